@@ -1,0 +1,30 @@
+// The projector interface implemented by the simulated and LightCrafter 4500
+// projectors.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace sl::drivers {
+
+// A pattern sequence the projector can run, as stored in the device (flash
+// images / LUT entries) or rendered by the simulator.
+struct ProjectorSequence {
+  std::string name;          // pattern name, e.g. "3+3_horizontal"
+  int frame_count = 0;       // patterns per sequence
+};
+
+class Projector {
+ public:
+  virtual ~Projector() = default;
+  virtual std::string id() const = 0;
+  virtual std::vector<ProjectorSequence> sequences() const = 0;
+  // Selects the sequence to run next; throws std::invalid_argument on an
+  // unknown name. Not allowed while running.
+  virtual void select(const std::string& name) = 0;
+  // Starts projecting the selected sequence `count` times (0 = until stop()).
+  virtual void start(int count) = 0;
+  virtual void stop() = 0;
+};
+
+}  // namespace sl::drivers
