@@ -1,0 +1,96 @@
+// The simulated sensor: one camera and a projector addressed like the
+// LightCrafter 4500, looking at a scene of planes and spheres. It renders what
+// the camera would see for each projected pattern (Lambertian shading,
+// projector shadows, ambient light, shot and read noise, quantisation) and
+// plays the trigger schedule of the real sensor in real time: the camera
+// exposes every dt_img = 1/fps, each sequence of frame_count patterns starts
+// with a trigger event.
+//
+// Rendering is cheap because the projector coordinate seen by a camera pixel
+// does not depend on the pattern: it is computed once per scene.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core/mat.hpp>
+
+#include "sl/drivers/camera.h"
+#include "sl/drivers/projector.h"
+#include "sl/drivers/trigger_source.h"
+#include "sl/pipeline/camera_model.h"
+#include "sl/pipeline/pattern.h"
+
+namespace sl::drivers {
+
+struct SimPlane {
+  Eigen::Vector3d point{0, 0, 600};   // mm, camera frame
+  Eigen::Vector3d normal{0, 0, -1};   // need not be unit; faces the sensor
+  double albedo = 0.8;                // diffuse reflectance in [0, 1]
+};
+
+struct SimSphere {
+  Eigen::Vector3d center{0, 0, 550};  // mm, camera frame
+  double radius = 50;                 // mm
+  double albedo = 0.8;
+};
+
+struct SimScene {
+  std::vector<SimPlane> planes;
+  std::vector<SimSphere> spheres;
+};
+
+struct SimConfig {
+  std::string camera_id = "sim_top";
+  // True geometry of the rig: camera and projector models, projector pose.
+  pipeline::CameraProjectorCalibration rig;
+  SimScene scene;
+  std::vector<pipeline::PhaseShift33Pattern> patterns;  // sequences the projector knows
+
+  double camera_fps = 30.0;       // dt_img = 1 / fps
+  int bit_depth = 8;              // 8..16
+  // Radiometry in camera DN: a white (albedo 1) surface facing the projector
+  // at reference_distance_mm, lit by a full-white pattern, reads
+  // projector_brightness_dn above the ambient level.
+  double projector_brightness_dn = 180.0;
+  double reference_distance_mm = 500.0;
+  double ambient_dn = 10.0;       // ambient light on an albedo-1 surface
+  double gain_dn_per_electron = 0.25;  // shot noise: var = gain * signal (DN^2)
+  double read_noise_dn = 0.8;          // std of additive Gaussian noise (DN)
+  std::uint64_t seed = 1;
+};
+
+// Per-pixel ground truth of the camera view (camera size).
+struct SimGroundTruth {
+  cv::Mat depth_mm;  // CV_32FC1 z in the camera frame, NaN where no surface
+  cv::Mat xyz_mm;    // CV_32FC3 point in the camera frame, NaN where no surface
+  cv::Mat up;        // CV_32FC1 projector column seen by the pixel, NaN if not lit
+  cv::Mat vp;        // CV_32FC1 projector row seen by the pixel, NaN if not lit
+  cv::Mat lit;       // CV_8UC1 255 where the surface is visible to the projector
+};
+
+// Thread-safe: the camera, projector and trigger source it hands out may be
+// used from different threads.
+class SimulatedSensor {
+ public:
+  // Throws std::invalid_argument naming the bad field.
+  static std::shared_ptr<SimulatedSensor> create(SimConfig config);
+  virtual ~SimulatedSensor() = default;
+
+  virtual std::shared_ptr<Camera> camera() = 0;
+  virtual std::shared_ptr<Projector> projector() = 0;
+  virtual std::shared_ptr<TriggerSource> triggerSource() = 0;
+
+  virtual const SimGroundTruth& groundTruth() const = 0;
+  virtual const SimConfig& config() const = 0;
+
+  // Renders frame `frame` of pattern `pattern_name` with noise drawn from
+  // `noise_seed`: deterministic, for tests. The live camera uses the same path.
+  virtual cv::Mat render(const std::string& pattern_name, int frame,
+                         std::uint64_t noise_seed) const = 0;
+};
+
+}  // namespace sl::drivers
