@@ -1,0 +1,62 @@
+// The daemon's configuration: one plain struct per component, parsed from
+// YAML in one place (config.cpp). Components never see YAML.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "sl/drivers/sim.h"
+#include "sl/pipeline/camera_model.h"
+#include "sl/pipeline/decoder.h"
+#include "sl/pipeline/pattern.h"
+#include "sl/pipeline/synchroniser.h"
+#include "sl/pipeline/triangulator.h"
+
+namespace sl::daemon {
+
+// A configuration error: the message names the file, the key and, where
+// known, the line ("config/sim.yaml:12: key 'sim.camera.fx': expected a number").
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct DdsConfig {
+  int domain_id = 0;
+  std::string ns = "sl";              // topics are rt/<ns>/points, rq/<ns>/commandRequest, ...
+  std::string frame_id = "sl_camera_optical_frame";
+  bool publish_projector_maps = false;
+  bool publish_image_sets = false;
+  double status_period_s = 1.0;
+};
+
+struct RuntimeConfig {
+  int queue_depth = 2;   // image sets / clouds waiting between stages (drop oldest)
+  std::string default_pattern;  // selected at startup; first pattern if empty
+};
+
+struct DaemonConfig {
+  std::string source_path;  // the file it was loaded from
+  std::string sensor = "sim";  // "sim" (hardware drivers come with later issues)
+  drivers::SimConfig sim;
+  // Calibration used by the triangulator. For the simulated sensor it
+  // defaults to the simulated rig (perfect calibration).
+  pipeline::CameraProjectorCalibration calibration;
+  std::vector<pipeline::PhaseShift33Pattern> patterns;
+  pipeline::DecoderOptions decoder;
+  pipeline::TriangulatorOptions triangulator;
+  pipeline::SynchroniserOptions synchroniser;
+  DdsConfig dds;
+  RuntimeConfig runtime;
+
+  const pipeline::PhaseShift33Pattern* findPattern(const std::string& name) const;
+};
+
+// Loads and validates a config file. Throws ConfigError on a missing file,
+// malformed YAML, an unknown or unused key, a wrong type or an invalid value.
+DaemonConfig loadConfig(const std::string& path);
+// Same, from a YAML string; `origin` names it in error messages.
+DaemonConfig parseConfig(const std::string& yaml_text, const std::string& origin);
+
+}  // namespace sl::daemon

@@ -1,0 +1,409 @@
+#include "sl/daemon/scan_engine.h"
+
+#include <chrono>
+#include <map>
+#include <variant>
+
+#include "sl/daemon/bounded_queue.h"
+#include "sl/pipeline/decoder.h"
+#include "sl/pipeline/synchroniser.h"
+#include "sl/pipeline/triangulator.h"
+
+namespace sl::daemon {
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+const char* toString(ScanState s) {
+  switch (s) {
+    case ScanState::kIdle: return "idle";
+    case ScanState::kScanning: return "scanning";
+    case ScanState::kError: return "error";
+  }
+  return "?";
+}
+
+namespace {
+
+// Events for the sync thread. Each carries the request generation it belongs
+// to; events of an older generation are discarded.
+struct FrameEvent {
+  std::size_t camera = 0;
+  pipeline::Frame frame;
+};
+struct TriggerEvent {
+  pipeline::TimestampNs stamp_ns = 0;
+};
+struct PatternEvent {  // a new request: reset the synchroniser
+  std::string name;
+  int frame_count = 0;
+};
+struct Event {
+  std::uint64_t generation = 0;
+  std::variant<FrameEvent, TriggerEvent, PatternEvent> payload;
+};
+
+struct SetItem {
+  std::uint64_t generation = 0;
+  std::shared_ptr<const pipeline::ImageSet> set;
+};
+
+struct ResultItem {
+  std::uint64_t generation = 0;
+  ScanResult result;
+};
+
+// Queue sizes between stages. Frames: enough for a few sequences of the
+// longest pattern; sets and results: the configured depth.
+constexpr std::size_t kEventQueueCapacity = 64;
+
+class Heartbeat {
+ public:
+  void beat() { last_ = Clock::now().time_since_epoch().count(); }
+  bool recent(std::chrono::nanoseconds max_age) const {
+    return Clock::now().time_since_epoch().count() - last_.load() < max_age.count();
+  }
+
+ private:
+  std::atomic<Clock::rep> last_{Clock::now().time_since_epoch().count()};
+};
+
+}  // namespace
+
+struct ScanEngine::Impl {
+  Impl(const DaemonConfig& config, EngineDevices devices, OutputCallback output)
+      : config(config),
+        devices(std::move(devices)),
+        output(std::move(output)),
+        events(kEventQueueCapacity),
+        sets(config.runtime.queue_depth),
+        results(config.runtime.queue_depth),
+        triangulator(config.calibration, config.triangulator) {
+    for (const auto& p : config.patterns)
+      decoders.emplace(p.name, pipeline::PhaseShift33Decoder(p, config.decoder));
+    current_pattern = config.runtime.default_pattern;
+    this->devices.projector->select(current_pattern);
+    for (auto& camera : this->devices.cameras) camera->start();
+  }
+
+  // --- configuration and devices (immutable after construction) ---
+  const DaemonConfig config;
+  EngineDevices devices;
+  OutputCallback output;
+
+  // --- queues between the threads ---
+  BoundedQueue<Event> events;
+  BoundedQueue<SetItem> sets;
+  BoundedQueue<ResultItem> results;
+
+  // --- stages, each used by one thread only ---
+  std::map<std::string, pipeline::PhaseShift33Decoder> decoders;  // processing thread
+  pipeline::Triangulator triangulator;                             // processing thread
+
+  // --- control state ---
+  mutable std::mutex mutex;
+  std::string current_pattern;            // guarded by mutex
+  ScanState state = ScanState::kIdle;     // guarded by mutex
+  std::uint64_t scans_requested = 0;      // guarded by mutex
+  std::uint64_t scans_done = 0;           // guarded by mutex
+  std::uint64_t status_version = 0;       // guarded by mutex
+  std::string last_error;                 // guarded by mutex
+  double scan_rate_hz = 0;                // guarded by mutex
+  Clock::time_point last_scan_time{};     // guarded by mutex
+  // A finite request that has not delivered every scan by then ends with an
+  // error (frames were lost); guarded by mutex.
+  Clock::time_point request_deadline = Clock::time_point::max();
+  // The generation of the current request; bumped by start() and stop().
+  std::atomic<std::uint64_t> generation{0};
+  // Set by the sync thread: when the last trigger of a finite request arrived.
+  std::atomic<std::uint64_t> triggers_seen{0};
+  std::atomic<std::uint64_t> frames_unmatched{0};
+  std::atomic<std::uint64_t> sets_incomplete{0};
+
+  std::atomic<bool> running{true};
+  std::vector<Heartbeat> heartbeats;  // sized before threads start
+  std::vector<std::thread> threads;
+
+  void cameraLoop(std::size_t index, Heartbeat& hb);
+  void triggerLoop(Heartbeat& hb);
+  void syncLoop(Heartbeat& hb);
+  void processLoop(Heartbeat& hb);
+  void outputLoop(Heartbeat& hb);
+  void finishRequestLocked(const std::string& error);
+  void recordError(const std::string& error);
+};
+
+void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
+  auto& camera = *devices.cameras[index];
+  while (running) {
+    hb.beat();
+    std::optional<pipeline::Frame> frame;
+    try {
+      frame = camera.grab(100ms);
+    } catch (const std::exception& e) {
+      recordError("camera '" + camera.id() + "': " + e.what());
+      std::this_thread::sleep_for(100ms);
+      continue;
+    }
+    if (frame) events.push({generation.load(), FrameEvent{index, std::move(*frame)}});
+  }
+}
+
+void ScanEngine::Impl::triggerLoop(Heartbeat& hb) {
+  while (running) {
+    hb.beat();
+    std::optional<drivers::TriggerEvent> trigger;
+    try {
+      trigger = devices.trigger->next(100ms);
+    } catch (const std::exception& e) {
+      recordError(std::string("trigger source: ") + e.what());
+      std::this_thread::sleep_for(100ms);
+      continue;
+    }
+    if (trigger) events.push({generation.load(), TriggerEvent{trigger->stamp_ns}});
+  }
+}
+
+void ScanEngine::Impl::syncLoop(Heartbeat& hb) {
+  std::vector<std::string> camera_ids;
+  for (const auto& c : devices.cameras) camera_ids.push_back(c->id());
+  pipeline::Synchroniser synchroniser(camera_ids, config.synchroniser);
+  std::uint64_t active_generation = 0;
+  pipeline::SynchroniserCounters reported{};
+  while (running) {
+    hb.beat();
+    std::optional<Event> event = events.pop(50ms);
+    if (!event) continue;
+    if (auto* pattern = std::get_if<PatternEvent>(&event->payload)) {
+      active_generation = event->generation;
+      synchroniser.setPattern(pattern->name, pattern->frame_count);
+      continue;
+    }
+    if (event->generation != active_generation) continue;  // from a stopped request
+    if (auto* frame = std::get_if<FrameEvent>(&event->payload)) {
+      synchroniser.pushFrame(frame->camera, std::move(frame->frame));
+    } else if (auto* trigger = std::get_if<TriggerEvent>(&event->payload)) {
+      synchroniser.pushTrigger(trigger->stamp_ns);
+    }
+    for (auto& set : synchroniser.takeCompleted()) {
+      sets.push({active_generation, std::move(set)});
+    }
+    const auto& counters = synchroniser.counters();
+    frames_unmatched += counters.frames_unmatched - reported.frames_unmatched;
+    sets_incomplete += counters.triggers_incomplete - reported.triggers_incomplete;
+    reported = counters;
+  }
+}
+
+void ScanEngine::Impl::processLoop(Heartbeat& hb) {
+  while (running) {
+    hb.beat();
+    std::optional<SetItem> item = sets.pop(50ms);
+    if (!item || item->generation != generation.load()) continue;
+    const pipeline::ImageSet& set = *item->set;
+    try {
+      const auto decoder = decoders.find(set.pattern_name);
+      if (decoder == decoders.end())
+        throw std::runtime_error("no decoder for pattern '" + set.pattern_name + "'");
+      const pipeline::CameraImages& images = set.cameras.front();
+      auto maps = std::make_shared<pipeline::ProjectorMaps>(
+          decoder->second.decode(images.frames, images.bit_depth));
+      maps->camera_id = images.camera_id;
+      maps->stamp_ns = set.trigger_stamp_ns;
+      auto cloud = std::make_shared<pipeline::PointCloud>(triangulator.triangulate(*maps));
+      cloud->frame_id = config.dds.frame_id;
+      cloud->stamp_ns = set.trigger_stamp_ns;
+      ResultItem result{item->generation, {}};
+      result.result.pattern = set.pattern_name;
+      result.result.images = item->set;
+      result.result.maps = std::move(maps);
+      result.result.cloud = std::move(cloud);
+      results.push(std::move(result));
+    } catch (const std::exception& e) {
+      recordError("processing sequence " + std::to_string(set.sequence_id) + ": " + e.what());
+    }
+  }
+}
+
+void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
+  while (running) {
+    hb.beat();
+    std::optional<ResultItem> item = results.pop(50ms);
+    if (!item) {
+      std::lock_guard lock(mutex);
+      if (state == ScanState::kScanning && Clock::now() > request_deadline)
+        finishRequestLocked("request ended with " + std::to_string(scans_done) + " of " +
+                            std::to_string(scans_requested) +
+                            " scans: image sets were lost (see the drop counters)");
+      continue;
+    }
+    {
+      std::lock_guard lock(mutex);
+      if (item->generation != generation.load() || state != ScanState::kScanning) continue;
+      item->result.scan_index = ++scans_done;
+      const auto now = Clock::now();
+      if (last_scan_time != Clock::time_point{}) {
+        const double rate = 1.0 / std::chrono::duration<double>(now - last_scan_time).count();
+        scan_rate_hz = scan_rate_hz == 0 ? rate : 0.7 * scan_rate_hz + 0.3 * rate;
+      }
+      last_scan_time = now;
+      ++status_version;
+    }
+    try {
+      output(item->result);
+    } catch (const std::exception& e) {
+      recordError(std::string("publishing: ") + e.what());
+    }
+    std::lock_guard lock(mutex);
+    if (item->generation == generation.load() && scans_requested != 0 &&
+        scans_done >= scans_requested) {
+      finishRequestLocked("");
+    }
+  }
+}
+
+// Ends the current request; caller holds the mutex.
+void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
+  try {
+    devices.projector->stop();
+  } catch (const std::exception& e) {
+    last_error = std::string("projector stop: ") + e.what();
+  }
+  generation++;
+  state = ScanState::kIdle;
+  if (!error.empty()) last_error = error;
+  ++status_version;
+}
+
+void ScanEngine::Impl::recordError(const std::string& error) {
+  std::lock_guard lock(mutex);
+  last_error = error;
+  ++status_version;
+}
+
+ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output)
+    : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output))) {
+  Impl& d = *impl_;
+  d.heartbeats = std::vector<Heartbeat>(d.devices.cameras.size() + 4);
+  for (std::size_t i = 0; i < d.devices.cameras.size(); ++i)
+    d.threads.emplace_back([&d, i] { d.cameraLoop(i, d.heartbeats[i]); });
+  const std::size_t k = d.devices.cameras.size();
+  d.threads.emplace_back([&d, k] { d.triggerLoop(d.heartbeats[k]); });
+  d.threads.emplace_back([&d, k] { d.syncLoop(d.heartbeats[k + 1]); });
+  d.threads.emplace_back([&d, k] { d.processLoop(d.heartbeats[k + 2]); });
+  d.threads.emplace_back([&d, k] { d.outputLoop(d.heartbeats[k + 3]); });
+}
+
+ScanEngine::~ScanEngine() {
+  Impl& d = *impl_;
+  try {
+    d.devices.projector->stop();
+  } catch (...) {
+  }
+  d.running = false;
+  for (auto& camera : d.devices.cameras) camera->stop();
+  d.devices.trigger->stop();
+  d.events.close();
+  d.sets.close();
+  d.results.close();
+  for (auto& t : d.threads) t.join();
+}
+
+CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
+  Impl& d = *impl_;
+  using Code = CommandResult::Code;
+  std::lock_guard lock(d.mutex);
+  if (d.state == ScanState::kScanning)
+    return {Code::kBusy, "already scanning '" + d.current_pattern + "' (" +
+                             std::to_string(d.scans_done) + " of " +
+                             (d.scans_requested ? std::to_string(d.scans_requested)
+                                                : std::string("continuous")) +
+                             "); send stop first"};
+  if (count < 0) return {Code::kInvalidCount, "count must be >= 0 (0 = continuous)"};
+  const std::string name = pattern_name.empty() ? d.current_pattern : pattern_name;
+  const pipeline::PhaseShift33Pattern* pattern = d.config.findPattern(name);
+  if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
+  const std::uint64_t generation = d.generation.load() + 1;
+  try {
+    d.devices.projector->select(name);
+    d.current_pattern = name;
+    d.events.push({generation, PatternEvent{name, pattern->frameCount()}});
+    d.generation = generation;
+    d.scans_requested = static_cast<std::uint64_t>(count);
+    d.scans_done = 0;
+    d.scan_rate_hz = 0;
+    d.last_scan_time = {};
+    const double sequence_s = pattern->frameCount() * d.config.synchroniser.image_interval_ns * 1e-9;
+    d.request_deadline =
+        count == 0 ? Clock::time_point::max()
+                   : Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(count * sequence_s + 2.0));
+    d.last_error.clear();
+    d.state = ScanState::kScanning;
+    d.devices.projector->start(count);
+  } catch (const std::exception& e) {
+    d.state = ScanState::kError;
+    d.last_error = std::string("projector: ") + e.what();
+    ++d.status_version;
+    return {Code::kDeviceError, d.last_error};
+  }
+  ++d.status_version;
+  return {};
+}
+
+CommandResult ScanEngine::stop() {
+  Impl& d = *impl_;
+  std::lock_guard lock(d.mutex);
+  if (d.state != ScanState::kScanning)
+    return {CommandResult::Code::kNotRunning, "not scanning"};
+  d.finishRequestLocked("");
+  return {};
+}
+
+CommandResult ScanEngine::selectPattern(const std::string& name) {
+  Impl& d = *impl_;
+  using Code = CommandResult::Code;
+  std::lock_guard lock(d.mutex);
+  if (d.state == ScanState::kScanning)
+    return {Code::kBusy, "cannot switch pattern while scanning; send stop first"};
+  if (!d.config.findPattern(name)) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
+  try {
+    d.devices.projector->select(name);
+  } catch (const std::exception& e) {
+    return {Code::kDeviceError, std::string("projector: ") + e.what()};
+  }
+  d.current_pattern = name;
+  ++d.status_version;
+  return {};
+}
+
+std::vector<std::string> ScanEngine::patterns() const {
+  std::vector<std::string> names;
+  for (const auto& p : impl_->config.patterns) names.push_back(p.name);
+  return names;
+}
+
+EngineStatus ScanEngine::status() const {
+  const Impl& d = *impl_;
+  EngineStatus s;
+  std::lock_guard lock(d.mutex);
+  s.version = d.status_version;
+  s.state = d.state;
+  s.pattern = d.current_pattern;
+  s.scans_done = d.scans_done;
+  s.scans_requested = d.scans_requested;
+  s.scan_rate_hz = d.state == ScanState::kScanning ? d.scan_rate_hz : 0.0;
+  s.frames_dropped = d.events.dropped() + d.frames_unmatched.load();
+  s.sets_dropped = d.sets.dropped() + d.results.dropped();
+  s.sets_incomplete = d.sets_incomplete.load();
+  s.last_error = d.last_error;
+  return s;
+}
+
+bool ScanEngine::healthy() const {
+  for (const auto& hb : impl_->heartbeats)
+    if (!hb.recent(2s)) return false;
+  return true;
+}
+
+}  // namespace sl::daemon

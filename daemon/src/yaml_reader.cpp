@@ -1,0 +1,139 @@
+#include "yaml_reader.h"
+
+#include <array>
+#include <cstdint>
+
+namespace sl::daemon {
+
+namespace {
+
+std::string where(const std::string& origin, const YAML::Node& node) {
+  const YAML::Mark mark = node.Mark();
+  if (mark.line < 0) return origin;
+  return origin + ":" + std::to_string(mark.line + 1);
+}
+
+template <typename T>
+const char* typeName() {
+  if constexpr (std::is_same_v<T, bool>) return "a boolean (true/false)";
+  else if constexpr (std::is_integral_v<T>) return "an integer";
+  else if constexpr (std::is_floating_point_v<T>) return "a number";
+  else if constexpr (std::is_same_v<T, std::string>) return "a string";
+  else return "a list of numbers";
+}
+
+}  // namespace
+
+YamlMap::YamlMap(const YAML::Node& node, std::string origin, std::string path)
+    : node_(node), origin_(std::move(origin)), path_(std::move(path)) {
+  if (node_ && !node_.IsNull() && !node_.IsMap())
+    throw ConfigError(where(origin_, node_) + ": key '" + (path_.empty() ? "<root>" : path_) +
+                      "': expected a map of keys");
+}
+
+std::string YamlMap::keyPath(const std::string& key) const {
+  return path_.empty() ? key : path_ + "." + key;
+}
+
+void YamlMap::fail(const std::string& key, const std::string& message) const {
+  const YAML::Node value = node_ && node_.IsMap() ? node_[key] : YAML::Node();
+  throw ConfigError(where(origin_, value ? value : node_) + ": key '" + keyPath(key) + "': " +
+                    message);
+}
+
+bool YamlMap::has(const std::string& key) const {
+  return node_ && node_.IsMap() && node_[key];
+}
+
+YAML::Node YamlMap::lookup(const std::string& key) const {
+  used_.insert(key);
+  if (!has(key)) return YAML::Node();
+  return node_[key];
+}
+
+template <typename T>
+T YamlMap::convert(const std::string& key, const YAML::Node& value) const {
+  if constexpr (std::is_same_v<T, std::vector<double>>) {
+    if (!value.IsSequence()) fail(key, std::string("expected ") + typeName<T>());
+    std::vector<double> out;
+    for (const auto& item : value) {
+      try {
+        out.push_back(item.as<double>());
+      } catch (const YAML::Exception&) {
+        fail(key, "expected a list of numbers, found '" + YAML::Dump(item) + "'");
+      }
+    }
+    return out;
+  } else {
+    if (!value.IsScalar())
+      fail(key, std::string("expected ") + typeName<T>() + ", found a " +
+                    (value.IsSequence() ? "list" : "map"));
+    try {
+      return value.as<T>();
+    } catch (const YAML::Exception&) {
+      fail(key, std::string("expected ") + typeName<T>() + ", found '" + value.Scalar() + "'");
+    }
+  }
+}
+
+template <typename T>
+T YamlMap::get(const std::string& key) const {
+  const YAML::Node value = lookup(key);
+  if (!value) {
+    throw ConfigError(where(origin_, node_) + ": key '" + keyPath(key) + "' is required");
+  }
+  return convert<T>(key, value);
+}
+
+template <typename T>
+T YamlMap::get(const std::string& key, const T& fallback) const {
+  const YAML::Node value = lookup(key);
+  if (!value) return fallback;
+  return convert<T>(key, value);
+}
+
+YamlMap YamlMap::map(const std::string& key) const {
+  const YAML::Node value = lookup(key);
+  if (!value) throw ConfigError(where(origin_, node_) + ": key '" + keyPath(key) + "' is required");
+  return YamlMap(value, origin_, keyPath(key));
+}
+
+YamlMap YamlMap::optionalMap(const std::string& key) const {
+  return YamlMap(lookup(key), origin_, keyPath(key));
+}
+
+std::vector<YamlMap> YamlMap::listOfMaps(const std::string& key) const {
+  const YAML::Node value = lookup(key);
+  if (!value) throw ConfigError(where(origin_, node_) + ": key '" + keyPath(key) + "' is required");
+  if (!value.IsSequence() || value.size() == 0) fail(key, "expected a non-empty list");
+  std::vector<YamlMap> out;
+  for (std::size_t i = 0; i < value.size(); ++i)
+    out.emplace_back(value[i], origin_, keyPath(key) + "[" + std::to_string(i) + "]");
+  return out;
+}
+
+YAML::Node YamlMap::raw(const std::string& key) const { return lookup(key); }
+
+void YamlMap::done() const {
+  if (!node_ || !node_.IsMap()) return;
+  for (const auto& entry : node_) {
+    const std::string key = entry.first.as<std::string>();
+    if (!used_.count(key))
+      throw ConfigError(where(origin_, entry.first) + ": unknown key '" + keyPath(key) + "'");
+  }
+}
+
+template bool YamlMap::get<bool>(const std::string&) const;
+template int YamlMap::get<int>(const std::string&) const;
+template double YamlMap::get<double>(const std::string&) const;
+template std::string YamlMap::get<std::string>(const std::string&) const;
+template std::vector<double> YamlMap::get<std::vector<double>>(const std::string&) const;
+template bool YamlMap::get<bool>(const std::string&, const bool&) const;
+template int YamlMap::get<int>(const std::string&, const int&) const;
+template double YamlMap::get<double>(const std::string&, const double&) const;
+template std::uint64_t YamlMap::get<std::uint64_t>(const std::string&, const std::uint64_t&) const;
+template std::string YamlMap::get<std::string>(const std::string&, const std::string&) const;
+template std::vector<double> YamlMap::get<std::vector<double>>(
+    const std::string&, const std::vector<double>&) const;
+
+}  // namespace sl::daemon
