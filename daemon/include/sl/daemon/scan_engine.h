@@ -3,9 +3,9 @@
 // handed to an output thread. Stages are the synchronous classes of
 // sl_pipeline; the threads and bounded queues live here.
 //
-//   camera thread(s) --frames-->  \
-//                                   event queue -> sync thread -> set queue
-//   trigger thread  --triggers--> /                                |
+//   camera thread(s) --frames---+
+//                               +--> event queue -> sync thread -> set queue
+//   trigger thread  --triggers--+                                     |
 //                          output thread <- result queue <- processing thread
 #pragma once
 
