@@ -1,1 +1,229 @@
-// (being written)
+#include "sl/pipeline/triangulator.h"
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace sl::pipeline {
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// Brown-Conrady distortion of normalized coordinates, the same model as
+// PinholeModel::normalizedToPixel (checked against it in test_triangulator).
+inline void distortNormalized(const double* d, double x, double y, double& xd, double& yd) {
+  const double r2 = x * x + y * y;
+  const double radial = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
+  xd = x * radial + 2.0 * d[2] * x * y + d[3] * (r2 + 2.0 * x * x);
+  yd = y * radial + d[2] * (r2 + 2.0 * y * y) + 2.0 * d[3] * x * y;
+}
+
+// Which projector coordinate constrains a pixel.
+enum Axis { kColumn = 0, kRow = 1 };
+
+}  // namespace
+
+struct Triangulator::Impl {
+  int width = 0;
+  int height = 0;
+  TriangulatorOptions options;
+  Axis preferred = kColumn;  // for Use::kBest
+
+  // Per camera pixel (row-major): undistorted normalized ray r = (rx, ry, 1)
+  // in the camera frame, a = M3[0:3].r and b[axis] = M1[0:3].r (columns) or
+  // M2[0:3].r (rows), with M = K_p [R | t] in projector px.
+  std::vector<float> rx, ry, a;
+  std::vector<float> b[2];
+  double m_t[2] = {0, 0};  // M1[3], M2[3]
+  double m3_t = 0;         // M3[3] = t.z (mm)
+
+  // Projector model for the distortion correction.
+  bool correct_projector = false;
+  double proj_f[2] = {0, 0}, proj_dist[5] = {0, 0, 0, 0, 0};
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+
+  // Depth (mm) along the ray of pixel i for undistorted projector coordinate
+  // p; NaN when the ray is parallel to the projector plane of p.
+  double depth(std::size_t i, Axis axis, double p) const {
+    const double den = p * a[i] - b[axis][i];
+    if (!(std::abs(den) > 1e-12)) return std::numeric_limits<double>::quiet_NaN();
+    return (m_t[axis] - p * m3_t) / den;
+  }
+
+  // Projector lens distortion along `axis` (distorted minus undistorted, in
+  // projector px) at the point of depth z on the ray of pixel i. NaN when the
+  // point is not in front of the projector.
+  double projectorDistortion(std::size_t i, Axis axis, double z) const {
+    const Eigen::Vector3d xc(z * rx[i], z * ry[i], z);
+    const Eigen::Vector3d xp = R * xc + t;
+    if (!(xp.z() > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+    const double xn = xp.x() / xp.z(), yn = xp.y() / xp.z();
+    double xd = 0, yd = 0;
+    distortNormalized(proj_dist, xn, yn, xd, yd);
+    return axis == kColumn ? proj_f[0] * (xd - xn) : proj_f[1] * (yd - yn);
+  }
+
+  // Triangulates pixel i from decoded projector coordinate `decoded`
+  // (distorted projector px); returns the depth in mm or NaN.
+  double triangulatePixel(std::size_t i, Axis axis, double decoded) const {
+    double z = depth(i, axis, decoded);
+    if (correct_projector) {
+      // Fixed point p_u = p_d - delta(X(p_u)): the distortion shift is
+      // evaluated at the current 3D estimate and removed from the decoded
+      // coordinate; each step shrinks the error by about d(delta)/dp.
+      for (int it = 0; it < options.projector_distortion_iterations; ++it) {
+        if (!std::isfinite(z) || z <= 0.0) break;
+        const double shift = projectorDistortion(i, axis, z);
+        if (!std::isfinite(shift)) break;
+        z = depth(i, axis, decoded - shift);
+      }
+    }
+    return z;
+  }
+};
+
+Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
+                           TriangulatorOptions options) {
+  const PinholeModel& cam = calibration.camera;
+  const PinholeModel& proj = calibration.projector;
+  if (cam.width <= 0 || cam.height <= 0) {
+    throw std::invalid_argument("Triangulator: camera size must be positive");
+  }
+  if (!(cam.fx > 0 && cam.fy > 0 && proj.fx > 0 && proj.fy > 0)) {
+    throw std::invalid_argument("Triangulator: focal lengths must be positive");
+  }
+  if (!(options.min_depth_mm > 0 && options.min_depth_mm < options.max_depth_mm)) {
+    throw std::invalid_argument("Triangulator: need 0 < min_depth_mm < max_depth_mm");
+  }
+  if (options.projector_distortion_iterations < 0) {
+    throw std::invalid_argument("Triangulator: projector_distortion_iterations must be >= 0");
+  }
+
+  auto impl = std::make_shared<Impl>();
+  impl->width = cam.width;
+  impl->height = cam.height;
+  impl->options = options;
+  const Eigen::Vector3d& t = calibration.t;
+  impl->preferred = std::abs(t.x()) >= std::abs(t.y()) ? kColumn : kRow;
+
+  Eigen::Matrix<double, 3, 4> rt;
+  rt.leftCols<3>() = calibration.R;
+  rt.col(3) = t;
+  const Eigen::Matrix<double, 3, 4> m = proj.K() * rt;
+  impl->m_t[kColumn] = m(0, 3);
+  impl->m_t[kRow] = m(1, 3);
+  impl->m3_t = m(2, 3);
+
+  const std::size_t n = static_cast<std::size_t>(cam.width) * cam.height;
+  impl->rx.resize(n);
+  impl->ry.resize(n);
+  impl->a.resize(n);
+  impl->b[kColumn].resize(n);
+  impl->b[kRow].resize(n);
+  for (int v = 0; v < cam.height; ++v) {
+    for (int u = 0; u < cam.width; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * cam.width + u;
+      const Eigen::Vector2d xn = cam.pixelToNormalized({double(u), double(v)});
+      const Eigen::Vector3d r(xn.x(), xn.y(), 1.0);
+      impl->rx[i] = static_cast<float>(xn.x());
+      impl->ry[i] = static_cast<float>(xn.y());
+      // a and b from the float-rounded ray, so that X = z * r is exactly the
+      // point whose projection the depth equation solves for.
+      const Eigen::Vector3d rf(impl->rx[i], impl->ry[i], 1.0);
+      impl->a[i] = static_cast<float>(m.block<1, 3>(2, 0).dot(rf));
+      impl->b[kColumn][i] = static_cast<float>(m.block<1, 3>(0, 0).dot(rf));
+      impl->b[kRow][i] = static_cast<float>(m.block<1, 3>(1, 0).dot(rf));
+    }
+  }
+
+  impl->correct_projector = proj.hasDistortion() && options.projector_distortion_iterations > 0;
+  impl->proj_f[0] = proj.fx;
+  impl->proj_f[1] = proj.fy;
+  for (int k = 0; k < 5; ++k) impl->proj_dist[k] = proj.distortion[k];
+  impl->R = calibration.R;
+  impl->t = t;
+  impl_ = std::move(impl);
+}
+
+PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
+  const Impl& im = *impl_;
+  const cv::Size size(im.width, im.height);
+  auto check = [&](const cv::Mat& map, const char* name) {
+    if (map.empty()) return;
+    if (map.type() != CV_32FC1 || map.size() != size) {
+      throw std::invalid_argument(std::string("Triangulator: maps.") + name +
+                                  " must be CV_32FC1 of the camera size " +
+                                  std::to_string(im.width) + "x" + std::to_string(im.height));
+    }
+  };
+  check(maps.up, "up");
+  check(maps.vp, "vp");
+  check(maps.offset, "offset");
+
+  const bool have[2] = {!maps.up.empty(), !maps.vp.empty()};
+  using Use = TriangulatorOptions::Use;
+  // first / second: the axes tried per pixel, in order (-1 = none).
+  int first = -1, second = -1;
+  switch (im.options.use) {
+    case Use::kColumns:
+      if (!have[kColumn]) throw std::invalid_argument("Triangulator: Use::kColumns needs maps.up");
+      first = kColumn;
+      break;
+    case Use::kRows:
+      if (!have[kRow]) throw std::invalid_argument("Triangulator: Use::kRows needs maps.vp");
+      first = kRow;
+      break;
+    case Use::kBest: {
+      const int other = 1 - im.preferred;
+      if (have[im.preferred]) first = im.preferred;
+      if (have[other]) (first < 0 ? first : second) = other;
+      if (first < 0) throw std::invalid_argument("Triangulator: maps have neither up nor vp");
+      break;
+    }
+  }
+
+  PointCloud cloud;
+  cloud.frame_id = maps.camera_id;
+  cloud.stamp_ns = maps.stamp_ns;
+  cloud.width = im.width;
+  cloud.height = im.height;
+  cloud.points.resize(static_cast<std::size_t>(im.width) * im.height);
+
+  const cv::Mat* coord_maps[2] = {&maps.up, &maps.vp};
+  const double min_z = im.options.min_depth_mm;
+  const double max_z = im.options.max_depth_mm;
+  for (int v = 0; v < im.height; ++v) {
+    const float* first_row = coord_maps[first]->ptr<float>(v);
+    const float* second_row = second >= 0 ? coord_maps[second]->ptr<float>(v) : nullptr;
+    const float* offset_row = maps.offset.empty() ? nullptr : maps.offset.ptr<float>(v);
+    const std::size_t row_start = static_cast<std::size_t>(v) * im.width;
+    PointXYZI* out = cloud.points.data() + row_start;
+    for (int u = 0; u < im.width; ++u) {
+      const std::size_t i = row_start + u;
+      double z = std::numeric_limits<double>::quiet_NaN();
+      if (std::isfinite(first_row[u])) {
+        z = im.triangulatePixel(i, static_cast<Axis>(first), first_row[u]);
+      } else if (second_row && std::isfinite(second_row[u])) {
+        z = im.triangulatePixel(i, static_cast<Axis>(second), second_row[u]);
+      }
+      PointXYZI& point = out[u];
+      point.intensity = offset_row ? offset_row[u] : 0.0f;
+      if (z >= min_z && z <= max_z) {
+        point.x = static_cast<float>(z * im.rx[i]);
+        point.y = static_cast<float>(z * im.ry[i]);
+        point.z = static_cast<float>(z);
+      } else {
+        point.x = point.y = point.z = kNaN;
+      }
+    }
+  }
+  return cloud;
+}
+
+}  // namespace sl::pipeline

@@ -19,6 +19,20 @@ struct DecoderOptions {
 };
 
 // Thread-compatible; holds only its configuration.
+//
+// Output contract of decode():
+// - up / vp: projector column / row in projector px, with the convention of
+//   patternIntensity() (a camera pixel that sees the centre of projector
+//   column c decodes to c). The 3+3 code is periodic along the axis (period
+//   L), so decoded values lie in [0, L); values above L - 0.5 cannot be told
+//   from the half pixel left of column 0 and are reported kOutOfRange.
+//   Maps of a direction that the pattern does not encode are all NaN.
+// - modulation: B of the high-frequency set (for kBoth the smaller of the
+//   two directions), offset: A of the first high-frequency set, camera DN.
+// - status: the first failing test in the order saturated, low modulation,
+//   unwrap inconsistency, out of range. For kBoth a pixel is valid only when
+//   both directions are; otherwise up and vp are both NaN.
+// DecoderOptions are checked by the constructor (std::invalid_argument).
 class PhaseShift33Decoder {
  public:
   PhaseShift33Decoder(PhaseShift33Pattern pattern, DecoderOptions options);

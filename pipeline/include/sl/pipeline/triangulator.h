@@ -14,8 +14,10 @@
 namespace sl::pipeline {
 
 struct TriangulatorOptions {
-  // Use u_p (projector columns) when available, else v_p. With both maps
-  // present, kColumns / kRows force one; kBest picks the better conditioned.
+  // kColumns / kRows force u_p / v_p (the map must be present). kBest
+  // prefers columns when the baseline is mostly horizontal (|t.x| >= |t.y|),
+  // rows otherwise, and per pixel falls back to the other map where the
+  // preferred one is NaN or absent (an empty cv::Mat).
   enum class Use { kColumns, kRows, kBest } use = Use::kBest;
   float min_depth_mm = 100.0f;  // points outside [min, max] depth are NaN
   float max_depth_mm = 3000.0f;
@@ -29,7 +31,13 @@ class Triangulator {
  public:
   Triangulator(const CameraProjectorCalibration& calibration, TriangulatorOptions options);
 
-  // maps must have the camera's size; intensity is taken from maps.offset.
+  // maps.up / maps.vp / maps.offset: CV_32FC1 of the camera's size, or empty
+  // (offset empty -> intensity 0). Throws std::invalid_argument otherwise or
+  // when the map that options.use needs is empty. Output: organized cloud of
+  // the camera's size in the camera optical frame (mm), frame_id =
+  // maps.camera_id, stamp = maps.stamp_ns; x = y = z = NaN where the input is
+  // NaN, the ray is parallel to the projector plane or z is outside
+  // [min_depth_mm, max_depth_mm].
   PointCloud triangulate(const ProjectorMaps& maps) const;
 
  private:
