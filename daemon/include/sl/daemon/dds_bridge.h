@@ -1,0 +1,47 @@
+// The daemon's DDS edge: converts pipeline results to DDS samples and DDS
+// requests to ScanEngine calls. The only place where the pipeline's value
+// types meet the IDL types.
+//
+// Topics (ns = DdsConfig::ns, default "sl"):
+//   rt/<ns>/points          sensor_msgs/PointCloud2 (ROS 2 wire format, XCDR1)
+//   rt/<ns>/projector_maps  sl_msgs ProjectorMaps (when enabled)
+//   rt/<ns>/status          sl_msgs Status (transient-local)
+//   rq/<ns>/commandRequest  sl_msgs CommandRequest (from clients)
+//   rr/<ns>/commandReply    sl_msgs CommandReply (one per request)
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "sl/daemon/config.h"
+#include "sl/daemon/scan_engine.h"
+
+namespace sl::daemon {
+
+struct TopicNames {
+  std::string points, projector_maps, image_sets, status, request, reply;
+  static TopicNames forNamespace(const std::string& ns);
+};
+
+// Thread-safe in the way the daemon uses it: publish() from the engine's
+// output thread while serve() runs on another; stop() from any thread.
+class DdsBridge {
+ public:
+  // Creates the participant, topics, writers and the request reader; throws
+  // sl::dds::Error naming the failing call.
+  explicit DdsBridge(const DdsConfig& config);
+  ~DdsBridge();
+
+  void publish(const ScanResult& result);
+
+  // Answers requests and publishes status (on change and every
+  // status_period_s) until stop(). Blocks.
+  void serve(ScanEngine& engine);
+  void stop();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sl::daemon

@@ -1,0 +1,292 @@
+#include "sl/daemon/dds_bridge.h"
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+#include "sensor_msgs/msg/PointCloud2.h"
+#include "sl/daemon/dds.h"
+#include "sl_msgs/msg/CommandReply.h"
+#include "sl_msgs/msg/CommandRequest.h"
+#include "sl_msgs/msg/ProjectorMaps.h"
+#include "sl_msgs/msg/Status.h"
+
+namespace sl::daemon {
+
+namespace {
+
+using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
+using PointField = sensor_msgs_msg_dds__PointField_;
+using Request = sl_msgs_msg_CommandRequest;
+using Reply = sl_msgs_msg_CommandReply;
+using Status = sl_msgs_msg_Status;
+using Maps = sl_msgs_msg_ProjectorMaps;
+
+constexpr std::uint8_t kFloat32 = 7;  // sensor_msgs/PointField FLOAT32
+
+builtin_interfaces_msg_dds__Time_ toTime(pipeline::TimestampNs ns) {
+  builtin_interfaces_msg_dds__Time_ t;
+  t.sec = static_cast<std::int32_t>(ns / 1'000'000'000);
+  t.nanosec = static_cast<std::uint32_t>(ns % 1'000'000'000);
+  return t;
+}
+
+pipeline::TimestampNs nowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// Sequences in the samples we write borrow our buffers (_release = false):
+// Cyclone serializes during dds_write and never frees them.
+template <typename Seq, typename T>
+void borrow(Seq& seq, T* data, std::size_t n) {
+  seq._maximum = static_cast<std::uint32_t>(n);
+  seq._length = static_cast<std::uint32_t>(n);
+  seq._buffer = data;
+  seq._release = false;
+}
+
+// Holds the string storage that borrowed char* fields point into.
+struct StringList {
+  std::vector<std::string> values;
+  std::vector<char*> pointers;
+  explicit StringList(std::vector<std::string> v) : values(std::move(v)) {
+    for (auto& s : values) pointers.push_back(s.data());
+  }
+};
+
+sl_msgs_msg_ReplyCode toReplyCode(CommandResult::Code code) {
+  switch (code) {
+    case CommandResult::Code::kOk: return sl_msgs_msg_REPLY_OK;
+    case CommandResult::Code::kUnknownPattern: return sl_msgs_msg_REPLY_UNKNOWN_PATTERN;
+    case CommandResult::Code::kBusy: return sl_msgs_msg_REPLY_BUSY;
+    case CommandResult::Code::kInvalidCount: return sl_msgs_msg_REPLY_INVALID_COUNT;
+    case CommandResult::Code::kInvalidCommand: return sl_msgs_msg_REPLY_INVALID_COMMAND;
+    case CommandResult::Code::kDeviceError: return sl_msgs_msg_REPLY_DEVICE_ERROR;
+    case CommandResult::Code::kNotRunning: return sl_msgs_msg_REPLY_NOT_RUNNING;
+  }
+  return sl_msgs_msg_REPLY_INVALID_COMMAND;
+}
+
+sl_msgs_msg_State toState(ScanState s) {
+  switch (s) {
+    case ScanState::kIdle: return sl_msgs_msg_STATE_IDLE;
+    case ScanState::kScanning: return sl_msgs_msg_STATE_SCANNING;
+    case ScanState::kError: return sl_msgs_msg_STATE_ERROR;
+  }
+  return sl_msgs_msg_STATE_ERROR;
+}
+
+}  // namespace
+
+TopicNames TopicNames::forNamespace(const std::string& ns) {
+  return {"rt/" + ns + "/points", "rt/" + ns + "/projector_maps", "rt/" + ns + "/image_sets",
+          "rt/" + ns + "/status", "rq/" + ns + "/commandRequest", "rr/" + ns + "/commandReply"};
+}
+
+struct DdsBridge::Impl {
+  explicit Impl(const DdsConfig& config)
+      : config(config),
+        names(TopicNames::forNamespace(config.ns)),
+        participant(config.domain_id),
+        points_topic(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc),
+        maps_topic(participant, names.projector_maps, sl_msgs_msg_ProjectorMaps_desc),
+        status_topic(participant, names.status, sl_msgs_msg_Status_desc),
+        request_topic(participant, names.request, sl_msgs_msg_CommandRequest_desc),
+        reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
+        // Clouds: reliable, a short history; a slow reader makes a write
+        // time out (counted) rather than stall the pipeline for long.
+        points_writer(participant, points_topic,
+                      dds::Qos().reliable(DDS_MSECS(200)).keepLast(4).xcdr1()),
+        maps_writer(participant, maps_topic,
+                    dds::Qos().reliable(DDS_MSECS(200)).keepLast(2).xcdr1()),
+        // Status: the latest value for late joiners.
+        status_writer(participant, status_topic,
+                      dds::Qos().reliable().transientLocal().keepLast(1).xcdr1()),
+        request_reader(participant, request_topic, dds::Qos().reliable().keepLast(64)),
+        reply_writer(participant, reply_topic, dds::Qos().reliable().keepLast(64).xcdr1()),
+        request_condition(request_reader),
+        wake(participant),
+        waitset(participant) {
+    waitset.attach(request_condition, 1);
+    waitset.attach(wake, 2);
+  }
+
+  const DdsConfig config;
+  const TopicNames names;
+  dds::Participant participant;
+  dds::Topic<PointCloud2> points_topic;
+  dds::Topic<Maps> maps_topic;
+  dds::Topic<Status> status_topic;
+  dds::Topic<Request> request_topic;
+  dds::Topic<Reply> reply_topic;
+  dds::Writer<PointCloud2> points_writer;
+  dds::Writer<Maps> maps_writer;
+  dds::Writer<Status> status_writer;
+  dds::Reader<Request> request_reader;
+  dds::Writer<Reply> reply_writer;
+  dds::ReadCondition request_condition;
+  dds::GuardCondition wake;
+  dds::WaitSet waitset;
+  std::atomic<bool> stopping{false};
+  std::atomic<std::uint64_t> writes_timed_out{0};
+
+  // Publish-thread scratch buffer (metres), reused between clouds.
+  std::vector<float> cloud_buffer;
+
+  void publishCloud(const pipeline::PointCloud& cloud);
+  void publishMaps(const pipeline::ProjectorMaps& maps);
+  void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
+  void answer(ScanEngine& engine, const Request& request);
+};
+
+void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud) {
+  const std::size_t n = cloud.points.size();
+  cloud_buffer.resize(4 * n);
+  bool dense = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    const pipeline::PointXYZI& p = cloud.points[i];
+    float* out = &cloud_buffer[4 * i];
+    out[0] = p.x * 1e-3f;  // mm -> m
+    out[1] = p.y * 1e-3f;
+    out[2] = p.z * 1e-3f;
+    out[3] = p.intensity;
+    dense = dense && std::isfinite(p.z);
+  }
+  static const char* kNames[4] = {"x", "y", "z", "intensity"};
+  PointField fields[4];
+  for (int i = 0; i < 4; ++i)
+    fields[i] = {const_cast<char*>(kNames[i]), static_cast<std::uint32_t>(4 * i), kFloat32, 1};
+  std::string frame_id = cloud.frame_id;
+
+  PointCloud2 msg{};
+  msg.header.stamp = toTime(cloud.stamp_ns);
+  msg.header.frame_id = frame_id.data();
+  msg.height = static_cast<std::uint32_t>(cloud.height);
+  msg.width = static_cast<std::uint32_t>(cloud.width);
+  borrow(msg.fields, fields, 4);
+  msg.is_bigendian = false;  // x86-64 / aarch64 little endian, as written
+  msg.point_step = 16;
+  msg.row_step = 16 * msg.width;
+  borrow(msg.data, reinterpret_cast<std::uint8_t*>(cloud_buffer.data()), cloud_buffer.size() * 4);
+  msg.is_dense = dense;
+  if (!points_writer.write(msg)) ++writes_timed_out;
+}
+
+void DdsBridge::Impl::publishMaps(const pipeline::ProjectorMaps& maps) {
+  const int rows = maps.status.rows, cols = maps.status.cols;
+  const std::size_t n = static_cast<std::size_t>(rows) * cols;
+  auto floats = [&](const cv::Mat& m) {
+    std::vector<float> v(n, std::numeric_limits<float>::quiet_NaN());
+    if (!m.empty()) {
+      cv::Mat continuous = m.isContinuous() ? m : m.clone();
+      std::memcpy(v.data(), continuous.ptr<float>(), n * sizeof(float));
+    }
+    return v;
+  };
+  std::vector<float> up = floats(maps.up), vp = floats(maps.vp), mod = floats(maps.modulation);
+  cv::Mat status = maps.status.isContinuous() ? maps.status : maps.status.clone();
+  std::string frame_id = config.frame_id;
+  Maps msg{};
+  msg.header.stamp = toTime(maps.stamp_ns);
+  msg.header.frame_id = frame_id.data();
+  msg.height = static_cast<std::uint32_t>(rows);
+  msg.width = static_cast<std::uint32_t>(cols);
+  borrow(msg.up, up.data(), n);
+  borrow(msg.vp, vp.data(), n);
+  borrow(msg.modulation, mod.data(), n);
+  borrow(msg.status, status.ptr<std::uint8_t>(), n);
+  if (!maps_writer.write(msg)) ++writes_timed_out;
+}
+
+void DdsBridge::Impl::publishStatus(const EngineStatus& s,
+                                    const std::vector<std::string>& patterns) {
+  std::string pattern = s.pattern, last_error = s.last_error;
+  StringList names(patterns);
+  Status msg{};
+  msg.stamp = toTime(nowNs());
+  msg.state = toState(s.state);
+  msg.pattern = pattern.data();
+  msg.scans_done = s.scans_done;
+  msg.scans_requested = s.scans_requested;
+  msg.scan_rate_hz = s.scan_rate_hz;
+  msg.frames_dropped = s.frames_dropped;
+  msg.sets_dropped = s.sets_dropped + writes_timed_out.load();
+  msg.sets_incomplete = s.sets_incomplete;
+  msg.last_error = last_error.data();
+  borrow(msg.patterns, names.pointers.data(), names.pointers.size());
+  status_writer.write(msg);
+}
+
+void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
+  CommandResult result;
+  const std::string pattern = request.pattern ? request.pattern : "";
+  switch (request.command) {
+    case sl_msgs_msg_COMMAND_START:
+      result = engine.start(pattern, request.count);
+      break;
+    case sl_msgs_msg_COMMAND_STOP:
+      result = engine.stop();
+      break;
+    case sl_msgs_msg_COMMAND_SET_PATTERN:
+      result = engine.selectPattern(pattern);
+      break;
+    default:
+      result = {CommandResult::Code::kInvalidCommand,
+                "unknown command " + std::to_string(static_cast<int>(request.command))};
+  }
+  std::string client_id = request.client_id ? request.client_id : "";
+  std::string reason = result.reason;
+  StringList names(engine.patterns());
+  Reply reply{};
+  reply.client_id = client_id.data();
+  reply.request_id = request.request_id;
+  reply.accepted = result.accepted();
+  reply.code = toReplyCode(result.code);
+  reply.reason = reason.data();
+  borrow(reply.patterns, names.pointers.data(), names.pointers.size());
+  reply_writer.write(reply);
+}
+
+DdsBridge::DdsBridge(const DdsConfig& config) : impl_(std::make_unique<Impl>(config)) {}
+DdsBridge::~DdsBridge() = default;
+
+void DdsBridge::publish(const ScanResult& result) {
+  if (result.cloud) impl_->publishCloud(*result.cloud);
+  if (impl_->config.publish_projector_maps && result.maps) impl_->publishMaps(*result.maps);
+}
+
+void DdsBridge::serve(ScanEngine& engine) {
+  Impl& d = *impl_;
+  using Clock = std::chrono::steady_clock;
+  const auto period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(d.config.status_period_s));
+  std::uint64_t published_version = ~std::uint64_t{0};
+  Clock::time_point next_periodic = Clock::now();
+  const std::vector<std::string> patterns = engine.patterns();
+  while (!d.stopping) {
+    d.waitset.wait(DDS_MSECS(100));
+    for (;;) {
+      dds::Loan<Request> requests = d.request_reader.take(16);
+      if (requests.empty()) break;
+      for (std::size_t i = 0; i < requests.size(); ++i)
+        if (requests.isValid(i)) d.answer(engine, requests[i]);
+    }
+    const EngineStatus status = engine.status();
+    if (status.version != published_version || Clock::now() >= next_periodic) {
+      d.publishStatus(status, patterns);
+      published_version = status.version;
+      next_periodic = Clock::now() + period;
+    }
+  }
+}
+
+void DdsBridge::stop() {
+  impl_->stopping = true;
+  impl_->wake.trigger();
+}
+
+}  // namespace sl::daemon
