@@ -1,0 +1,450 @@
+// Tests of the sl::dds wrapper and the generated ROS 2 / project types, over
+// the loopback configuration (config/cyclonedds-loopback.xml). Every topic
+// name contains the pid and a counter, so concurrent runs never interfere;
+// every wait is bounded so a failure fails instead of hanging.
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <future>
+#include <memory>
+#include <string>
+#include <thread>
+#include <tuple>
+#include <vector>
+
+#include "sensor_msgs/msg/PointCloud2.h"
+#include "sl/daemon/dds.h"
+#include "sl_msgs/msg/CommandReply.h"
+#include "sl_msgs/msg/CommandRequest.h"
+
+extern char** environ;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using sl::dds::GuardCondition;
+using sl::dds::Participant;
+using sl::dds::Qos;
+using sl::dds::ReadCondition;
+using sl::dds::Reader;
+using sl::dds::Topic;
+using sl::dds::WaitSet;
+using sl::dds::Writer;
+using Cloud = sensor_msgs_msg_dds__PointCloud2_;
+
+constexpr std::uint32_t kWidth = 1440;
+constexpr std::uint32_t kHeight = 1080;
+constexpr std::uint32_t kPointStep = 16;  // x, y, z, intensity as float32
+
+// Must run before the first participant is created: Cyclone reads the
+// variable when it initialises the domain.
+void useLoopbackConfig() {
+  setenv("CYCLONEDDS_URI", "file://" SL_SOURCE_DIR "/config/cyclonedds-loopback.xml", 1);
+}
+
+std::string uniqueTopic(const std::string& name) {
+  static std::atomic<int> counter{0};
+  return "sl_test/" + std::to_string(getpid()) + "_" + std::to_string(counter++) + "/" + name;
+}
+
+// Point i of cloud `seed`: x, y in metres from the pixel position, z varying,
+// NaN z every 7th point (invalid pixels), intensity from i and seed.
+std::vector<std::uint8_t> makeCloudData(std::uint32_t seed) {
+  std::vector<std::uint8_t> data(std::size_t{kWidth} * kHeight * kPointStep);
+  for (std::uint32_t row = 0; row < kHeight; ++row) {
+    for (std::uint32_t col = 0; col < kWidth; ++col) {
+      const std::uint32_t i = row * kWidth + col;
+      const float point[4] = {
+          (static_cast<float>(col) - kWidth / 2.0f) * 0.001f,
+          (static_cast<float>(row) - kHeight / 2.0f) * 0.001f,
+          i % 7 == 0 ? NAN : 0.5f + static_cast<float>((i + seed) % 1000) * 0.001f,
+          static_cast<float>((i * 31u + seed) % 4096u)};
+      std::memcpy(&data[std::size_t{i} * kPointStep], point, sizeof point);
+    }
+  }
+  return data;
+}
+
+// A PointCloud2_ whose sequences and strings point into memory this object
+// owns (_release = false): nothing allocated by Cyclone, nothing to free.
+struct CloudSample {
+  explicit CloudSample(std::uint32_t seed) : data(makeCloudData(seed)) {
+    static const char* const names[4] = {"x", "y", "z", "intensity"};
+    for (int f = 0; f < 4; ++f) {
+      fields[f].name = const_cast<char*>(names[f]);
+      fields[f].offset = 4u * f;
+      fields[f].datatype = sensor_msgs_msg_dds__PointField_Constants_FLOAT32;
+      fields[f].count = 1;
+    }
+    msg.header.stamp.sec = 1700000000;
+    msg.header.stamp.nanosec = seed;
+    msg.header.frame_id = frame_id.data();
+    msg.height = kHeight;
+    msg.width = kWidth;
+    msg.fields._length = msg.fields._maximum = 4;
+    msg.fields._buffer = fields;
+    msg.fields._release = false;
+    msg.is_bigendian = false;
+    msg.point_step = kPointStep;
+    msg.row_step = kPointStep * kWidth;
+    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
+    msg.data._buffer = data.data();
+    msg.data._release = false;
+    msg.is_dense = false;
+  }
+  CloudSample(const CloudSample&) = delete;
+  CloudSample& operator=(const CloudSample&) = delete;
+
+  std::vector<std::uint8_t> data;
+  std::string frame_id = "sl_camera0_optical_frame";
+  sensor_msgs_msg_dds__PointField_ fields[4] = {};
+  Cloud msg = {};
+};
+
+// Checks everything but the data bytes, which the caller compares.
+void checkCloudMetadata(const Cloud& got, std::uint32_t seed) {
+  CHECK(got.header.stamp.sec == 1700000000);
+  CHECK(got.header.stamp.nanosec == seed);
+  CHECK(std::string(got.header.frame_id) == "sl_camera0_optical_frame");
+  CHECK(got.height == kHeight);
+  CHECK(got.width == kWidth);
+  REQUIRE(got.fields._length == 4);
+  const char* const names[4] = {"x", "y", "z", "intensity"};
+  for (std::uint32_t f = 0; f < 4; ++f) {
+    CHECK(std::string(got.fields._buffer[f].name) == names[f]);
+    CHECK(got.fields._buffer[f].offset == 4 * f);
+    CHECK(got.fields._buffer[f].datatype == sensor_msgs_msg_dds__PointField_Constants_FLOAT32);
+    CHECK(got.fields._buffer[f].count == 1);
+  }
+  CHECK_FALSE(got.is_bigendian);
+  CHECK(got.point_step == kPointStep);
+  CHECK(got.row_step == kPointStep * kWidth);
+  CHECK_FALSE(got.is_dense);
+  REQUIRE(got.data._length == std::size_t{kWidth} * kHeight * kPointStep);
+}
+
+// Point clouds: reliable, keep-last. The writer may block up to 2 s for a
+// slow reader before write() reports a timeout.
+Qos cloudWriterQos() { return Qos().reliable(DDS_SECS(2)).keepLast(1).volatile_().xcdr1(); }
+Qos cloudReaderQos(std::int32_t depth) { return Qos().reliable().keepLast(depth); }
+
+// Waits (bounded) until reader has data.
+bool waitForData(const Participant& participant, const sl::dds::Entity& reader,
+                 dds_duration_t timeout) {
+  WaitSet waitset(participant);
+  ReadCondition has_data(reader);
+  waitset.attach(has_data);
+  return waitset.wait(timeout);
+}
+
+// A child process running a hidden test case of this executable; killed if
+// still running when this object goes away.
+class ChildProcess {
+ public:
+  explicit ChildProcess(const std::string& test_spec) {
+    char exe[4096];
+    const ssize_t len = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    REQUIRE(len > 0);
+    exe[len] = '\0';
+    std::string spec = test_spec;
+    char* argv[] = {exe, spec.data(), nullptr};
+    REQUIRE(posix_spawn(&pid_, exe, nullptr, nullptr, argv, environ) == 0);
+  }
+  ~ChildProcess() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+  // Exit status, or -1 if it did not exit within timeout (then it is killed).
+  int wait(std::chrono::milliseconds timeout) {
+    const auto deadline = Clock::now() + timeout;
+    int status = 0;
+    while (Clock::now() < deadline) {
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+}  // namespace
+
+TEST_CASE("full-size PointCloud2 round trip between two participants", "[dds]") {
+  useLoopbackConfig();
+  const std::string name = uniqueTopic("points");
+  Participant pub_participant;
+  Participant sub_participant;
+  Topic<Cloud> pub_topic(pub_participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
+  Topic<Cloud> sub_topic(sub_participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
+  Writer<Cloud> writer(pub_participant, pub_topic, cloudWriterQos());
+  Reader<Cloud> reader(sub_participant, sub_topic, cloudReaderQos(1));
+  REQUIRE(writer.waitForReaders(1, DDS_SECS(10)));
+
+  const CloudSample sent(7);
+  REQUIRE(writer.write(sent.msg));
+  REQUIRE(waitForData(sub_participant, reader, DDS_SECS(10)));
+
+  auto loan = reader.take(4);
+  REQUIRE(loan.size() == 1);
+  REQUIRE(loan.isValid(0));
+  checkCloudMetadata(loan[0], 7);
+  CHECK(std::memcmp(loan[0].data._buffer, sent.data.data(), sent.data.size()) == 0);
+}
+
+TEST_CASE("writers publish XCDR1 (ROS 2 compatible)", "[dds]") {
+  useLoopbackConfig();
+  const std::string name = uniqueTopic("xcdr");
+  Participant participant;
+  Topic<Cloud> topic(participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
+  // No data representation given: the wrapper adds XCDR1.
+  Writer<Cloud> writer(participant, topic, Qos().reliable());
+  const dds_data_representation_id_t xcdr2 = DDS_DATA_REPRESENTATION_XCDR2;
+  Qos xcdr2_only = Qos().reliable();
+  dds_qset_data_representation(const_cast<dds_qos_t*>(xcdr2_only.get()), 1, &xcdr2);
+
+  Reader<Cloud> xcdr2_reader(participant, topic, xcdr2_only);
+  Reader<Cloud> xcdr1_reader(participant, topic, Qos().reliable().xcdr1());
+  REQUIRE(xcdr1_reader.waitForWriters(1, DDS_SECS(10)));
+  // Matching is decided when the reader is created, so this cannot change.
+  CHECK(xcdr2_reader.matchedWriters() == 0);
+  CHECK(writer.matchedReaders() == 1);
+}
+
+TEST_CASE("request/reply round trip", "[dds]") {
+  useLoopbackConfig();
+  const std::string request_name = uniqueTopic("commandRequest");
+  const std::string reply_name = uniqueTopic("commandReply");
+  const Qos qos = Qos().reliable().keepLast(16);
+
+  Participant client;
+  Topic<sl_msgs_msg_CommandRequest> client_rq(client, request_name,
+                                              sl_msgs_msg_CommandRequest_desc);
+  Topic<sl_msgs_msg_CommandReply> client_rr(client, reply_name, sl_msgs_msg_CommandReply_desc);
+  Writer<sl_msgs_msg_CommandRequest> request_writer(client, client_rq, qos);
+  Reader<sl_msgs_msg_CommandReply> reply_reader(client, client_rr, qos);
+
+  Participant server;
+  Topic<sl_msgs_msg_CommandRequest> server_rq(server, request_name,
+                                              sl_msgs_msg_CommandRequest_desc);
+  Topic<sl_msgs_msg_CommandReply> server_rr(server, reply_name, sl_msgs_msg_CommandReply_desc);
+  Reader<sl_msgs_msg_CommandRequest> request_reader(server, server_rq, qos);
+  Writer<sl_msgs_msg_CommandReply> reply_writer(server, server_rr, qos);
+
+  REQUIRE(request_writer.waitForReaders(1, DDS_SECS(10)));
+  REQUIRE(reply_writer.waitForReaders(1, DDS_SECS(10)));
+
+  // Client: a stack sample pointing at literals (the writer only reads it).
+  sl_msgs_msg_CommandRequest request = {};
+  request.client_id = const_cast<char*>("test-client");
+  request.request_id = 42;
+  request.command = sl_msgs_msg_COMMAND_START;
+  request.pattern = const_cast<char*>("3+3");
+  request.count = 0;
+  REQUIRE(request_writer.write(request));
+
+  // Server: take the request, answer with a heap sample built with Cyclone's
+  // allocator and freed with the generated free function.
+  REQUIRE(waitForData(server, request_reader, DDS_SECS(10)));
+  {
+    auto requests = request_reader.take(8);
+    REQUIRE(requests.size() == 1);
+    REQUIRE(requests.isValid(0));
+    const auto& got = requests[0];
+    CHECK(std::string(got.client_id) == "test-client");
+    CHECK(got.request_id == 42);
+    CHECK(got.command == sl_msgs_msg_COMMAND_START);
+    CHECK(std::string(got.pattern) == "3+3");
+    CHECK(got.count == 0);
+
+    auto* reply = static_cast<sl_msgs_msg_CommandReply*>(dds_alloc(sizeof(sl_msgs_msg_CommandReply)));
+    reply->client_id = dds_string_dup(got.client_id);
+    reply->request_id = got.request_id;
+    reply->accepted = true;
+    reply->code = sl_msgs_msg_REPLY_OK;
+    reply->reason = dds_string_dup("");
+    reply->patterns._length = reply->patterns._maximum = 2;
+    reply->patterns._buffer = dds_sequence_string_allocbuf(2);
+    reply->patterns._release = true;
+    reply->patterns._buffer[0] = dds_string_dup("3+3");
+    reply->patterns._buffer[1] = dds_string_dup("gray+phase");
+    const bool written = reply_writer.write(*reply);
+    sl_msgs_msg_CommandReply_free(reply, DDS_FREE_ALL);
+    REQUIRE(written);
+  }
+
+  REQUIRE(waitForData(client, reply_reader, DDS_SECS(10)));
+  auto replies = reply_reader.take(8);
+  REQUIRE(replies.size() == 1);
+  REQUIRE(replies.isValid(0));
+  const auto& reply = replies[0];
+  CHECK(std::string(reply.client_id) == "test-client");
+  CHECK(reply.request_id == 42);
+  CHECK(reply.accepted);
+  CHECK(reply.code == sl_msgs_msg_REPLY_OK);
+  CHECK(std::string(reply.reason).empty());
+  REQUIRE(reply.patterns._length == 2);
+  CHECK(std::string(reply.patterns._buffer[0]) == "3+3");
+  CHECK(std::string(reply.patterns._buffer[1]) == "gray+phase");
+}
+
+TEST_CASE("WaitSet::wait returns false after the timeout", "[dds]") {
+  useLoopbackConfig();
+  Participant participant;
+  Topic<sl_msgs_msg_CommandRequest> topic(participant, uniqueTopic("quiet"),
+                                          sl_msgs_msg_CommandRequest_desc);
+  Reader<sl_msgs_msg_CommandRequest> reader(participant, topic);
+  ReadCondition has_data(reader);
+  WaitSet waitset(participant);
+  waitset.attach(has_data, 1);
+
+  const auto start = Clock::now();
+  std::vector<dds_attach_t> triggered;
+  CHECK_FALSE(waitset.wait(DDS_MSECS(200), &triggered));
+  const auto elapsed = Clock::now() - start;
+  CHECK(triggered.empty());
+  CHECK(elapsed >= std::chrono::milliseconds(190));
+  CHECK(elapsed < std::chrono::seconds(2));
+  CHECK(reader.take(4).empty());
+}
+
+TEST_CASE("GuardCondition wakes a thread waiting on a WaitSet", "[dds]") {
+  useLoopbackConfig();
+  Participant participant;
+  GuardCondition stop(participant);
+  WaitSet waitset(participant);
+  waitset.attach(stop, 77);
+
+  auto waiter = std::async(std::launch::async, [&waitset] {
+    std::vector<dds_attach_t> triggered;
+    const auto start = Clock::now();
+    const bool woke = waitset.wait(DDS_SECS(10), &triggered);
+    return std::make_tuple(woke, triggered, Clock::now() - start);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  stop.trigger();
+  REQUIRE(waiter.wait_for(std::chrono::seconds(5)) == std::future_status::ready);
+  const auto [woke, triggered, elapsed] = waiter.get();
+  CHECK(woke);
+  REQUIRE(triggered.size() == 1);
+  CHECK(triggered[0] == 77);
+  CHECK(elapsed < std::chrono::seconds(5));
+  CHECK(stop.triggered());
+  stop.reset();
+  CHECK_FALSE(stop.triggered());
+}
+
+TEST_CASE("failures throw sl::dds::Error naming the call", "[dds]") {
+  useLoopbackConfig();
+  Participant participant;
+  SECTION("illegal topic name") {
+    try {
+      Topic<Cloud> topic(participant, "bad topic*name", sensor_msgs_msg_dds__PointCloud2__desc);
+      FAIL("no exception");
+    } catch (const sl::dds::Error& e) {
+      const std::string what = e.what();
+      INFO(what);
+      CHECK(what.find("dds_create_topic(\"bad topic*name\"") != std::string::npos);
+      CHECK(what.find(dds_strretcode(e.code())) != std::string::npos);
+      CHECK(e.code() == DDS_RETCODE_BAD_PARAMETER);
+    }
+  }
+  SECTION("invalid domain id") {
+    try {
+      Participant bad(5000);
+      FAIL("no exception");
+    } catch (const sl::dds::Error& e) {
+      const std::string what = e.what();
+      INFO(what);
+      CHECK(what.find("dds_create_participant(domain 5000)") != std::string::npos);
+      CHECK(e.code() < 0);
+    }
+  }
+}
+
+// Two processes: this one reads, a child process (this executable running the
+// hidden test case below) writes full-size clouds over the loopback network.
+// Proves discovery and large-sample transport between processes and measures
+// the rate.
+TEST_CASE("full-size clouds between two processes", "[dds][process]") {
+  useLoopbackConfig();
+  constexpr int kClouds = 20;
+  constexpr int kDistinct = 4;  // the child cycles through this many clouds
+  const std::string name = uniqueTopic("points_ipc");
+  setenv("SL_TEST_CHILD_TOPIC", name.c_str(), 1);
+  setenv("SL_TEST_CHILD_COUNT", std::to_string(kClouds).c_str(), 1);
+  std::vector<std::vector<std::uint8_t>> expected;
+  for (int i = 0; i < kDistinct; ++i) expected.push_back(makeCloudData(i));
+
+  Participant participant;
+  Topic<Cloud> topic(participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
+  Reader<Cloud> reader(participant, topic, Qos().reliable().keepAll());
+  ReadCondition has_data(reader);
+  WaitSet waitset(participant);
+  waitset.attach(has_data);
+
+  ChildProcess child("[.dds_child_publisher]");
+  REQUIRE(reader.waitForWriters(1, DDS_SECS(20)));
+
+  int received = 0;
+  Clock::time_point first, last;
+  const auto deadline = Clock::now() + std::chrono::seconds(60);
+  while (received < kClouds && Clock::now() < deadline) {
+    if (!waitset.wait(DDS_SECS(1))) continue;
+    auto loan = reader.take(4);
+    for (std::size_t i = 0; i < loan.size(); ++i) {
+      if (!loan.isValid(i)) continue;
+      last = Clock::now();
+      if (received == 0) first = last;
+      const Cloud& got = loan[i];
+      const std::uint32_t seed = static_cast<std::uint32_t>(received % kDistinct);
+      checkCloudMetadata(got, seed);
+      CHECK(std::memcmp(got.data._buffer, expected[seed].data(), expected[seed].size()) == 0);
+      ++received;
+    }
+  }
+  REQUIRE(received == kClouds);
+  CHECK(child.wait(std::chrono::seconds(20)) == 0);
+  const double seconds = std::chrono::duration<double>(last - first).count();
+  std::printf("two processes: %d clouds of %.1f MB, %.1f clouds/s (%.0f MB/s) after the first\n",
+              received, expected[0].size() / 1e6, (received - 1) / seconds,
+              (received - 1) * expected[0].size() / 1e6 / seconds);
+}
+
+// The publishing half of the test above; run only as its child process.
+TEST_CASE("child: publish full-size clouds", "[.dds_child_publisher]") {
+  useLoopbackConfig();
+  const char* topic_name = std::getenv("SL_TEST_CHILD_TOPIC");
+  const char* count_text = std::getenv("SL_TEST_CHILD_COUNT");
+  REQUIRE(topic_name != nullptr);
+  REQUIRE(count_text != nullptr);
+  const int count = std::atoi(count_text);
+
+  Participant participant;
+  Topic<Cloud> topic(participant, topic_name, sensor_msgs_msg_dds__PointCloud2__desc);
+  // Keep-all so that every cloud arrives and the count is deterministic; the
+  // writer blocks while the reader catches up.
+  Writer<Cloud> writer(participant, topic, Qos().reliable(DDS_SECS(10)).keepAll().xcdr1());
+  REQUIRE(writer.waitForReaders(1, DDS_SECS(20)));
+  // Prepare the clouds first so that the reader measures transport only.
+  std::vector<std::unique_ptr<CloudSample>> clouds;
+  for (int i = 0; i < 4; ++i) clouds.push_back(std::make_unique<CloudSample>(i));
+  for (int i = 0; i < count; ++i) REQUIRE(writer.write(clouds[i % 4]->msg));
+  REQUIRE(dds_wait_for_acks(writer.handle(), DDS_SECS(30)) == DDS_RETCODE_OK);
+}
