@@ -55,12 +55,34 @@ struct SimConfig {
   // Radiometry in camera DN: a white (albedo 1) surface facing the projector
   // at reference_distance_mm, lit by a full-white pattern, reads
   // projector_brightness_dn above the ambient level.
+  //
+  // All DN values here are on the 8-bit scale (full scale 255) whatever
+  // bit_depth is. A pixel's signal is
+  //   S = ambient_dn * albedo
+  //       + projector_brightness_dn * albedo * cos(incidence)
+  //         * (reference_distance_mm / distance to projector)^2 * P / 255
+  // with P the projector image (8 bits) sampled bilinearly at the pixel's
+  // projector coordinate (P = 0 where not lit). Noise is Gaussian with
+  // variance gain_dn_per_electron * S + read_noise_dn^2 (8-bit DN^2), then
+  // the image value is round((S + noise) * (2^bit_depth - 1) / 255) clamped
+  // to [0, 2^bit_depth - 1]: a deeper ADC sees the same relative noise, with
+  // finer quantisation. bit_depth 8 gives CV_8UC1, 9..16 CV_16UC1.
   double projector_brightness_dn = 180.0;
   double reference_distance_mm = 500.0;
   double ambient_dn = 10.0;       // ambient light on an albedo-1 surface
   double gain_dn_per_electron = 0.25;  // shot noise: var = gain * signal (DN^2)
   double read_noise_dn = 0.8;          // std of additive Gaussian noise (DN)
+  // Noise seed. Live frame with camera frame_id f uses a seed hashed from
+  // (seed, f), so a run is reproducible apart from dropped frames.
   std::uint64_t seed = 1;
+};
+
+// Counts of the live schedule since creation.
+struct SimCounters {
+  std::uint64_t frames_delivered = 0;
+  std::uint64_t frames_dropped = 0;     // grab() fell more than 8 frames behind
+  std::uint64_t triggers_delivered = 0;
+  std::uint64_t triggers_dropped = 0;   // next() fell more than 8 triggers behind
 };
 
 // Per-pixel ground truth of the camera view (camera size).
@@ -89,8 +111,12 @@ class SimulatedSensor {
 
   // Renders frame `frame` of pattern `pattern_name` with noise drawn from
   // `noise_seed`: deterministic, for tests. The live camera uses the same path.
+  // Throws std::invalid_argument on an unknown pattern, std::out_of_range on
+  // a frame outside [0, frame count).
   virtual cv::Mat render(const std::string& pattern_name, int frame,
                          std::uint64_t noise_seed) const = 0;
+
+  virtual SimCounters counters() const = 0;
 };
 
 }  // namespace sl::drivers

@@ -1,0 +1,308 @@
+#include "sim_live.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "sim_render.h"
+
+namespace sl::drivers::sim {
+
+namespace {
+
+std::int64_t nowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::int64_t deadlineAfter(std::chrono::milliseconds timeout) {
+  return nowNs() + std::chrono::duration_cast<std::chrono::nanoseconds>(
+                       std::max(timeout, std::chrono::milliseconds(0)))
+                       .count();
+}
+
+}  // namespace
+
+LiveSchedule::LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps,
+                           int bit_depth, std::uint64_t seed, RenderFunction render)
+    : sequences_(std::move(sequences)),
+      frame_interval_ns_(1e9 / camera_fps),
+      bit_depth_(bit_depth),
+      seed_(seed),
+      render_(std::move(render)) {
+  if (sequences_.empty()) throw std::invalid_argument("LiveSchedule: no sequences");
+}
+
+// --- schedule arithmetic (mutex_ held) ---
+
+std::int64_t LiveSchedule::frameStamp(std::int64_t j) const {
+  return t0_ns_ + std::llround(double(j) * frame_interval_ns_);
+}
+
+std::int64_t LiveSchedule::frameLimit() const {
+  return sequence_count_ == 0 ? kNever : sequence_count_ * frames_per_sequence_;
+}
+
+bool LiveSchedule::frameExists(std::int64_t j) const {
+  return generation_ != 0 && j >= 0 && j < frameLimit() &&
+         (stop_ns_ == kNever || frameStamp(j) < stop_ns_);
+}
+
+std::int64_t LiveSchedule::lastStampAtOrBefore(std::int64_t t_ns) const {
+  if (t_ns < t0_ns_) return -1;
+  auto j = static_cast<std::int64_t>(std::floor(double(t_ns - t0_ns_) / frame_interval_ns_));
+  while (j >= 0 && frameStamp(j) > t_ns) --j;
+  while (frameStamp(j + 1) <= t_ns) ++j;
+  return j;
+}
+
+std::int64_t LiveSchedule::lastFrameAtOrBefore(std::int64_t t_ns) const {
+  if (generation_ == 0) return -1;
+  std::int64_t j = lastStampAtOrBefore(t_ns);
+  if (frameLimit() != kNever) j = std::min(j, frameLimit() - 1);
+  if (stop_ns_ != kNever) j = std::min(j, lastStampAtOrBefore(stop_ns_ - 1));
+  return j;
+}
+
+bool LiveSchedule::runningLocked(std::int64_t now_ns) const {
+  if (generation_ == 0) return false;
+  std::int64_t end = stop_ns_;
+  if (frameLimit() != kNever) end = std::min(end, frameStamp(frameLimit()));
+  return now_ns < end;
+}
+
+void LiveSchedule::waitUntil(std::unique_lock<std::mutex>& lock, std::int64_t t_ns) {
+  const std::chrono::system_clock::time_point until(
+      std::chrono::duration_cast<std::chrono::system_clock::duration>(
+          std::chrono::nanoseconds(t_ns)));
+  cv_.wait_until(lock, until);
+}
+
+// --- projector ---
+
+void LiveSchedule::select(const std::string& name) {
+  const auto it = std::find_if(sequences_.begin(), sequences_.end(),
+                               [&](const ProjectorSequence& s) { return s.name == name; });
+  if (it == sequences_.end()) {
+    std::string known;
+    for (const ProjectorSequence& s : sequences_) known += (known.empty() ? "" : ", ") + s.name;
+    throw std::invalid_argument("projector: unknown pattern '" + name + "' (known: " + known +
+                                ")");
+  }
+  std::lock_guard lock(mutex_);
+  if (runningLocked(nowNs()))
+    throw std::logic_error("projector: select('" + name + "') while running; stop() first");
+  selected_ = static_cast<std::size_t>(it - sequences_.begin());
+}
+
+void LiveSchedule::startProjector(int count) {
+  if (count < 0) throw std::invalid_argument("projector: start count must be >= 0");
+  {
+    std::lock_guard lock(mutex_);
+    const std::int64_t now = nowNs();
+    if (runningLocked(now)) throw std::logic_error("projector: start() while running");
+    ++generation_;
+    running_pattern_ = selected_;
+    frames_per_sequence_ = sequences_[selected_].frame_count;
+    sequence_count_ = count;
+    t0_ns_ = now + kStartDelayNs;
+    stop_ns_ = kNever;
+    triggers_stopped_ = false;
+  }
+  cv_.notify_all();
+}
+
+void LiveSchedule::stopProjector() {
+  {
+    std::lock_guard lock(mutex_);
+    if (generation_ != 0) stop_ns_ = std::min(stop_ns_, nowNs());
+  }
+  cv_.notify_all();
+}
+
+// --- camera ---
+
+void LiveSchedule::armCamera() {
+  std::lock_guard lock(mutex_);
+  if (camera_armed_) return;
+  camera_armed_ = true;
+  camera_armed_ns_ = nowNs();
+  camera_generation_ = 0;  // re-join the current schedule at the first frame after arming
+}
+
+void LiveSchedule::disarmCamera() {
+  {
+    std::lock_guard lock(mutex_);
+    camera_armed_ = false;
+    ++camera_stop_epoch_;
+  }
+  cv_.notify_all();
+}
+
+std::optional<pipeline::Frame> LiveSchedule::grab(std::chrono::milliseconds timeout) {
+  const std::int64_t deadline = deadlineAfter(timeout);
+  std::unique_lock lock(mutex_);
+  const std::uint64_t epoch = camera_stop_epoch_;
+  while (true) {
+    if (!camera_armed_ || camera_stop_epoch_ != epoch) return std::nullopt;
+    const std::int64_t now = nowNs();
+    std::int64_t wake = deadline;
+    if (generation_ != 0) {
+      if (camera_generation_ != generation_) {
+        camera_generation_ = generation_;
+        camera_next_ = std::max<std::int64_t>(0, lastStampAtOrBefore(camera_armed_ns_ - 1) + 1);
+      }
+      if (frameExists(camera_next_)) {
+        const std::int64_t last_due = lastFrameAtOrBefore(now);
+        if (last_due >= camera_next_) {
+          const std::int64_t behind = last_due - camera_next_ + 1;
+          if (behind > kLiveBufferDepth) {  // drop the oldest
+            const std::int64_t dropped = behind - kLiveBufferDepth;
+            camera_next_ += dropped;
+            next_frame_id_ += static_cast<std::uint64_t>(dropped);
+            counters_.frames_dropped += static_cast<std::uint64_t>(dropped);
+          }
+          const std::int64_t j = camera_next_++;
+          pipeline::Frame frame;
+          frame.frame_id = next_frame_id_++;
+          frame.stamp_ns = frameStamp(j);
+          frame.bit_depth = bit_depth_;
+          const std::size_t pattern = running_pattern_;
+          const int pattern_frame = static_cast<int>(j % frames_per_sequence_);
+          ++counters_.frames_delivered;
+          lock.unlock();
+          frame.image = render_(pattern, pattern_frame, mix64(seed_ ^ mix64(frame.frame_id)));
+          return frame;
+        }
+        wake = std::min(deadline, frameStamp(camera_next_));
+      }
+    }
+    if (now >= deadline) return std::nullopt;
+    waitUntil(lock, wake);
+  }
+}
+
+// --- trigger source ---
+
+std::optional<TriggerEvent> LiveSchedule::nextTrigger(std::chrono::milliseconds timeout) {
+  const std::int64_t deadline = deadlineAfter(timeout);
+  std::unique_lock lock(mutex_);
+  const std::uint64_t epoch = trigger_stop_epoch_;
+  while (true) {
+    if (triggers_stopped_ || trigger_stop_epoch_ != epoch) return std::nullopt;
+    const std::int64_t now = nowNs();
+    std::int64_t wake = deadline;
+    if (generation_ != 0) {
+      if (trigger_generation_ != generation_) {
+        trigger_generation_ = generation_;
+        trigger_next_ = 0;
+      }
+      const std::int64_t n = frames_per_sequence_;
+      if (frameExists(trigger_next_ * n)) {
+        const std::int64_t last_frame = lastFrameAtOrBefore(now);
+        const std::int64_t last_due = last_frame < 0 ? -1 : last_frame / n;
+        if (last_due >= trigger_next_) {
+          const std::int64_t behind = last_due - trigger_next_ + 1;
+          if (behind > kLiveBufferDepth) {  // drop the oldest
+            const std::int64_t dropped = behind - kLiveBufferDepth;
+            trigger_next_ += dropped;
+            counters_.triggers_dropped += static_cast<std::uint64_t>(dropped);
+          }
+          const std::int64_t k = trigger_next_++;
+          ++counters_.triggers_delivered;
+          return TriggerEvent{frameStamp(k * n), static_cast<std::uint64_t>(k)};
+        }
+        wake = std::min(deadline, frameStamp(trigger_next_ * n));
+      }
+    }
+    if (now >= deadline) return std::nullopt;
+    waitUntil(lock, wake);
+  }
+}
+
+void LiveSchedule::stopTriggers() {
+  {
+    std::lock_guard lock(mutex_);
+    triggers_stopped_ = true;
+    ++trigger_stop_epoch_;
+  }
+  cv_.notify_all();
+}
+
+SimCounters LiveSchedule::counters() const {
+  std::lock_guard lock(mutex_);
+  return counters_;
+}
+
+// --- adapters ---
+
+namespace {
+
+// Thread-safe (delegates to LiveSchedule).
+class LiveCamera final : public Camera {
+ public:
+  LiveCamera(std::shared_ptr<LiveSchedule> schedule, std::string id, int width, int height)
+      : schedule_(std::move(schedule)), id_(std::move(id)), width_(width), height_(height) {}
+  std::string id() const override { return id_; }
+  int width() const override { return width_; }
+  int height() const override { return height_; }
+  void start() override { schedule_->armCamera(); }
+  void stop() override { schedule_->disarmCamera(); }
+  std::optional<pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
+    return schedule_->grab(timeout);
+  }
+
+ private:
+  const std::shared_ptr<LiveSchedule> schedule_;
+  const std::string id_;
+  const int width_, height_;
+};
+
+// Thread-safe (delegates to LiveSchedule).
+class LiveProjector final : public Projector {
+ public:
+  LiveProjector(std::shared_ptr<LiveSchedule> schedule, std::string id)
+      : schedule_(std::move(schedule)), id_(std::move(id)) {}
+  std::string id() const override { return id_; }
+  std::vector<ProjectorSequence> sequences() const override { return schedule_->sequences(); }
+  void select(const std::string& name) override { schedule_->select(name); }
+  void start(int count) override { schedule_->startProjector(count); }
+  void stop() override { schedule_->stopProjector(); }
+
+ private:
+  const std::shared_ptr<LiveSchedule> schedule_;
+  const std::string id_;
+};
+
+// Thread-safe (delegates to LiveSchedule).
+class LiveTriggerSource final : public TriggerSource {
+ public:
+  explicit LiveTriggerSource(std::shared_ptr<LiveSchedule> schedule)
+      : schedule_(std::move(schedule)) {}
+  std::optional<TriggerEvent> next(std::chrono::milliseconds timeout) override {
+    return schedule_->nextTrigger(timeout);
+  }
+  void stop() override { schedule_->stopTriggers(); }
+
+ private:
+  const std::shared_ptr<LiveSchedule> schedule_;
+};
+
+}  // namespace
+
+std::shared_ptr<Camera> makeLiveCamera(std::shared_ptr<LiveSchedule> schedule, std::string id,
+                                       int width, int height) {
+  return std::make_shared<LiveCamera>(std::move(schedule), std::move(id), width, height);
+}
+
+std::shared_ptr<Projector> makeLiveProjector(std::shared_ptr<LiveSchedule> schedule,
+                                             std::string id) {
+  return std::make_shared<LiveProjector>(std::move(schedule), std::move(id));
+}
+
+std::shared_ptr<TriggerSource> makeLiveTriggerSource(std::shared_ptr<LiveSchedule> schedule) {
+  return std::make_shared<LiveTriggerSource>(std::move(schedule));
+}
+
+}  // namespace sl::drivers::sim

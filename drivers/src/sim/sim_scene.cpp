@@ -1,0 +1,148 @@
+#include "sim_scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Dense>
+#include <opencv2/core.hpp>
+
+namespace sl::drivers::sim {
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// Keeps `candidate` in `best` when it lies in (min_s, max_s) and is nearer.
+void keepNearest(std::optional<SurfaceHit>& best, double candidate, double min_s, double max_s,
+                 const Eigen::Vector3d& normal, double albedo) {
+  if (!(candidate > min_s && candidate < max_s)) return;
+  if (best && best->distance <= candidate) return;
+  best = SurfaceHit{candidate, normal, albedo};
+}
+
+}  // namespace
+
+std::optional<SurfaceHit> intersectScene(const SimScene& scene, const Eigen::Vector3d& origin,
+                                         const Eigen::Vector3d& direction, double min_s,
+                                         double max_s) {
+  std::optional<SurfaceHit> best;
+  for (const SimPlane& plane : scene.planes) {
+    const Eigen::Vector3d n = plane.normal.normalized();
+    const double along = n.dot(direction);
+    if (along == 0.0) continue;  // ray parallel to the plane
+    const double s = n.dot(plane.point - origin) / along;
+    keepNearest(best, s, min_s, max_s, n, plane.albedo);
+  }
+  for (const SimSphere& sphere : scene.spheres) {
+    // |origin + s d - c|^2 = r^2  <=>  a s^2 + 2 b s + c0 = 0
+    const Eigen::Vector3d oc = origin - sphere.center;
+    const double a = direction.squaredNorm();
+    const double b = direction.dot(oc);
+    const double c0 = oc.squaredNorm() - sphere.radius * sphere.radius;
+    const double discriminant = b * b - a * c0;
+    if (discriminant < 0.0) continue;
+    const double root = std::sqrt(discriminant);
+    for (double s : {(-b - root) / a, (-b + root) / a}) {
+      if (s > min_s && s < max_s) {
+        const Eigen::Vector3d point = origin + s * direction;
+        keepNearest(best, s, min_s, max_s, (point - sphere.center) / sphere.radius,
+                    sphere.albedo);
+        break;  // the first root in range is the nearer one
+      }
+    }
+  }
+  return best;
+}
+
+SceneView computeSceneView(const SimConfig& config) {
+  const pipeline::CameraProjectorCalibration& rig = config.rig;
+  const int width = rig.camera.width, height = rig.camera.height;
+  const int proj_width = rig.projector.width, proj_height = rig.projector.height;
+  const Eigen::Vector3d projector_center = -rig.R.transpose() * rig.t;  // camera frame, mm
+  const bool check_projector_fold = rig.projector.hasDistortion();
+
+  SceneView view;
+  SimGroundTruth& gt = view.ground_truth;
+  gt.depth_mm = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
+  gt.xyz_mm = cv::Mat(height, width, CV_32FC3, cv::Scalar(kNaN, kNaN, kNaN));
+  gt.up = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
+  gt.vp = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
+  gt.lit = cv::Mat(height, width, CV_8UC1, cv::Scalar(0));
+
+  RenderMaps& maps = view.maps;
+  const std::size_t n = static_cast<std::size_t>(width) * height;
+  maps.width = width;
+  maps.height = height;
+  maps.texture_width = proj_width;
+  maps.ambient_dn.assign(n, 0.0f);
+  maps.projector_dn_per_level.assign(n, 0.0f);
+  maps.texel_index.assign(n, 0);
+  maps.weight_x.assign(n, 0.0f);
+  maps.weight_y.assign(n, 0.0f);
+
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int row = 0; row < height; ++row) {
+    auto* depth_row = gt.depth_mm.ptr<float>(row);
+    auto* xyz_row = gt.xyz_mm.ptr<cv::Vec3f>(row);
+    auto* up_row = gt.up.ptr<float>(row);
+    auto* vp_row = gt.vp.ptr<float>(row);
+    auto* lit_row = gt.lit.ptr<std::uint8_t>(row);
+    for (int col = 0; col < width; ++col) {
+      const std::size_t i = static_cast<std::size_t>(row) * width + col;
+      const Eigen::Vector2d xn = rig.camera.pixelToNormalized({double(col), double(row)});
+      const Eigen::Vector3d ray{xn.x(), xn.y(), 1.0};  // s along it is the depth z (mm)
+      const std::optional<SurfaceHit> hit = intersectScene(config.scene, Eigen::Vector3d::Zero(),
+                                                           ray, 0.0, inf);
+      if (!hit) continue;
+      const Eigen::Vector3d point = hit->distance * ray;
+      depth_row[col] = static_cast<float>(point.z());
+      xyz_row[col] = cv::Vec3f(float(point.x()), float(point.y()), float(point.z()));
+      maps.ambient_dn[i] = static_cast<float>(config.ambient_dn * hit->albedo);
+
+      // The side of the surface the camera sees.
+      const Eigen::Vector3d normal = hit->normal.dot(ray) > 0 ? -hit->normal : hit->normal;
+      const Eigen::Vector3d point_in_projector = rig.R * point + rig.t;
+      if (point_in_projector.z() <= 0.0) continue;  // behind the projector
+      const Eigen::Vector2d projector_px = rig.projector.project(point_in_projector);
+      const double up = projector_px.x(), vp = projector_px.y();
+      // A projector pixel covers [c - 0.5, c + 0.5) around its centre c.
+      if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5))
+        continue;
+      if (check_projector_fold) {
+        // Far outside the lens's field the distortion polynomial folds back
+        // into the image; such points are not lit.
+        const Eigen::Vector2d xn_p{point_in_projector.x() / point_in_projector.z(),
+                                   point_in_projector.y() / point_in_projector.z()};
+        if ((rig.projector.pixelToNormalized(projector_px) - xn_p).norm() > 1e-4) continue;
+      }
+      const Eigen::Vector3d to_projector = projector_center - point;
+      const double distance = to_projector.norm();
+      const double cos_incidence = normal.dot(to_projector) / distance;
+      if (cos_incidence <= 0.0) continue;  // lit from behind
+      // Shadow: anything between the point and the projector centre (1 um
+      // tolerance at the point itself).
+      if (intersectScene(config.scene, point, to_projector, 1e-3 / distance, 1.0)) continue;
+
+      const double falloff = config.reference_distance_mm / distance;
+      const double shading = hit->albedo * cos_incidence * falloff * falloff;
+      maps.projector_dn_per_level[i] =
+          static_cast<float>(config.projector_brightness_dn * shading / 255.0);
+      // Bilinear sampling at the pixel centres, clamped to the image edge.
+      const double u_clamped = std::clamp(up, 0.0, double(proj_width - 1));
+      const double v_clamped = std::clamp(vp, 0.0, double(proj_height - 1));
+      const int x0 = std::min(int(std::floor(u_clamped)), std::max(proj_width - 2, 0));
+      const int y0 = std::min(int(std::floor(v_clamped)), std::max(proj_height - 2, 0));
+      maps.texel_index[i] = y0 * proj_width + x0;
+      maps.weight_x[i] = static_cast<float>(u_clamped - x0);
+      maps.weight_y[i] = static_cast<float>(v_clamped - y0);
+
+      up_row[col] = static_cast<float>(up);
+      vp_row[col] = static_cast<float>(vp);
+      lit_row[col] = 255;
+    }
+  }
+  return view;
+}
+
+}  // namespace sl::drivers::sim
