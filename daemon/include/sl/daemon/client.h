@@ -1,0 +1,77 @@
+// A client of a running sl_sensord over DDS: sends command requests, waits
+// for the matching reply, receives point clouds and status. Used by slctl and
+// the end-to-end tests.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sl/daemon/scan_engine.h"
+#include "sl/pipeline/types.h"
+
+namespace sl::daemon {
+
+struct ClientOptions {
+  int domain_id = 0;
+  std::string ns = "sl";
+  bool subscribe_points = true;
+};
+
+struct CommandReplyInfo {
+  bool accepted = false;
+  CommandResult::Code code = CommandResult::Code::kOk;
+  std::string reason;
+  std::vector<std::string> patterns;
+};
+
+struct StatusInfo {
+  ScanState state = ScanState::kIdle;
+  std::string pattern;
+  std::uint64_t scans_done = 0, scans_requested = 0;
+  double scan_rate_hz = 0;
+  std::uint64_t frames_dropped = 0, sets_dropped = 0, sets_incomplete = 0;
+  std::string last_error;
+  std::vector<std::string> patterns;
+  pipeline::TimestampNs stamp_ns = 0;
+};
+
+enum class Command { kStart, kStop, kSetPattern };
+
+// Thread-compatible. Each client has a random id; replies to other clients
+// are ignored.
+class SensorClient {
+ public:
+  // Throws sl::dds::Error if DDS cannot be set up.
+  explicit SensorClient(const ClientOptions& options);
+  ~SensorClient();
+
+  const std::string& clientId() const;
+
+  // Waits until the daemon's request reader (and, if subscribed, its cloud
+  // writer) is discovered. False on timeout: no daemon on this domain/ns.
+  bool waitForDaemon(std::chrono::milliseconds timeout);
+
+  // Sends a request and waits for its reply; nullopt on timeout.
+  std::optional<CommandReplyInfo> request(Command command, const std::string& pattern, int count,
+                                          std::chrono::milliseconds timeout);
+
+  // Next point cloud stamped at or after `not_before_ns`, converted back to
+  // the pipeline type (mm); nullopt on timeout.
+  std::optional<pipeline::PointCloud> receiveCloud(pipeline::TimestampNs not_before_ns,
+                                                   std::chrono::milliseconds timeout);
+
+  // Latest status (transient-local: available right after discovery).
+  std::optional<StatusInfo> status(std::chrono::milliseconds timeout);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+const char* toString(CommandResult::Code code);
+
+}  // namespace sl::daemon

@@ -1,0 +1,243 @@
+#include "sl/daemon/client.h"
+
+#include <cstring>
+#include <limits>
+#include <random>
+#include <thread>
+
+#include "sensor_msgs/msg/PointCloud2.h"
+#include "sl/daemon/dds.h"
+#include "sl/daemon/dds_bridge.h"
+#include "sl_msgs/msg/CommandReply.h"
+#include "sl_msgs/msg/CommandRequest.h"
+#include "sl_msgs/msg/Status.h"
+
+namespace sl::daemon {
+
+namespace {
+
+using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
+using Request = sl_msgs_msg_CommandRequest;
+using Reply = sl_msgs_msg_CommandReply;
+using Status = sl_msgs_msg_Status;
+using Clock = std::chrono::steady_clock;
+
+std::string randomClientId() {
+  std::random_device device;
+  std::uniform_int_distribution<std::uint64_t> dist;
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(dist(device)));
+  return text;
+}
+
+pipeline::TimestampNs fromTime(const builtin_interfaces_msg_dds__Time_& t) {
+  return static_cast<pipeline::TimestampNs>(t.sec) * 1'000'000'000 + t.nanosec;
+}
+
+std::vector<std::string> toStrings(const dds_sequence_string& seq) {
+  std::vector<std::string> out;
+  for (std::uint32_t i = 0; i < seq._length; ++i) out.emplace_back(seq._buffer[i]);
+  return out;
+}
+
+CommandResult::Code fromReplyCode(sl_msgs_msg_ReplyCode code) {
+  switch (code) {
+    case sl_msgs_msg_REPLY_OK: return CommandResult::Code::kOk;
+    case sl_msgs_msg_REPLY_UNKNOWN_PATTERN: return CommandResult::Code::kUnknownPattern;
+    case sl_msgs_msg_REPLY_BUSY: return CommandResult::Code::kBusy;
+    case sl_msgs_msg_REPLY_INVALID_COUNT: return CommandResult::Code::kInvalidCount;
+    case sl_msgs_msg_REPLY_INVALID_COMMAND: return CommandResult::Code::kInvalidCommand;
+    case sl_msgs_msg_REPLY_DEVICE_ERROR: return CommandResult::Code::kDeviceError;
+    case sl_msgs_msg_REPLY_NOT_RUNNING: return CommandResult::Code::kNotRunning;
+  }
+  return CommandResult::Code::kInvalidCommand;
+}
+
+// Decodes a PointCloud2 with float32 x, y, z (m) and optional intensity into
+// the pipeline type (mm). Throws std::runtime_error on a layout it cannot read.
+pipeline::PointCloud toPointCloud(const PointCloud2& msg) {
+  int offsets[4] = {-1, -1, -1, -1};
+  const char* names[4] = {"x", "y", "z", "intensity"};
+  for (std::uint32_t i = 0; i < msg.fields._length; ++i) {
+    const auto& f = msg.fields._buffer[i];
+    for (int k = 0; k < 4; ++k)
+      if (std::strcmp(f.name, names[k]) == 0 && f.datatype == 7 /* FLOAT32 */)
+        offsets[k] = static_cast<int>(f.offset);
+  }
+  if (offsets[0] < 0 || offsets[1] < 0 || offsets[2] < 0)
+    throw std::runtime_error("point cloud has no float32 x, y, z fields");
+  if (msg.is_bigendian) throw std::runtime_error("big-endian point clouds are not supported");
+  const std::size_t n = static_cast<std::size_t>(msg.width) * msg.height;
+  if (msg.data._length < n * msg.point_step || msg.row_step != msg.width * msg.point_step)
+    throw std::runtime_error("point cloud data is shorter than width * height * point_step");
+  pipeline::PointCloud cloud;
+  cloud.frame_id = msg.header.frame_id ? msg.header.frame_id : "";
+  cloud.stamp_ns = fromTime(msg.header.stamp);
+  cloud.width = static_cast<int>(msg.width);
+  cloud.height = static_cast<int>(msg.height);
+  cloud.points.resize(n);
+  auto readFloat = [&](std::size_t point, int offset) {
+    float v;
+    std::memcpy(&v, msg.data._buffer + point * msg.point_step + offset, sizeof v);
+    return v;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    auto& p = cloud.points[i];
+    p.x = readFloat(i, offsets[0]) * 1e3f;  // m -> mm
+    p.y = readFloat(i, offsets[1]) * 1e3f;
+    p.z = readFloat(i, offsets[2]) * 1e3f;
+    p.intensity = offsets[3] >= 0 ? readFloat(i, offsets[3]) : 0.0f;
+  }
+  return cloud;
+}
+
+}  // namespace
+
+const char* toString(CommandResult::Code code) {
+  switch (code) {
+    case CommandResult::Code::kOk: return "ok";
+    case CommandResult::Code::kUnknownPattern: return "unknown pattern";
+    case CommandResult::Code::kBusy: return "busy";
+    case CommandResult::Code::kInvalidCount: return "invalid count";
+    case CommandResult::Code::kInvalidCommand: return "invalid command";
+    case CommandResult::Code::kDeviceError: return "device error";
+    case CommandResult::Code::kNotRunning: return "not running";
+  }
+  return "?";
+}
+
+struct SensorClient::Impl {
+  explicit Impl(const ClientOptions& options)
+      : options(options),
+        names(TopicNames::forNamespace(options.ns)),
+        client_id(randomClientId()),
+        participant(options.domain_id),
+        request_topic(participant, names.request, sl_msgs_msg_CommandRequest_desc),
+        reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
+        status_topic(participant, names.status, sl_msgs_msg_Status_desc),
+        request_writer(participant, request_topic, dds::Qos().reliable().keepLast(16).xcdr1()),
+        reply_reader(participant, reply_topic, dds::Qos().reliable().keepLast(64)),
+        status_reader(participant, status_topic,
+                      dds::Qos().reliable().transientLocal().keepLast(1)) {
+    if (options.subscribe_points) {
+      points_topic.emplace(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc);
+      points_reader.emplace(participant, *points_topic, dds::Qos().reliable().keepLast(8));
+    }
+  }
+
+  const ClientOptions options;
+  const TopicNames names;
+  const std::string client_id;
+  std::uint64_t next_request_id = 1;
+  dds::Participant participant;
+  dds::Topic<Request> request_topic;
+  dds::Topic<Reply> reply_topic;
+  dds::Topic<Status> status_topic;
+  dds::Writer<Request> request_writer;
+  dds::Reader<Reply> reply_reader;
+  dds::Reader<Status> status_reader;
+  std::optional<dds::Topic<PointCloud2>> points_topic;
+  std::optional<dds::Reader<PointCloud2>> points_reader;
+};
+
+SensorClient::SensorClient(const ClientOptions& options)
+    : impl_(std::make_unique<Impl>(options)) {}
+SensorClient::~SensorClient() = default;
+
+const std::string& SensorClient::clientId() const { return impl_->client_id; }
+
+bool SensorClient::waitForDaemon(std::chrono::milliseconds timeout) {
+  Impl& d = *impl_;
+  const auto deadline = Clock::now() + timeout;
+  auto remaining = [&] {
+    return std::max<dds_duration_t>(
+        0, std::chrono::duration_cast<std::chrono::nanoseconds>(deadline - Clock::now()).count());
+  };
+  if (!d.request_writer.waitForReaders(1, remaining())) return false;
+  if (!d.reply_reader.waitForWriters(1, remaining())) return false;
+  if (d.points_reader && !d.points_reader->waitForWriters(1, remaining())) return false;
+  return true;
+}
+
+std::optional<CommandReplyInfo> SensorClient::request(Command command, const std::string& pattern,
+                                                      int count,
+                                                      std::chrono::milliseconds timeout) {
+  Impl& d = *impl_;
+  std::string client_id = d.client_id, pattern_copy = pattern;
+  Request req{};
+  req.client_id = client_id.data();
+  req.request_id = d.next_request_id++;
+  req.command = command == Command::kStart  ? sl_msgs_msg_COMMAND_START
+                : command == Command::kStop ? sl_msgs_msg_COMMAND_STOP
+                                            : sl_msgs_msg_COMMAND_SET_PATTERN;
+  req.pattern = pattern_copy.data();
+  req.count = count;
+  if (!d.request_writer.write(req)) return std::nullopt;
+  const auto deadline = Clock::now() + timeout;
+  while (Clock::now() < deadline) {
+    dds::Loan<Reply> replies = d.reply_reader.take(16);
+    for (std::size_t i = 0; i < replies.size(); ++i) {
+      if (!replies.isValid(i)) continue;
+      const Reply& r = replies[i];
+      if (r.request_id != req.request_id || std::strcmp(r.client_id, client_id.c_str()) != 0)
+        continue;  // another client's reply, or a stale one
+      CommandReplyInfo info;
+      info.accepted = r.accepted;
+      info.code = fromReplyCode(r.code);
+      info.reason = r.reason ? r.reason : "";
+      info.patterns = toStrings(r.patterns);
+      return info;
+    }
+    if (replies.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return std::nullopt;
+}
+
+std::optional<pipeline::PointCloud> SensorClient::receiveCloud(
+    pipeline::TimestampNs not_before_ns, std::chrono::milliseconds timeout) {
+  Impl& d = *impl_;
+  if (!d.points_reader) throw std::logic_error("SensorClient: points not subscribed");
+  const auto deadline = Clock::now() + timeout;
+  while (Clock::now() < deadline) {
+    dds::Loan<PointCloud2> clouds = d.points_reader->take(1);
+    if (clouds.empty()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      continue;
+    }
+    if (!clouds.isValid(0) || fromTime(clouds[0].header.stamp) < not_before_ns) continue;
+    return toPointCloud(clouds[0]);
+  }
+  return std::nullopt;
+}
+
+std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout) {
+  Impl& d = *impl_;
+  const auto deadline = Clock::now() + timeout;
+  std::optional<StatusInfo> latest;
+  while (!latest && Clock::now() < deadline) {
+    dds::Loan<Status> samples = d.status_reader.take(8);
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+      if (!samples.isValid(i)) continue;
+      const Status& s = samples[i];
+      StatusInfo info;
+      info.state = s.state == sl_msgs_msg_STATE_SCANNING ? ScanState::kScanning
+                   : s.state == sl_msgs_msg_STATE_IDLE   ? ScanState::kIdle
+                                                         : ScanState::kError;
+      info.pattern = s.pattern ? s.pattern : "";
+      info.scans_done = s.scans_done;
+      info.scans_requested = s.scans_requested;
+      info.scan_rate_hz = s.scan_rate_hz;
+      info.frames_dropped = s.frames_dropped;
+      info.sets_dropped = s.sets_dropped;
+      info.sets_incomplete = s.sets_incomplete;
+      info.last_error = s.last_error ? s.last_error : "";
+      info.patterns = toStrings(s.patterns);
+      info.stamp_ns = fromTime(s.stamp);
+      latest = info;
+    }
+    if (!latest) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return latest;
+}
+
+}  // namespace sl::daemon

@@ -1,0 +1,254 @@
+// slctl: command-line client of a running sl_sensord (over DDS).
+//
+//   slctl scan --count N --out DIR [--pattern NAME] [--units mm|m]
+//   slctl stop | status | patterns | pattern set NAME
+// Common options: --domain N, --ns NAMESPACE, --timeout SECONDS.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/ply.h"
+#include "sl/daemon/client.h"
+
+namespace {
+
+using namespace std::chrono_literals;
+using sl::daemon::Command;
+using sl::daemon::SensorClient;
+
+constexpr const char* kUsage =
+    "usage: slctl [options] COMMAND\n"
+    "commands:\n"
+    "  scan --count N --out DIR [--pattern NAME] [--units mm|m]\n"
+    "                     take N scans, write DIR/scan_0001.ply ... (binary PLY, finite points)\n"
+    "  stop               stop scanning\n"
+    "  status             print the daemon's status\n"
+    "  patterns           list the daemon's patterns\n"
+    "  pattern set NAME   select the pattern for the next scans\n"
+    "options:\n"
+    "  --domain N         DDS domain id (default 0)\n"
+    "  --ns NAME          topic namespace (default sl)\n"
+    "  --timeout S        seconds to wait for the daemon and each reply/scan (default 10)\n"
+    "exit codes: 0 ok, 1 error, 2 usage, 3 no daemon answered, 4 request rejected\n";
+
+struct Args {
+  std::string command;
+  std::vector<std::string> positional;
+  int domain = 0;
+  std::string ns = "sl";
+  double timeout_s = 10;
+  int count = 1;
+  std::string out;
+  std::string pattern;
+  sl::tools::LengthUnit unit = sl::tools::LengthUnit::kMillimetre;
+};
+
+[[noreturn]] void usageError(const std::string& message) {
+  std::cerr << "slctl: " << message << "\n" << kUsage;
+  std::exit(2);
+}
+
+int parseInt(const std::string& option, const std::string& value) {
+  try {
+    std::size_t used = 0;
+    const int v = std::stoi(value, &used);
+    if (used == value.size()) return v;
+  } catch (const std::exception&) {
+  }
+  usageError(option + " expects an integer, not '" + value + "'");
+}
+
+Args parseArgs(int argc, char** argv) {
+  Args args;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) usageError(a + " needs a value");
+      return argv[++i];
+    };
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      std::exit(0);
+    } else if (a == "--domain") {
+      args.domain = parseInt(a, value());
+    } else if (a == "--ns") {
+      args.ns = value();
+    } else if (a == "--timeout") {
+      const std::string v = value();
+      try {
+        args.timeout_s = std::stod(v);
+      } catch (const std::exception&) {
+        usageError("--timeout expects seconds, not '" + v + "'");
+      }
+      if (!(args.timeout_s > 0)) usageError("--timeout must be > 0");
+    } else if (a == "--count") {
+      args.count = parseInt(a, value());
+    } else if (a == "--out") {
+      args.out = value();
+    } else if (a == "--pattern") {
+      args.pattern = value();
+    } else if (a == "--units") {
+      const std::string v = value();
+      if (v == "mm") args.unit = sl::tools::LengthUnit::kMillimetre;
+      else if (v == "m") args.unit = sl::tools::LengthUnit::kMetre;
+      else usageError("--units must be mm or m, not '" + v + "'");
+    } else if (!a.empty() && a[0] == '-') {
+      usageError("unknown option '" + a + "'");
+    } else if (args.command.empty()) {
+      args.command = a;
+    } else {
+      args.positional.push_back(a);
+    }
+  }
+  if (args.command.empty()) usageError("no command given");
+  return args;
+}
+
+std::chrono::milliseconds toMs(double seconds) {
+  return std::chrono::milliseconds(static_cast<long long>(seconds * 1000));
+}
+
+std::int64_t nowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+int noDaemon(const Args& args) {
+  std::cerr << "slctl: no sl_sensord answered on 'rq/" << args.ns << "/commandRequest' (domain "
+            << args.domain << ") within " << args.timeout_s
+            << " s; is the daemon running with the same domain and namespace?\n";
+  return 3;
+}
+
+// Sends a request and reports a rejection; returns the exit code (0 = accepted).
+int sendCommand(SensorClient& client, const Args& args, Command command,
+                const std::string& pattern, int count,
+                sl::daemon::CommandReplyInfo* reply_out = nullptr) {
+  const auto reply = client.request(command, pattern, count, toMs(args.timeout_s));
+  if (!reply) {
+    std::cerr << "slctl: the daemon did not reply within " << args.timeout_s << " s\n";
+    return 3;
+  }
+  if (reply_out) *reply_out = *reply;
+  if (!reply->accepted) {
+    std::cerr << "slctl: request rejected (" << sl::daemon::toString(reply->code)
+              << "): " << reply->reason << "\n";
+    return 4;
+  }
+  return 0;
+}
+
+int scan(SensorClient& client, const Args& args) {
+  if (args.count < 1) usageError("scan --count must be >= 1");
+  if (args.out.empty()) usageError("scan needs --out DIR");
+  std::error_code error;
+  std::filesystem::create_directories(args.out, error);
+  if (error) {
+    std::cerr << "slctl: cannot create output directory '" << args.out << "': " << error.message()
+              << "\n";
+    return 1;
+  }
+  const std::int64_t requested_at = nowNs();
+  if (const int rc = sendCommand(client, args, Command::kStart, args.pattern, args.count))
+    return rc;
+  const char* unit = args.unit == sl::tools::LengthUnit::kMetre ? "m" : "mm";
+  const double scale = args.unit == sl::tools::LengthUnit::kMetre ? 1e-3 : 1.0;
+  for (int i = 1; i <= args.count; ++i) {
+    const auto cloud = client.receiveCloud(requested_at, toMs(args.timeout_s));
+    if (!cloud) {
+      std::cerr << "slctl: scan " << i << " of " << args.count << " did not arrive within "
+                << args.timeout_s << " s";
+      if (const auto s = client.status(1s); s && !s->last_error.empty())
+        std::cerr << " (daemon: " << s->last_error << ")";
+      std::cerr << "\n";
+      return 1;
+    }
+    char name[32];
+    std::snprintf(name, sizeof name, "scan_%04d.ply", i);
+    const std::string path = (std::filesystem::path(args.out) / name).string();
+    const std::size_t written = sl::tools::writePly(*cloud, path, args.unit);
+    double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin, zsum = 0;
+    for (const auto& p : cloud->points) {
+      if (!std::isfinite(p.z)) continue;
+      zmin = std::min<double>(zmin, p.z);
+      zmax = std::max<double>(zmax, p.z);
+      zsum += p.z;
+    }
+    const double total = static_cast<double>(cloud->points.size());
+    if (written > 0) {
+      std::printf("scan %d/%d: %dx%d, %zu valid points (%.1f %%), z %.1f..%.1f mean %.1f %s -> %s\n",
+                  i, args.count, cloud->width, cloud->height, written, 100.0 * written / total,
+                  zmin * scale, zmax * scale, zsum / written * scale, unit, path.c_str());
+    } else {
+      std::printf("scan %d/%d: %dx%d, no valid points -> %s\n", i, args.count, cloud->width,
+                  cloud->height, path.c_str());
+    }
+    std::fflush(stdout);
+  }
+  return 0;
+}
+
+int printStatus(SensorClient& client, const Args& args) {
+  const auto s = client.status(toMs(args.timeout_s));
+  if (!s) return noDaemon(args);
+  std::printf("state:            %s\n", sl::daemon::toString(s->state));
+  std::printf("pattern:          %s\n", s->pattern.c_str());
+  std::printf("scans:            %llu of %s\n", static_cast<unsigned long long>(s->scans_done),
+              s->scans_requested ? std::to_string(s->scans_requested).c_str() : "continuous");
+  std::printf("scan rate:        %.2f Hz\n", s->scan_rate_hz);
+  std::printf("frames dropped:   %llu\n", static_cast<unsigned long long>(s->frames_dropped));
+  std::printf("sets dropped:     %llu\n", static_cast<unsigned long long>(s->sets_dropped));
+  std::printf("sets incomplete:  %llu\n", static_cast<unsigned long long>(s->sets_incomplete));
+  std::printf("last error:       %s\n", s->last_error.empty() ? "-" : s->last_error.c_str());
+  return 0;
+}
+
+int run(const Args& args) {
+  sl::daemon::ClientOptions options;
+  options.domain_id = args.domain;
+  options.ns = args.ns;
+  options.subscribe_points = args.command == "scan";
+  SensorClient client(options);
+  if (args.command == "status") return printStatus(client, args);
+  if (!client.waitForDaemon(toMs(args.timeout_s))) return noDaemon(args);
+  if (args.command == "scan") return scan(client, args);
+  if (args.command == "stop") {
+    const int rc = sendCommand(client, args, Command::kStop, "", 0);
+    if (rc == 0) std::printf("stopped\n");
+    return rc;
+  }
+  if (args.command == "patterns") {
+    // An empty SET_PATTERN is rejected, but every reply lists the patterns.
+    const auto answer = client.request(Command::kSetPattern, "", 0, toMs(args.timeout_s));
+    if (!answer) return noDaemon(args);
+    for (const auto& name : answer->patterns) std::printf("%s\n", name.c_str());
+    return 0;
+  }
+  if (args.command == "pattern") {
+    if (args.positional.size() != 2 || args.positional[0] != "set")
+      usageError("usage: slctl pattern set NAME");
+    const int rc = sendCommand(client, args, Command::kSetPattern, args.positional[1], 0);
+    if (rc == 0) std::printf("pattern set to '%s'\n", args.positional[1].c_str());
+    return rc;
+  }
+  usageError("unknown command '" + args.command + "'");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Args args = parseArgs(argc, argv);
+  try {
+    return run(args);
+  } catch (const std::exception& e) {
+    std::cerr << "slctl: " << e.what() << "\n";
+    return 1;
+  }
+}
