@@ -116,9 +116,9 @@ namespace detail {
 
 dds_entity_t createTopic(const Participant& participant, const std::string& name,
                          const dds_topic_descriptor_t& descriptor, const Qos& qos) {
-  return check(dds_create_topic(participant.handle(), &descriptor, name.c_str(), qos.get(),
-                                nullptr),
-               "dds_create_topic(\"" + name + "\", " + descriptor.m_typename + ")");
+  return check(
+      dds_create_topic(participant.handle(), &descriptor, name.c_str(), qos.get(), nullptr),
+      "dds_create_topic(\"" + name + "\", " + descriptor.m_typename + ")");
 }
 
 dds_entity_t createWriter(const Participant& participant, const Entity& topic, const Qos& qos) {
@@ -176,9 +176,13 @@ ReadCondition::ReadCondition(const Entity& reader, std::uint32_t mask)
 GuardCondition::GuardCondition(const Participant& participant)
     : Entity(dds_create_guardcondition(participant.handle()), "dds_create_guardcondition") {}
 
-void GuardCondition::trigger() { check(dds_set_guardcondition(handle(), true), "dds_set_guardcondition"); }
+void GuardCondition::trigger() {
+  check(dds_set_guardcondition(handle(), true), "dds_set_guardcondition");
+}
 
-void GuardCondition::reset() { check(dds_set_guardcondition(handle(), false), "dds_set_guardcondition"); }
+void GuardCondition::reset() {
+  check(dds_set_guardcondition(handle(), false), "dds_set_guardcondition");
+}
 
 bool GuardCondition::triggered() const {
   bool value = false;
@@ -201,7 +205,8 @@ bool WaitSet::wait(dds_duration_t timeout, std::vector<dds_attach_t>* triggered)
   // Enough room for every cookie a wait set in this project attaches; if more
   // trigger, Cyclone reports the count and fills what fits.
   dds_attach_t cookies[16];
-  const dds_return_t n = check(dds_waitset_wait(handle(), cookies, 16, timeout), "dds_waitset_wait");
+  const dds_return_t n =
+      check(dds_waitset_wait(handle(), cookies, 16, timeout), "dds_waitset_wait");
   if (triggered != nullptr) {
     triggered->assign(cookies, cookies + std::min<dds_return_t>(n, 16));
   }

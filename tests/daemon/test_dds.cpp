@@ -2,14 +2,14 @@
 // the loopback configuration (config/cyclonedds-loopback.xml). Every topic
 // name contains the pid and a counter, so concurrent runs never interfere;
 // every wait is bounded so a failure fails instead of hanging.
-#include <catch2/catch.hpp>
-
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -47,9 +47,12 @@ constexpr std::uint32_t kHeight = 1080;
 constexpr std::uint32_t kPointStep = 16;  // x, y, z, intensity as float32
 
 // Must run before the first participant is created: Cyclone reads the
-// variable when it initialises the domain.
+// variable when it initialises the domain. SL_TEST_CYCLONEDDS_URI, if set,
+// replaces the loopback configuration (to measure another one).
 void useLoopbackConfig() {
-  setenv("CYCLONEDDS_URI", "file://" SL_SOURCE_DIR "/config/cyclonedds-loopback.xml", 1);
+  const char* other = std::getenv("SL_TEST_CYCLONEDDS_URI");
+  setenv("CYCLONEDDS_URI",
+         other != nullptr ? other : "file://" SL_SOURCE_DIR "/config/cyclonedds-loopback.xml", 1);
 }
 
 std::string uniqueTopic(const std::string& name) {
@@ -273,7 +276,8 @@ TEST_CASE("request/reply round trip", "[dds]") {
     CHECK(std::string(got.pattern) == "3+3");
     CHECK(got.count == 0);
 
-    auto* reply = static_cast<sl_msgs_msg_CommandReply*>(dds_alloc(sizeof(sl_msgs_msg_CommandReply)));
+    auto* reply =
+        static_cast<sl_msgs_msg_CommandReply*>(dds_alloc(sizeof(sl_msgs_msg_CommandReply)));
     reply->client_id = dds_string_dup(got.client_id);
     reply->request_id = got.request_id;
     reply->accepted = true;
@@ -384,7 +388,9 @@ TEST_CASE("failures throw sl::dds::Error naming the call", "[dds]") {
 // the rate.
 TEST_CASE("full-size clouds between two processes", "[dds][process]") {
   useLoopbackConfig();
-  constexpr int kClouds = 20;
+  // SL_TEST_IPC_CLOUDS overrides the count for longer measurements.
+  const char* clouds_text = std::getenv("SL_TEST_IPC_CLOUDS");
+  const int kClouds = clouds_text != nullptr ? std::max(2, std::atoi(clouds_text)) : 20;
   constexpr int kDistinct = 4;  // the child cycles through this many clouds
   const std::string name = uniqueTopic("points_ipc");
   setenv("SL_TEST_CHILD_TOPIC", name.c_str(), 1);

@@ -134,8 +134,12 @@ static void printCloud(long index, const Cloud* cloud) {
         uint8_t bytes[4];
         memcpy(bytes, p, 4);
         if (swap) {
-          uint8_t t = bytes[0]; bytes[0] = bytes[3]; bytes[3] = t;
-          t = bytes[1]; bytes[1] = bytes[2]; bytes[2] = t;
+          uint8_t t = bytes[0];
+          bytes[0] = bytes[3];
+          bytes[3] = t;
+          t = bytes[1];
+          bytes[1] = bytes[2];
+          bytes[2] = t;
         }
         float z;
         memcpy(&z, bytes, 4);
@@ -148,8 +152,8 @@ static void printCloud(long index, const Cloud* cloud) {
   }
   const char* frame_id = cloud->header.frame_id != NULL ? cloud->header.frame_id : "";
   printf("cloud %ld: %" PRIu32 " x %" PRIu32 " (width x height), point_step %" PRIu32
-         ", %zu points, finite z %zu, mean z %.4f m, frame_id \"%s\", stamp %" PRId32
-         ".%09" PRIu32 "%s\n",
+         ", %zu points, finite z %zu, mean z %.4f m, frame_id \"%s\", stamp %" PRId32 ".%09" PRIu32
+         "%s\n",
          index, cloud->width, cloud->height, cloud->point_step, points, finite,
          finite > 0 ? sum_z / (double)finite : NAN, frame_id, cloud->header.stamp.sec,
          cloud->header.stamp.nanosec, z_field == NULL ? " (no float32 z field)" : "");
@@ -170,8 +174,8 @@ int main(int argc, char** argv) {
   if (participant < 0) return fail("dds_create_participant", participant);
   int exit_code = 2;
 
-  const dds_entity_t topic = dds_create_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc,
-                                              opt.topic, NULL, NULL);
+  const dds_entity_t topic =
+      dds_create_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc, opt.topic, NULL, NULL);
   if (topic < 0) {
     exit_code = fail("dds_create_topic", topic);
     goto done;

@@ -218,13 +218,13 @@ class Reader : public Entity {
   // if there are none.
   Loan<T> take(std::size_t max_samples = 1) {
     Loan<T> loan;
+    if (max_samples == 0) return loan;
     loan.reader_ = handle();
     loan.samples_.assign(max_samples, nullptr);  // null: Cyclone lends the memory
     loan.infos_.resize(max_samples);
-    const dds_return_t n = check(
-        dds_take(handle(), loan.samples_.data(), loan.infos_.data(), max_samples,
-                 static_cast<std::uint32_t>(max_samples)),
-        "dds_take");
+    const dds_return_t n = check(dds_take(handle(), loan.samples_.data(), loan.infos_.data(),
+                                          max_samples, static_cast<std::uint32_t>(max_samples)),
+                                 "dds_take");
     loan.count_ = static_cast<std::size_t>(n);
     return loan;
   }
