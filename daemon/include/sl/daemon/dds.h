@@ -106,7 +106,7 @@ class Entity {
 
 class Participant : public Entity {
  public:
-  // domain_id 0..230 (DDS_DOMAIN_DEFAULT: the configuration's domain, 0 if
+  // domain_id 0..232 (ports must fit; DDS_DOMAIN_DEFAULT: the configuration's domain, 0 if
   // none). Throws Error for an invalid id or a broken configuration.
   explicit Participant(dds_domainid_t domain_id = DDS_DOMAIN_DEFAULT);
 };
