@@ -199,8 +199,7 @@ void parseTriangulator(const YamlMap& m, pipeline::TriangulatorOptions& t) {
 }
 
 void parseSynchroniser(const YamlMap& m, double camera_fps, pipeline::SynchroniserOptions& s) {
-  s.image_interval_ns = static_cast<pipeline::TimestampNs>(
-      std::llround(1e9 / m.get<double>("camera_fps", camera_fps)));
+  s.image_interval_ns = static_cast<pipeline::TimestampNs>(std::llround(1e9 / camera_fps));
   s.tolerance_lower = nonNegative(m, "tolerance_lower", s.tolerance_lower);
   s.tolerance_upper = nonNegative(m, "tolerance_upper", s.tolerance_upper);
   if (s.tolerance_lower + s.tolerance_upper >= 1.0)

@@ -45,9 +45,9 @@ bool YamlMap::has(const std::string& key) const {
   return node_ && node_.IsMap() && node_[key];
 }
 
-YAML::Node YamlMap::lookup(const std::string& key) const {
+std::optional<YAML::Node> YamlMap::lookup(const std::string& key) const {
   used_.insert(key);
-  if (!has(key)) return YAML::Node();
+  if (!has(key)) return std::nullopt;
   return node_[key];
 }
 
@@ -78,41 +78,43 @@ T YamlMap::convert(const std::string& key, const YAML::Node& value) const {
 
 template <typename T>
 T YamlMap::get(const std::string& key) const {
-  const YAML::Node value = lookup(key);
+  const auto value = lookup(key);
   if (!value) {
     throw ConfigError(where(origin_, node_) + ": key '" + keyPath(key) + "' is required");
   }
-  return convert<T>(key, value);
+  return convert<T>(key, *value);
 }
 
 template <typename T>
 T YamlMap::get(const std::string& key, const T& fallback) const {
-  const YAML::Node value = lookup(key);
+  const auto value = lookup(key);
   if (!value) return fallback;
-  return convert<T>(key, value);
+  return convert<T>(key, *value);
 }
 
 YamlMap YamlMap::map(const std::string& key) const {
-  const YAML::Node value = lookup(key);
+  const auto value = lookup(key);
   if (!value) throw ConfigError(where(origin_, node_) + ": key '" + keyPath(key) + "' is required");
-  return YamlMap(value, origin_, keyPath(key));
+  return YamlMap(*value, origin_, keyPath(key));
 }
 
 YamlMap YamlMap::optionalMap(const std::string& key) const {
-  return YamlMap(lookup(key), origin_, keyPath(key));
+  return YamlMap(lookup(key).value_or(YAML::Node()), origin_, keyPath(key));
 }
 
 std::vector<YamlMap> YamlMap::listOfMaps(const std::string& key) const {
-  const YAML::Node value = lookup(key);
+  const auto value = lookup(key);
   if (!value) throw ConfigError(where(origin_, node_) + ": key '" + keyPath(key) + "' is required");
-  if (!value.IsSequence() || value.size() == 0) fail(key, "expected a non-empty list");
+  if (!value->IsSequence() || value->size() == 0) fail(key, "expected a non-empty list");
   std::vector<YamlMap> out;
-  for (std::size_t i = 0; i < value.size(); ++i)
-    out.emplace_back(value[i], origin_, keyPath(key) + "[" + std::to_string(i) + "]");
+  for (std::size_t i = 0; i < value->size(); ++i)
+    out.emplace_back((*value)[i], origin_, keyPath(key) + "[" + std::to_string(i) + "]");
   return out;
 }
 
-YAML::Node YamlMap::raw(const std::string& key) const { return lookup(key); }
+YAML::Node YamlMap::raw(const std::string& key) const {
+  return lookup(key).value_or(YAML::Node());
+}
 
 void YamlMap::done() const {
   if (!node_ || !node_.IsMap()) return;

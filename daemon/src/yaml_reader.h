@@ -2,6 +2,7 @@
 // names the file, line and key, and done() rejects keys nobody read.
 #pragma once
 
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -28,7 +29,7 @@ class YamlMap {
   YamlMap map(const std::string& key) const;           // required map
   YamlMap optionalMap(const std::string& key) const;   // empty map if absent
   std::vector<YamlMap> listOfMaps(const std::string& key) const;  // required, non-empty
-  YAML::Node raw(const std::string& key) const;        // marks the key used
+  YAML::Node raw(const std::string& key) const;  // marks the key used; Null if absent
 
   // Throws ConfigError naming the first key that was never read.
   void done() const;
@@ -38,7 +39,7 @@ class YamlMap {
   std::string keyPath(const std::string& key) const;
 
  private:
-  YAML::Node lookup(const std::string& key) const;  // marks used; null if absent
+  std::optional<YAML::Node> lookup(const std::string& key) const;  // marks used
   template <typename T>
   T convert(const std::string& key, const YAML::Node& value) const;
 
