@@ -1,0 +1,63 @@
+// Cost of the simulated sensor: one render() of a 1440x1080 camera frame (the
+// live camera does one per frame, 30 per second) and the once-per-scene ray
+// casting. Run a Release build: ./bench_sim
+#include <benchmark/benchmark.h>
+
+#include <Eigen/Geometry>
+#include <numbers>
+
+#include "sl/drivers/sim.h"
+
+namespace {
+
+sl::drivers::SimConfig benchConfig(int bit_depth, bool noise) {
+  sl::drivers::SimConfig c;
+  auto& rig = c.rig;
+  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
+  rig.projector = {1824, 1140, 2200, 2200, 911.5, 1139, {0.02, -0.01, 0, 0, 0}};
+  const double deg = std::numbers::pi / 180.0;
+  rig.R = (Eigen::AngleAxisd(14.5 * deg, Eigen::Vector3d::UnitX()) *
+           Eigen::AngleAxisd(15 * deg, Eigen::Vector3d::UnitY()))
+              .toRotationMatrix();
+  rig.t = -rig.R * Eigen::Vector3d(160, 0, 0);
+  c.scene.planes = {{{0, 0, 700}, {0.1, -0.05, -1}, 0.8}};
+  c.scene.spheres = {{{20, -10, 520}, 90, 0.7}};
+  sl::pipeline::PhaseShift33Pattern p;
+  p.name = "3+3_both";
+  p.direction = sl::pipeline::Direction::kBoth;
+  c.patterns = {p};
+  c.bit_depth = bit_depth;
+  if (!noise) {
+    c.gain_dn_per_electron = 0;
+    c.read_noise_dn = 0;
+  }
+  return c;
+}
+
+// Args: bit depth, noise on (1) / off (0).
+void BM_Render(benchmark::State& state) {
+  const auto sensor = sl::drivers::SimulatedSensor::create(
+      benchConfig(int(state.range(0)), state.range(1) != 0));
+  std::uint64_t seed = 0;
+  int frame = 0;
+  for (auto _ : state) {
+    cv::Mat image = sensor->render("3+3_both", frame, ++seed);
+    benchmark::DoNotOptimize(image.data);
+    frame = (frame + 1) % 12;
+  }
+  state.SetItemsProcessed(state.iterations() * 1440 * 1080);
+}
+BENCHMARK(BM_Render)->Args({8, 1})->Args({12, 1})->Args({8, 0})->Unit(benchmark::kMillisecond);
+
+void BM_CreateScene(benchmark::State& state) {
+  const sl::drivers::SimConfig config = benchConfig(8, true);
+  for (auto _ : state) {
+    auto sensor = sl::drivers::SimulatedSensor::create(config);
+    benchmark::DoNotOptimize(sensor.get());
+  }
+}
+BENCHMARK(BM_CreateScene)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
