@@ -8,3 +8,7 @@ target_link_libraries(test_dds PRIVATE sl_dds sl_idl)
 sl_add_test(test_e2e daemon/test_e2e.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers yaml-cpp)
 add_dependencies(test_e2e sl_sensord)
+
+# Config loading and its error messages.
+sl_add_test(test_config daemon/test_config.cpp)
+target_link_libraries(test_config PRIVATE sl_daemon)

@@ -1,0 +1,112 @@
+// Config loading: the shipped config parses; every kind of mistake is one
+// ConfigError naming the file, the line and the key.
+#include <catch2/catch.hpp>
+
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+#include "sl/daemon/config.h"
+
+namespace {
+
+std::string shippedConfig() {
+  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// The shipped config with the first occurrence of `from` replaced by `to`.
+std::string edited(const std::string& from, const std::string& to) {
+  std::string text = shippedConfig();
+  const auto at = text.find(from);
+  REQUIRE(at != std::string::npos);
+  return text.replace(at, from.size(), to);
+}
+
+std::string errorOf(const std::string& yaml) {
+  try {
+    sl::daemon::parseConfig(yaml, "test.yaml");
+  } catch (const sl::daemon::ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST_CASE("the shipped sim config loads with the documented values") {
+  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  CHECK(config.sensor == "sim");
+  CHECK(config.sim.rig.camera.width == 1440);
+  CHECK(config.sim.rig.camera.height == 1080);
+  CHECK(config.sim.rig.projector.width == 1824);
+  CHECK(config.sim.rig.projector.height == 1140);
+  CHECK(config.patterns.size() >= 2);
+  CHECK(config.patterns[0].projector_width == 1824);
+  CHECK(config.sim.patterns.size() == config.patterns.size());
+  CHECK(config.findPattern(config.runtime.default_pattern) != nullptr);
+  CHECK(config.dds.ns == "sl");
+  CHECK(config.synchroniser.image_interval_ns == 33'333'333);
+  // 'calibration: sim' = the rig's own geometry.
+  CHECK(config.calibration.t.isApprox(config.sim.rig.t));
+  CHECK(config.calibration.camera.fx == config.sim.rig.camera.fx);
+  // The projector sits 150 mm to the side of the camera: centre C = -R^T t.
+  CHECK((-config.calibration.R.transpose() * config.calibration.t).norm() ==
+        Approx(150.0).margin(0.05));
+}
+
+TEST_CASE("config mistakes are reported with file, line and key") {
+  struct Case {
+    std::string from, to, expected;
+  };
+  const auto c = GENERATE(
+      Case{"  seed: 1", "  seed: 1\n  sed: 2", "test.yaml:10: unknown key 'sim.sed'"},
+      Case{"camera_fps: 30", "camera_fps: fast",
+           "key 'sim.camera_fps': expected a number, found 'fast'"},
+      Case{"camera_fps: 30", "camera_fps: -3", "key 'sim.camera_fps': must be > 0"},
+      Case{"bit_depth: 8", "bit_depth: 20", "key 'sim.bit_depth': must be in 8..16"},
+      Case{"fx: 2400,", "fx: [1, 2],", "key 'sim.rig.calibration.camera.fx': expected a number, found a list"},
+      Case{"distortion: [-0.08, 0.12, 0.0005, -0.0003, 0.0]", "distortion: [1, 2]",
+           "key 'sim.rig.calibration.camera.distortion': expected 5 numbers"},
+      Case{"direction: horizontal", "direction: diagonal",
+           "key 'patterns[0].direction': direction must be horizontal, vertical or both"},
+      Case{"fringes: 16}", "fringes: 1000}", "key 'patterns[0].fringes'"},
+      Case{"family: phase_shift_3+3", "family: gray_code",
+           "key 'patterns[0].family': unknown pattern family 'gray_code'"},
+      Case{"default_pattern: 3+3_horizontal", "default_pattern: nope",
+           "key 'runtime.default_pattern': no pattern named 'nope'"},
+      Case{"sensor: sim", "sensor: lightcrafter", "key 'sensor': unknown sensor 'lightcrafter'"},
+      Case{"calibration: sim", "calibration: /nonexistent/calib.yaml",
+           "key 'calibration': cannot read calibration file '/nonexistent/calib.yaml'"},
+      Case{"    - plane:", "    - cube:", "each scene item is exactly one of 'plane' or 'sphere'"},
+      Case{"radius_mm: 60", "radius_mm: 0", "key 'sim.scene[1].sphere.radius_mm': must be > 0"},
+      Case{"namespace: sl", "namespace: /bad/", "key 'dds.namespace'"},
+      Case{"queue_depth: 2", "queue_depth: 0", "key 'runtime.queue_depth': must be in 1..64"},
+      Case{"max_unwrap_error: 0.35", "max_unwrap_error: 0.7", "key 'decoder.max_unwrap_error'"},
+      Case{"use: best", "use: diagonal", "key 'triangulator.use': must be best, columns or rows"},
+      Case{"rotation_deg: [0, 15.25, 0],", "rotation_deg: [0, 15.25, 0], rotation: [1,0,0,0,1,0,0,0,1],",
+           "give exactly one of 'rotation'"},
+      Case{"patterns:\n", "patterns: []\nunused:\n", "key 'patterns': expected a non-empty list"});
+  INFO("edit: '" << c.from << "' -> '" << c.to << "'");
+  const std::string message = errorOf(edited(c.from, c.to));
+  INFO("message: " << message);
+  CHECK(message.rfind("test.yaml", 0) == 0);  // names the file first
+  CHECK(message.find(c.expected) != std::string::npos);
+  CHECK(message.find('\n') == std::string::npos);  // one line
+}
+
+TEST_CASE("a missing file and malformed YAML are one clear error") {
+  try {
+    sl::daemon::loadConfig("/nonexistent/sl.yaml");
+    FAIL("no error");
+  } catch (const sl::daemon::ConfigError& e) {
+    CHECK(std::string(e.what()) == "/nonexistent/sl.yaml: cannot open config file");
+  }
+  const std::string message = errorOf("sensor: sim\nsim: {seed: [1,\n");
+  CHECK(message.rfind("test.yaml:", 0) == 0);
+  CHECK(message.find("malformed YAML") != std::string::npos);
+  CHECK(errorOf("- just\n- a list\n").find("expected a map of keys at the top level") !=
+        std::string::npos);
+}
