@@ -12,3 +12,8 @@ add_dependencies(test_e2e sl_sensord)
 # Config loading and its error messages.
 sl_add_test(test_config daemon/test_config.cpp)
 target_link_libraries(test_config PRIVATE sl_daemon)
+
+# End to end through slctl and the plain C subscriber.
+add_test(NAME e2e_cli COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/e2e_cli.sh
+  ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
+set_tests_properties(e2e_cli PROPERTIES TIMEOUT 120)
