@@ -26,6 +26,9 @@
 #include <chrono>
 #include <cmath>
 
+#include <sys/socket.h>
+#include <sys/un.h>
+
 #include <Eigen/Dense>
 
 #include "daemon_process.h"
@@ -211,4 +214,45 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
   REQUIRE(exit_status);
   CHECK(*exit_status == 0);
   CHECK(elapsed < 2s);
+}
+
+TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("notify");
+  const std::string config_path = sl::test::writeTestConfig(ns);
+  // A datagram socket standing in for systemd's notification socket.
+  const std::string socket_path = "/tmp/sl_notify_" + ns;
+  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  REQUIRE(fd >= 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  std::snprintf(address.sun_path, sizeof address.sun_path, "%s", socket_path.c_str());
+  ::unlink(socket_path.c_str());
+  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0);
+  timeval receive_timeout{20, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &receive_timeout, sizeof receive_timeout);
+
+  setenv("NOTIFY_SOCKET", socket_path.c_str(), 1);
+  sl::test::DaemonProcess daemon(config_path);
+  unsetenv("NOTIFY_SOCKET");
+  REQUIRE(daemon.started());
+  char buffer[256] = {};
+  const ssize_t n = ::recv(fd, buffer, sizeof buffer - 1, 0);
+  CHECK(std::string(buffer, n > 0 ? n : 0) == "READY=1");
+  // The daemon answers requests once it said it is ready.
+  sl::daemon::ClientOptions options;
+  options.ns = ns;
+  options.subscribe_points = false;
+  sl::daemon::SensorClient client(options);
+  REQUIRE(client.waitForDaemon(10s));
+  const auto status = client.status(5s);
+  REQUIRE(status);
+  CHECK(status->state == sl::daemon::ScanState::kIdle);
+  const auto exit_status = daemon.terminate(5s);
+  REQUIRE(exit_status);
+  CHECK(*exit_status == 0);
+  const ssize_t m = ::recv(fd, buffer, sizeof buffer - 1, 0);
+  CHECK(std::string(buffer, m > 0 ? m : 0) == "STOPPING=1");
+  ::close(fd);
+  ::unlink(socket_path.c_str());
 }
