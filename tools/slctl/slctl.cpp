@@ -1,7 +1,7 @@
 // slctl: command-line client of a running sl_sensord (over DDS).
 //
 //   slctl scan --count N --out DIR [--pattern NAME] [--units mm|m]
-//   slctl stop | status | patterns | pattern set NAME
+//   slctl start [--pattern NAME] | stop | status | patterns | pattern set NAME
 // Common options: --domain N, --ns NAMESPACE, --timeout SECONDS.
 #include <chrono>
 #include <cmath>
@@ -27,6 +27,7 @@ constexpr const char* kUsage =
     "commands:\n"
     "  scan --count N --out DIR [--pattern NAME] [--units mm|m]\n"
     "                     take N scans, write DIR/scan_0001.ply ... (binary PLY, finite points)\n"
+    "  start [--pattern NAME]  scan continuously until stop\n"
     "  stop               stop scanning\n"
     "  status             print the daemon's status\n"
     "  patterns           list the daemon's patterns\n"
@@ -219,6 +220,11 @@ int run(const Args& args) {
   if (args.command == "status") return printStatus(client, args);
   if (!client.waitForDaemon(toMs(args.timeout_s))) return noDaemon(args);
   if (args.command == "scan") return scan(client, args);
+  if (args.command == "start") {
+    const int rc = sendCommand(client, args, Command::kStart, args.pattern, 0);
+    if (rc == 0) std::printf("scanning continuously; 'slctl stop' ends it\n");
+    return rc;
+  }
   if (args.command == "stop") {
     const int rc = sendCommand(client, args, Command::kStop, "", 0);
     if (rc == 0) std::printf("stopped\n");
