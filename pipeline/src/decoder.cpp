@@ -30,90 +30,125 @@ struct DirectionParams {
   float max_unwrap_error;  // periods
 };
 
+static_assert(static_cast<int>(PixelStatus::kValid) == 0, "outputRow tests status == 0");
+
 // Scratch rows reused across the rows of one decode call.
 struct RowBuffers {
-  std::vector<float> phase_high, phase_low, saturated;
-  explicit RowBuffers(int width) : phase_high(width), phase_low(width), saturated(width) {}
+  std::vector<float> phase_high, phase_low, modulation, peak, coord;
+  std::vector<std::int32_t> status;
+  explicit RowBuffers(int width)
+      : phase_high(width), phase_low(width), modulation(width), peak(width), coord(width),
+        status(width) {}
 };
 
+// Per-row kernels. They are written without branches and take __restrict
+// pointers so that GCC vectorizes them at -O3 without runtime alias checks
+// (SSE2 baseline; needs -fno-math-errno -fno-trapping-math, set for this file
+// in CMakeLists.txt).
+
+// Wrapped phases (eq. 2) of both sets, (3B)^2 of the high-frequency set, the
+// brightest of the six values and, when `offset` is not null, A.
+template <typename Pixel>
+void phaseRow(int n, const Pixel* __restrict i0, const Pixel* __restrict i1,
+              const Pixel* __restrict i2, const Pixel* __restrict l0, const Pixel* __restrict l1,
+              const Pixel* __restrict l2, float* __restrict phase_high,
+              float* __restrict phase_low, float* __restrict b2, float* __restrict peak,
+              float* __restrict offset) {
+  for (int x = 0; x < n; ++x) {
+    const float a0 = i0[x], a1 = i1[x], a2 = i2[x];
+    const float c0 = l0[x], c1 = l1[x], c2 = l2[x];
+    const float sin_h = kSqrt3 * (a1 - a2);  // 3B sin(phi_h)
+    const float cos_h = 2.0f * a0 - a1 - a2;  // 3B cos(phi_h)
+    const float sin_l = kSqrt3 * (c1 - c2);
+    const float cos_l = 2.0f * c0 - c1 - c2;
+    phase_high[x] = detail::fastAtan2Positive(sin_h, cos_h);
+    phase_low[x] = detail::fastAtan2Positive(sin_l, cos_l);
+    b2[x] = sin_h * sin_h + cos_h * cos_h;
+    peak[x] = std::max(std::max(std::max(a0, a1), std::max(a2, c0)), std::max(c1, c2));
+  }
+  if (offset) {
+    for (int x = 0; x < n; ++x) offset[x] = (float(i0[x]) + float(i1[x]) + float(i2[x])) / 3.0f;
+  }
+}
+
+// Constants of unwrapRow, precomputed from DirectionParams.
+struct UnwrapConstants {
+  float n_fringes, wavelength, max_coord, min_b2, max_unwrap_error, saturation_level;
+};
+
+// Temporal unwrapping (eq. 3-4), projector coordinate (eq. 5) and status.
+// cycles lies in (-1, N); the fringe order k is taken modulo N because the
+// code is periodic in p with period L (k = -1 and k = N are the neighbours of
+// the wrap).
+void unwrapRow(int n, const UnwrapConstants c, const float* __restrict phase_high,
+               const float* __restrict phase_low, const float* __restrict b2,
+               const float* __restrict peak, float* __restrict coord,
+               std::int32_t* __restrict status) {
+  for (int x = 0; x < n; ++x) {
+    const float cycles = (c.n_fringes * phase_low[x] - phase_high[x]) * kInvTwoPi;
+    // round(cycles) for cycles > -1.5, as a truncation (no libm call).
+    const float k_raw = static_cast<float>(static_cast<std::int32_t>(cycles + 1.5f) - 1);
+    const float unwrap_error = std::fabs(cycles - k_raw);
+    float k = k_raw < 0.0f ? k_raw + c.n_fringes : k_raw;
+    k = k >= c.n_fringes ? k - c.n_fringes : k;
+    const float p = (phase_high[x] * kInvTwoPi + k) * c.wavelength;
+    coord[x] = p;
+    std::int32_t s = p >= -0.5f && p <= c.max_coord
+                         ? static_cast<std::int32_t>(PixelStatus::kValid)
+                         : static_cast<std::int32_t>(PixelStatus::kOutOfRange);
+    s = unwrap_error > c.max_unwrap_error
+            ? static_cast<std::int32_t>(PixelStatus::kUnwrapInconsistent)
+            : s;
+    s = b2[x] >= c.min_b2 ? s : static_cast<std::int32_t>(PixelStatus::kLowModulation);
+    s = peak[x] >= c.saturation_level ? static_cast<std::int32_t>(PixelStatus::kSaturated) : s;
+    status[x] = s;
+  }
+}
+
+// Writes B, the projector coordinate (NaN unless valid) and the status of a
+// row. With `combine` (second direction of kBoth) B keeps the minimum of both
+// directions and an earlier invalid status wins.
+void outputRow(int n, bool combine, const float* __restrict b2, const float* __restrict p,
+               std::int32_t* __restrict status, float* __restrict modulation_out,
+               float* __restrict coord_out, std::uint8_t* __restrict status_out) {
+  if (combine) {
+    for (int x = 0; x < n; ++x) {
+      modulation_out[x] = std::min(modulation_out[x], std::sqrt(b2[x]) * (1.0f / 3.0f));
+    }
+    for (int x = 0; x < n; ++x) status[x] = status_out[x] != 0 ? status_out[x] : status[x];
+  } else {
+    for (int x = 0; x < n; ++x) modulation_out[x] = std::sqrt(b2[x]) * (1.0f / 3.0f);
+  }
+  for (int x = 0; x < n; ++x) coord_out[x] = status[x] == 0 ? p[x] : kNaN;
+  for (int x = 0; x < n; ++x) status_out[x] = static_cast<std::uint8_t>(status[x]);
+}
+
 // Decodes one direction (frames first_frame .. first_frame + 5) into `coord`.
-// When `combine` is false, modulation/offset/status are written; when true
-// (second direction of kBoth), modulation keeps the minimum of both
-// directions and an earlier invalid status is kept.
+// Without `combine`, modulation/offset/status are written; with it (second
+// direction of kBoth), see outputRow.
 template <typename Pixel>
 void decodeDirection(const std::vector<cv::Mat>& frames, const DirectionParams& d, bool combine,
                      cv::Mat& coord, cv::Mat& modulation, cv::Mat& offset, cv::Mat& status) {
   const int rows = frames[0].rows;
   const int cols = frames[0].cols;
   RowBuffers buf(cols);
-  const float n_fringes = static_cast<float>(d.fringes);
-  const float max_coord = d.axis_length - 0.5f;
-
+  const UnwrapConstants constants{static_cast<float>(d.fringes),
+                                  d.wavelength,
+                                  d.axis_length - 0.5f,
+                                  9.0f * d.min_modulation * d.min_modulation,  // on (3B)^2
+                                  d.max_unwrap_error,
+                                  d.saturation_level};
+  const int f = d.first_frame;
   for (int y = 0; y < rows; ++y) {
-    const Pixel* i0 = frames[d.first_frame + 0].ptr<Pixel>(y);
-    const Pixel* i1 = frames[d.first_frame + 1].ptr<Pixel>(y);
-    const Pixel* i2 = frames[d.first_frame + 2].ptr<Pixel>(y);
-    const Pixel* l0 = frames[d.first_frame + 3].ptr<Pixel>(y);
-    const Pixel* l1 = frames[d.first_frame + 4].ptr<Pixel>(y);
-    const Pixel* l2 = frames[d.first_frame + 5].ptr<Pixel>(y);
-    float* coord_row = coord.ptr<float>(y);
-    float* mod_row = modulation.ptr<float>(y);
-    float* off_row = offset.ptr<float>(y);
-    auto* status_row = status.ptr<std::uint8_t>(y);
-    float* ph = buf.phase_high.data();
-    float* pl = buf.phase_low.data();
-    float* sat = buf.saturated.data();
-
-    // Pass 1, branch-free so it vectorizes: wrapped phases (eq. 2), B and A
-    // of the high-frequency set, saturation flag.
-    for (int x = 0; x < cols; ++x) {
-      const float a0 = i0[x], a1 = i1[x], a2 = i2[x];
-      const float b0 = l0[x], b1 = l1[x], b2 = l2[x];
-      const float sin_h = kSqrt3 * (a1 - a2);  // 3B sin(phi_h)
-      const float cos_h = 2.0f * a0 - a1 - a2;  // 3B cos(phi_h)
-      const float sin_l = kSqrt3 * (b1 - b2);
-      const float cos_l = 2.0f * b0 - b1 - b2;
-      ph[x] = detail::fastAtan2Positive(sin_h, cos_h);
-      pl[x] = detail::fastAtan2Positive(sin_l, cos_l);
-      const float b = std::sqrt(sin_h * sin_h + cos_h * cos_h) * (1.0f / 3.0f);
-      const float peak = std::max(std::max(std::max(a0, a1), std::max(a2, b0)), std::max(b1, b2));
-      sat[x] = peak >= d.saturation_level ? 1.0f : 0.0f;
-      if (combine) {
-        mod_row[x] = std::min(mod_row[x], b);
-      } else {
-        mod_row[x] = b;
-        off_row[x] = (a0 + a1 + a2) * (1.0f / 3.0f);
-      }
-    }
-
-    // Pass 2: temporal unwrapping (eq. 3-4), projector coordinate (eq. 5),
-    // validity. The fringe order k is taken modulo N: the code is periodic in
-    // p with period L, so k = -1 and k = N are the neighbours of the wrap.
-    for (int x = 0; x < cols; ++x) {
-      const float cycles = (n_fringes * pl[x] - ph[x]) * kInvTwoPi;
-      const float k_raw = std::nearbyint(cycles);
-      const float unwrap_error = std::fabs(cycles - k_raw);
-      float k = k_raw;
-      if (k < 0.0f) k += n_fringes;
-      if (k >= n_fringes) k -= n_fringes;
-      const float p = (ph[x] * kInvTwoPi + k) * d.wavelength;
-
-      PixelStatus s = PixelStatus::kValid;
-      if (sat[x] != 0.0f) {
-        s = PixelStatus::kSaturated;
-      } else if (!(mod_row[x] >= d.min_modulation)) {
-        s = PixelStatus::kLowModulation;
-      } else if (unwrap_error > d.max_unwrap_error) {
-        s = PixelStatus::kUnwrapInconsistent;
-      } else if (!(p >= -0.5f && p <= max_coord)) {
-        s = PixelStatus::kOutOfRange;
-      }
-      if (combine && status_row[x] != static_cast<std::uint8_t>(PixelStatus::kValid)) {
-        s = static_cast<PixelStatus>(status_row[x]);
-      }
-      status_row[x] = static_cast<std::uint8_t>(s);
-      coord_row[x] = s == PixelStatus::kValid ? p : kNaN;
-    }
+    phaseRow<Pixel>(cols, frames[f].ptr<Pixel>(y), frames[f + 1].ptr<Pixel>(y),
+                    frames[f + 2].ptr<Pixel>(y), frames[f + 3].ptr<Pixel>(y),
+                    frames[f + 4].ptr<Pixel>(y), frames[f + 5].ptr<Pixel>(y),
+                    buf.phase_high.data(), buf.phase_low.data(), buf.modulation.data(),
+                    buf.peak.data(), combine ? nullptr : offset.ptr<float>(y));
+    unwrapRow(cols, constants, buf.phase_high.data(), buf.phase_low.data(), buf.modulation.data(),
+              buf.peak.data(), buf.coord.data(), buf.status.data());
+    outputRow(cols, combine, buf.modulation.data(), buf.coord.data(), buf.status.data(),
+              modulation.ptr<float>(y), coord.ptr<float>(y), status.ptr<std::uint8_t>(y));
   }
 }
 

@@ -24,7 +24,7 @@ inline float fastAtan2Positive(float y, float x) {
   const float ax = std::fabs(x), ay = std::fabs(y);
   const float hi = ax > ay ? ax : ay;
   const float lo = ax > ay ? ay : ax;
-  const float a = hi > 0.0f ? lo / hi : 0.0f;
+  const float a = lo / (hi > 0.0f ? hi : 1.0f);  // unconditional division: no branch
   const float s = a * a;
   float r = a * (c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * (c5 + s * c6))))));
   r = ay > ax ? 0.5f * kPi - r : r;  // first octant -> first quadrant

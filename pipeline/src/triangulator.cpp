@@ -44,62 +44,65 @@ struct Triangulator::Impl {
 
   // Projector model for the distortion correction.
   bool correct_projector = false;
-  double proj_f[2] = {0, 0}, proj_dist[5] = {0, 0, 0, 0, 0};
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double proj_f[2] = {0, 0}, inv_proj_f[2] = {0, 0}, proj_c[2] = {0, 0};
+  double proj_dist[5] = {0, 0, 0, 0, 0};
 
-  // Depth (mm) along the ray of pixel i for undistorted projector coordinate
-  // p; NaN when the ray is parallel to the projector plane of p.
-  double depth(std::size_t i, Axis axis, double p) const {
-    const double den = p * a[i] - b[axis][i];
-    if (!(std::abs(den) > 1e-12)) return std::numeric_limits<double>::quiet_NaN();
-    return (m_t[axis] - p * m3_t) / den;
-  }
-
-  // Projector lens distortion along `axis` (distorted minus undistorted, in
-  // projector px) at the point of depth z on the ray of pixel i. NaN when the
-  // point is not in front of the projector.
-  double projectorDistortion(std::size_t i, Axis axis, double z) const {
-    const Eigen::Vector3d xc(z * rx[i], z * ry[i], z);
-    const Eigen::Vector3d xp = R * xc + t;
-    if (!(xp.z() > 0.0)) return std::numeric_limits<double>::quiet_NaN();
-    const double xn = xp.x() / xp.z(), yn = xp.y() / xp.z();
-    double xd = 0, yd = 0;
-    distortNormalized(proj_dist, xn, yn, xd, yd);
-    return axis == kColumn ? proj_f[0] * (xd - xn) : proj_f[1] * (yd - yn);
-  }
-
-  // Triangulates pixel i from decoded projector coordinate `decoded`
-  // (distorted projector px); returns the depth in mm or NaN.
+  // Depth (mm) of camera pixel i from the projector coordinate p (decoded,
+  // distorted projector px), or NaN when the ray is parallel to the
+  // projector plane of p.
+  //
+  // With n = M[axis][3] - p M3[3] and d = p a - b[axis], the depth is
+  // z = n / d. The projector distortion correction works projectively so that
+  // it costs one division per step: M (z r; 1) * d = (n b_col + M1[3] d,
+  // n b_row + M2[3] d, n a + M3[3] d) gives the undistorted projector pixel
+  // of the current point without forming it.
+  //
+  // The correction solves g(p) = p + delta(X(p)) - decoded = 0 for the
+  // undistorted coordinate p, where delta is the projector distortion
+  // (distorted minus undistorted projection) at the point triangulated from
+  // p. The first step is the plain shift p = decoded - delta; later steps are
+  // secant steps on g, which cost the same one evaluation of delta but remove
+  // the linear part of delta's variation along the ray (measured: 2 steps
+  // leave < 1e-3 mm where plain shifting leaves ~1e-2 mm).
   double triangulatePixel(std::size_t i, Axis axis, double decoded) const {
-    double z = depth(i, axis, decoded);
-    if (!correct_projector) return z;
-    // Solve g(p) = p + delta(X(p)) - decoded = 0 for the undistorted
-    // coordinate p, where delta is the projector distortion (distorted minus
-    // undistorted projection) at the point triangulated from p. The first
-    // step is the plain shift p = decoded - delta; later steps are secant
-    // steps on g, which cost the same one evaluation of delta but remove the
-    // linear part of delta's variation along the ray (measured: 2 steps leave
-    // < 1e-3 mm where plain shifting leaves ~1e-2 mm).
-    double p = decoded, p_prev = decoded, g_prev = 0.0;
-    for (int it = 0; it < options.projector_distortion_iterations; ++it) {
-      if (!std::isfinite(z) || z <= 0.0) break;
-      const double shift = projectorDistortion(i, axis, z);
-      if (!std::isfinite(shift)) break;
-      const double g = p + shift - decoded;
-      if (g == 0.0) break;
-      double slope = 1.0;
-      if (it > 0 && p != p_prev) {
-        const double secant = (g - g_prev) / (p - p_prev);
-        // Keep the plain shift where the secant is degenerate.
-        if (secant > 0.5 && secant < 2.0) slope = secant;
+    const double ai = a[i];
+    const double bi = b[axis][i];
+    const double mt = m_t[axis];
+    double p = decoded;
+    if (correct_projector) {
+      const double b_col = b[kColumn][i], b_row = b[kRow][i];
+      double p_prev = decoded, g_prev = 0.0;
+      for (int it = 0; it < options.projector_distortion_iterations; ++it) {
+        const double n = mt - p * m3_t;
+        const double d = p * ai - bi;
+        const double w = n * ai + m3_t * d;  // projector-frame depth times d
+        // In front of both devices: z = n / d > 0 and w / d > 0.
+        if (!(n * d > 0.0 && w * d > 0.0)) break;
+        const double inv_w = 1.0 / w;
+        const double xn = ((n * b_col + m_t[kColumn] * d) * inv_w - proj_c[0]) * inv_proj_f[0];
+        const double yn = ((n * b_row + m_t[kRow] * d) * inv_w - proj_c[1]) * inv_proj_f[1];
+        double xd = 0, yd = 0;
+        distortNormalized(proj_dist, xn, yn, xd, yd);
+        const double shift = axis == kColumn ? proj_f[0] * (xd - xn) : proj_f[1] * (yd - yn);
+        const double g = p + shift - decoded;
+        if (g == 0.0) break;
+        double step = g;  // plain shift: slope 1
+        if (it > 0 && p != p_prev) {
+          const double dg = g - g_prev, dp = p - p_prev;
+          // Secant slope dg / dp; kept only where it is sane (0.5 .. 2).
+          if (dg * dp > 0.0 && std::abs(dg) > 0.5 * std::abs(dp) &&
+              std::abs(dg) < 2.0 * std::abs(dp)) {
+            step = g * dp / dg;
+          }
+        }
+        p_prev = p;
+        g_prev = g;
+        p -= step;
       }
-      p_prev = p;
-      g_prev = g;
-      p -= g / slope;
-      z = depth(i, axis, p);
     }
-    return z;
+    const double den = p * ai - bi;
+    if (!(std::abs(den) > 1e-12)) return std::numeric_limits<double>::quiet_NaN();
+    return (mt - p * m3_t) / den;
   }
 };
 
@@ -160,9 +163,11 @@ Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
   impl->correct_projector = proj.hasDistortion() && options.projector_distortion_iterations > 0;
   impl->proj_f[0] = proj.fx;
   impl->proj_f[1] = proj.fy;
+  impl->inv_proj_f[0] = 1.0 / proj.fx;
+  impl->inv_proj_f[1] = 1.0 / proj.fy;
+  impl->proj_c[0] = proj.cx;
+  impl->proj_c[1] = proj.cy;
   for (int k = 0; k < 5; ++k) impl->proj_dist[k] = proj.distortion[k];
-  impl->R = calibration.R;
-  impl->t = t;
   impl_ = std::move(impl);
 }
 
