@@ -54,25 +54,31 @@ void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const Senso
   const float upper = full_scale + 0.5f;
 
   NormalSource normals(noise_seed);
+  std::vector<float> signal(width);
   std::vector<float> z(kNoise ? width : 0);
   for (int row = 0; row < maps.height; ++row) {
-    if constexpr (kNoise) normals.fill(z.data(), width);
     const std::size_t base = static_cast<std::size_t>(row) * width;
     const float* ambient = maps.ambient_dn.data() + base;
     const float* per_level = maps.projector_dn_per_level.data() + base;
     const std::int32_t* texel = maps.texel_index.data() + base;
     const float* wx = maps.weight_x.data() + base;
     const float* wy = maps.weight_y.data() + base;
-    Pixel* dst = out.ptr<Pixel>(row);
+    // Pass 1 (gathers, scalar): noise-free signal in 8-bit DN.
     for (int c = 0; c < width; ++c) {
       const std::uint8_t* t = texture + texel[c];
       const float t00 = t[0], t01 = t[1], t10 = t[stride], t11 = t[stride + 1];
       const float top = t00 + wx[c] * (t01 - t00);
       const float bottom = t10 + wx[c] * (t11 - t10);
       const float level = top + wy[c] * (bottom - top);  // 0..255
-      float signal = ambient[c] + per_level[c] * level;   // 8-bit DN
-      if constexpr (kNoise) signal += std::sqrt(shot_gain * signal + read_variance) * z[c];
-      const float value = std::min(std::max(signal * to_output + 0.5f, 0.0f), upper);
+      signal[c] = ambient[c] + per_level[c] * level;
+    }
+    // Pass 2 (no branches, vectorisable): noise, ADC scale, rounding, saturation.
+    if constexpr (kNoise) normals.fill(z.data(), width);
+    Pixel* dst = out.ptr<Pixel>(row);
+    for (int c = 0; c < width; ++c) {
+      float s = signal[c];
+      if constexpr (kNoise) s += std::sqrt(shot_gain * s + read_variance) * z[c];
+      const float value = std::min(std::max(s * to_output + 0.5f, 0.0f), upper);
       dst[c] = static_cast<Pixel>(static_cast<int>(value));
     }
   }

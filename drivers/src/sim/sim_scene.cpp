@@ -21,6 +21,20 @@ void keepNearest(std::optional<SurfaceHit>& best, double candidate, double min_s
   best = SurfaceHit{candidate, normal, albedo};
 }
 
+// Squared normalized radius up to which the radial distortion of `model`
+// is monotonic (the distorted radius grows with the undistorted one):
+// d/dr [r (1 + k1 r^2 + k2 r^4 + k3 r^6)] > 0. Infinity if it is everywhere
+// up to r = 10 (84 degrees off axis).
+double monotonicFieldRadius2(const pipeline::PinholeModel& model) {
+  const auto& d = model.distortion;
+  constexpr double kStep = 1e-3, kMaxRadius = 10.0;
+  for (double r = kStep; r <= kMaxRadius; r += kStep) {
+    const double r2 = r * r;
+    if (1.0 + r2 * (3.0 * d[0] + r2 * (5.0 * d[1] + r2 * 7.0 * d[4])) <= 0.0) return r2;
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
 }  // namespace
 
 std::optional<SurfaceHit> intersectScene(const SimScene& scene, const Eigen::Vector3d& origin,
@@ -60,7 +74,7 @@ SceneView computeSceneView(const SimConfig& config) {
   const int width = rig.camera.width, height = rig.camera.height;
   const int proj_width = rig.projector.width, proj_height = rig.projector.height;
   const Eigen::Vector3d projector_center = -rig.R.transpose() * rig.t;  // camera frame, mm
-  const bool check_projector_fold = rig.projector.hasDistortion();
+  const double projector_field_radius2 = monotonicFieldRadius2(rig.projector);
 
   SceneView view;
   SimGroundTruth& gt = view.ground_truth;
@@ -104,18 +118,16 @@ SceneView computeSceneView(const SimConfig& config) {
       const Eigen::Vector3d normal = hit->normal.dot(ray) > 0 ? -hit->normal : hit->normal;
       const Eigen::Vector3d point_in_projector = rig.R * point + rig.t;
       if (point_in_projector.z() <= 0.0) continue;  // behind the projector
+      // Beyond the lens's field the distortion polynomial folds back into
+      // the image; such points are not lit.
+      const double xp = point_in_projector.x() / point_in_projector.z();
+      const double yp = point_in_projector.y() / point_in_projector.z();
+      if (xp * xp + yp * yp >= projector_field_radius2) continue;
       const Eigen::Vector2d projector_px = rig.projector.project(point_in_projector);
       const double up = projector_px.x(), vp = projector_px.y();
       // A projector pixel covers [c - 0.5, c + 0.5) around its centre c.
       if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5))
         continue;
-      if (check_projector_fold) {
-        // Far outside the lens's field the distortion polynomial folds back
-        // into the image; such points are not lit.
-        const Eigen::Vector2d xn_p{point_in_projector.x() / point_in_projector.z(),
-                                   point_in_projector.y() / point_in_projector.z()};
-        if ((rig.projector.pixelToNormalized(projector_px) - xn_p).norm() > 1e-4) continue;
-      }
       const Eigen::Vector3d to_projector = projector_center - point;
       const double distance = to_projector.norm();
       const double cos_incidence = normal.dot(to_projector) / distance;
