@@ -8,6 +8,7 @@
 
 #include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/dds.h"
+#include "sl/daemon/log.h"
 #include "sl_msgs/msg/CommandReply.h"
 #include "sl_msgs/msg/CommandRequest.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
@@ -240,6 +241,14 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   }
   std::string client_id = request.client_id ? request.client_id : "";
   std::string reason = result.reason;
+  static const char* kCommands[] = {"start", "stop", "set_pattern"};
+  const int command = static_cast<int>(request.command);
+  logInfo("request " + std::to_string(request.request_id) + " from client " + client_id + ": " +
+          (command >= 0 && command < 3 ? kCommands[command] : "unknown") +
+          (pattern.empty() ? "" : " '" + pattern + "'") +
+          (request.command == sl_msgs_msg_COMMAND_START ? " count " + std::to_string(request.count)
+                                                        : "") +
+          (result.accepted() ? ": accepted" : ": rejected: " + reason));
   StringList names(engine.patterns());
   Reply reply{};
   reply.client_id = client_id.data();
