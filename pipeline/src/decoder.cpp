@@ -199,8 +199,11 @@ ProjectorMaps PhaseShift33Decoder::decode(const std::vector<cv::Mat>& frames,
   const cv::Size size = frames.front().size();
 
   ProjectorMaps maps;
-  maps.up = cv::Mat(size, CV_32FC1, cv::Scalar(kNaN));
-  maps.vp = cv::Mat(size, CV_32FC1, cv::Scalar(kNaN));
+  // Encoded maps are written in full below; the other one is all NaN.
+  maps.up = cv::Mat(size, CV_32FC1);
+  maps.vp = cv::Mat(size, CV_32FC1);
+  if (pattern_.direction == Direction::kVertical) maps.up.setTo(kNaN);
+  if (pattern_.direction == Direction::kHorizontal) maps.vp.setTo(kNaN);
   maps.modulation = cv::Mat(size, CV_32FC1);
   maps.offset = cv::Mat(size, CV_32FC1);
   maps.status = cv::Mat(size, CV_8UC1);

@@ -1,6 +1,7 @@
 #include "sl/pipeline/triangulator.h"
 
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -13,15 +14,6 @@ namespace sl::pipeline {
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-
-// Brown-Conrady distortion of normalized coordinates, the same model as
-// PinholeModel::normalizedToPixel (checked against it in test_triangulator).
-inline void distortNormalized(const double* d, double x, double y, double& xd, double& yd) {
-  const double r2 = x * x + y * y;
-  const double radial = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
-  xd = x * radial + 2.0 * d[2] * x * y + d[3] * (r2 + 2.0 * x * x);
-  yd = y * radial + d[2] * (r2 + 2.0 * y * y) + 2.0 * d[3] * x * y;
-}
 
 // Which projector coordinate constrains a pixel.
 enum Axis { kColumn = 0, kRow = 1 };
@@ -47,15 +39,14 @@ struct Triangulator::Impl {
   double proj_f[2] = {0, 0}, inv_proj_f[2] = {0, 0}, proj_c[2] = {0, 0};
   double proj_dist[5] = {0, 0, 0, 0, 0};
 
-  // Depth (mm) of camera pixel i from the projector coordinate p (decoded,
-  // distorted projector px), or NaN when the ray is parallel to the
-  // projector plane of p.
+  // The projector distortion correction for one row of pixels, in place on
+  // p (decoded, distorted projector px -> undistorted projector px).
   //
-  // With n = M[axis][3] - p M3[3] and d = p a - b[axis], the depth is
-  // z = n / d. The projector distortion correction works projectively so that
-  // it costs one division per step: M (z r; 1) * d = (n b_col + M1[3] d,
-  // n b_row + M2[3] d, n a + M3[3] d) gives the undistorted projector pixel
-  // of the current point without forming it.
+  // For pixel i and coordinate p along `axis`, with n = M[axis][3] - p M3[3]
+  // and d = p a - b[axis], the depth is z = n / d, and
+  // M (z r; 1) * d = (n b_col + M1[3] d, n b_row + M2[3] d, n a + M3[3] d)
+  // gives the undistorted projector pixel of the point without forming it, at
+  // the cost of one division.
   //
   // The correction solves g(p) = p + delta(X(p)) - decoded = 0 for the
   // undistorted coordinate p, where delta is the projector distortion
@@ -63,46 +54,61 @@ struct Triangulator::Impl {
   // p. The first step is the plain shift p = decoded - delta; later steps are
   // secant steps on g, which cost the same one evaluation of delta but remove
   // the linear part of delta's variation along the ray (measured: 2 steps
-  // leave < 1e-3 mm where plain shifting leaves ~1e-2 mm).
-  double triangulatePixel(std::size_t i, Axis axis, double decoded) const {
-    const double ai = a[i];
-    const double bi = b[axis][i];
-    const double mt = m_t[axis];
-    double p = decoded;
-    if (correct_projector) {
-      const double b_col = b[kColumn][i], b_row = b[kRow][i];
-      double p_prev = decoded, g_prev = 0.0;
-      for (int it = 0; it < options.projector_distortion_iterations; ++it) {
-        const double n = mt - p * m3_t;
-        const double d = p * ai - bi;
-        const double w = n * ai + m3_t * d;  // projector-frame depth times d
-        // In front of both devices: z = n / d > 0 and w / d > 0.
-        if (!(n * d > 0.0 && w * d > 0.0)) break;
+  // leave < 1e-3 mm where plain shifting leaves ~1e-2 mm). A pixel whose
+  // point is not in front of both devices, or NaN, keeps its p.
+  //
+  // Branch-free over the row so that it vectorizes (needs
+  // -fno-trapping-math, set for this file in CMakeLists.txt).
+  void correctRow(int n_pixels, const float* __restrict a_row,
+                  const float* __restrict b_col_row, const float* __restrict b_row_row,
+                  const std::uint8_t* __restrict is_column, const double* __restrict decoded,
+                  double* __restrict p, double* __restrict p_prev,
+                  double* __restrict g_prev) const {
+    const double m_col = m_t[kColumn], m_row = m_t[kRow], m3 = m3_t;
+    const double cx = proj_c[0], cy = proj_c[1], ifx = inv_proj_f[0], ify = inv_proj_f[1];
+    const double fx = proj_f[0], fy = proj_f[1];
+    const double k1 = proj_dist[0], k2 = proj_dist[1], p1 = proj_dist[2], p2 = proj_dist[3],
+                 k3 = proj_dist[4];
+    auto step = [&]<bool kSecant>() {
+      for (int x = 0; x < n_pixels; ++x) {
+        const bool col = is_column[x] != 0;
+        const double ai = a_row[x];
+        const double bc = b_col_row[x], br = b_row_row[x];
+        const double pi = p[x];
+        const double n = (col ? m_col : m_row) - pi * m3;
+        const double d = pi * ai - (col ? bc : br);
+        const double w = n * ai + m3 * d;  // projector-frame depth times d
+        const bool in_front = (n * d > 0.0) & (w * d > 0.0);
         const double inv_w = 1.0 / w;
-        const double xn = ((n * b_col + m_t[kColumn] * d) * inv_w - proj_c[0]) * inv_proj_f[0];
-        const double yn = ((n * b_row + m_t[kRow] * d) * inv_w - proj_c[1]) * inv_proj_f[1];
-        double xd = 0, yd = 0;
-        distortNormalized(proj_dist, xn, yn, xd, yd);
-        const double shift = axis == kColumn ? proj_f[0] * (xd - xn) : proj_f[1] * (yd - yn);
-        const double g = p + shift - decoded;
-        if (g == 0.0) break;
-        double step = g;  // plain shift: slope 1
-        if (it > 0 && p != p_prev) {
-          const double dg = g - g_prev, dp = p - p_prev;
-          // Secant slope dg / dp; kept only where it is sane (0.5 .. 2).
-          if (dg * dp > 0.0 && std::abs(dg) > 0.5 * std::abs(dp) &&
-              std::abs(dg) < 2.0 * std::abs(dp)) {
-            step = g * dp / dg;
-          }
+        const double xn = ((n * bc + m_col * d) * inv_w - cx) * ifx;
+        const double yn = ((n * br + m_row * d) * inv_w - cy) * ify;
+        // Brown-Conrady, as PinholeModel::normalizedToPixel.
+        const double r2 = xn * xn + yn * yn;
+        const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        const double xd = xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn);
+        const double yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn;
+        const double shift = col ? fx * (xd - xn) : fy * (yd - yn);
+        const double g = pi + shift - decoded[x];
+        double delta_p = g;  // plain shift: slope 1
+        if constexpr (kSecant) {
+          const double dg = g - g_prev[x], dp = pi - p_prev[x];
+          // Secant slope dg / dp, used only where it is sane (0.5 .. 2).
+          const bool sane = (dg * dp > 0.0) & (std::abs(dg) > 0.5 * std::abs(dp)) &
+                            (std::abs(dg) < 2.0 * std::abs(dp));
+          delta_p = sane ? g * dp / dg : g;
         }
-        p_prev = p;
-        g_prev = g;
-        p -= step;
+        p_prev[x] = pi;
+        g_prev[x] = g;
+        p[x] = in_front ? pi - delta_p : pi;
+      }
+    };
+    for (int it = 0; it < options.projector_distortion_iterations; ++it) {
+      if (it == 0) {
+        step.template operator()<false>();
+      } else {
+        step.template operator()<true>();
       }
     }
-    const double den = p * ai - bi;
-    if (!(std::abs(den) > 1e-12)) return std::numeric_limits<double>::quiet_NaN();
-    return (mt - p * m3_t) / den;
   }
 };
 
@@ -218,23 +224,37 @@ PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
   const cv::Mat* coord_maps[2] = {&maps.up, &maps.vp};
   const double min_z = im.options.min_depth_mm;
   const double max_z = im.options.max_depth_mm;
+  const double m3 = im.m3_t;
+  // Row scratch: chosen coordinate and axis per pixel, correction state.
+  std::vector<double> p(im.width), decoded(im.width), p_prev(im.width), g_prev(im.width);
+  std::vector<std::uint8_t> is_column(im.width);
   for (int v = 0; v < im.height; ++v) {
     const float* first_row = coord_maps[first]->ptr<float>(v);
     const float* second_row = second >= 0 ? coord_maps[second]->ptr<float>(v) : nullptr;
     const float* offset_row = maps.offset.empty() ? nullptr : maps.offset.ptr<float>(v);
     const std::size_t row_start = static_cast<std::size_t>(v) * im.width;
+    for (int u = 0; u < im.width; ++u) {
+      const bool use_second = second_row && !std::isfinite(first_row[u]);
+      decoded[u] = use_second ? second_row[u] : first_row[u];
+      is_column[u] = (use_second ? second : first) == kColumn;
+    }
+    p = decoded;
+    if (im.correct_projector) {
+      im.correctRow(im.width, im.a.data() + row_start, im.b[kColumn].data() + row_start,
+                    im.b[kRow].data() + row_start, is_column.data(), decoded.data(), p.data(),
+                    p_prev.data(), g_prev.data());
+    }
     PointXYZI* out = cloud.points.data() + row_start;
     for (int u = 0; u < im.width; ++u) {
       const std::size_t i = row_start + u;
-      double z = std::numeric_limits<double>::quiet_NaN();
-      if (std::isfinite(first_row[u])) {
-        z = im.triangulatePixel(i, static_cast<Axis>(first), first_row[u]);
-      } else if (second_row && std::isfinite(second_row[u])) {
-        z = im.triangulatePixel(i, static_cast<Axis>(second), second_row[u]);
-      }
+      const bool col = is_column[u] != 0;
+      const double den = p[u] * im.a[i] - (col ? im.b[kColumn][i] : im.b[kRow][i]);
+      const double z = ((col ? im.m_t[kColumn] : im.m_t[kRow]) - p[u] * m3) / den;
       PointXYZI& point = out[u];
       point.intensity = offset_row ? offset_row[u] : 0.0f;
-      if (z >= min_z && z <= max_z) {
+      // NaN input, a ray parallel to the projector plane (den ~ 0 gives an
+      // infinite or huge z) and out-of-range depths all fail this test.
+      if (std::abs(den) > 1e-12 && z >= min_z && z <= max_z) {
         point.x = static_cast<float>(z * im.rx[i]);
         point.y = static_cast<float>(z * im.ry[i]);
         point.z = static_cast<float>(z);

@@ -22,11 +22,16 @@ struct TriangulatorOptions {
   float min_depth_mm = 100.0f;  // points outside [min, max] depth are NaN
   float max_depth_mm = 3000.0f;
   // Iterations that correct the decoded projector coordinate for projector
-  // lens distortion (0 = ignore projector distortion).
+  // lens distortion (0 = ignore projector distortion). Each costs one
+  // projection per point; the first is a plain shift by the distortion at the
+  // current point, later ones secant steps. With ~15 px of projector
+  // distortion, 2 iterations leave < 1e-3 mm (see test_triangulator.cpp).
   int projector_distortion_iterations = 2;
 };
 
-// Thread-compatible. Construction precomputes O(width*height) maps.
+// Thread-compatible (triangulate() is const and keeps no state, so concurrent
+// calls on one instance are safe too). Construction precomputes
+// O(width*height) maps (~20 bytes per camera pixel).
 class Triangulator {
  public:
   Triangulator(const CameraProjectorCalibration& calibration, TriangulatorOptions options);
