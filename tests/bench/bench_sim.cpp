@@ -36,8 +36,8 @@ sl::drivers::SimConfig benchConfig(int bit_depth, bool noise) {
 
 // Args: bit depth, noise on (1) / off (0).
 void BM_Render(benchmark::State& state) {
-  const auto sensor = sl::drivers::SimulatedSensor::create(
-      benchConfig(int(state.range(0)), state.range(1) != 0));
+  const auto sensor =
+      sl::drivers::SimulatedSensor::create(benchConfig(int(state.range(0)), state.range(1) != 0));
   std::uint64_t seed = 0;
   int frame = 0;
   for (auto _ : state) {

@@ -1,16 +1,15 @@
 // Tests of the simulated sensor: ground-truth geometry, shadows, radiometry
 // and noise, determinism, and the real-time trigger schedule. Every wait is
 // bounded by a timeout, so a broken schedule fails instead of hanging.
+#include <Eigen/Geometry>
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <future>
 #include <numbers>
+#include <opencv2/core.hpp>
 #include <thread>
 #include <vector>
-
-#include <Eigen/Geometry>
-#include <catch2/catch.hpp>
-#include <opencv2/core.hpp>
 
 #include "sl/drivers/sim.h"
 
@@ -192,8 +191,8 @@ TEST_CASE("ground-truth projector coordinates reproject consistently", "[sim][ge
       CHECK(lit == !std::isnan(gt.up.at<float>(r, c)));
       CHECK(lit == !std::isnan(gt.vp.at<float>(r, c)));
       if (!lit) continue;
-      const Eigen::Vector2d p = config.rig.projector.project(config.rig.R * gtPoint(*sensor, r, c) +
-                                                             config.rig.t);
+      const Eigen::Vector2d p =
+          config.rig.projector.project(config.rig.R * gtPoint(*sensor, r, c) + config.rig.t);
       CHECK(std::abs(p.x() - gt.up.at<float>(r, c)) < 2e-3);
       CHECK(std::abs(p.y() - gt.vp.at<float>(r, c)) < 2e-3);
       ++checked;
@@ -220,7 +219,8 @@ TEST_CASE("a sphere casts its shadow where the geometry says", "[sim][shadow]") 
   CHECK(gt.lit.at<std::uint8_t>(sr, sc) == 0);
   CHECK(std::isnan(gt.up.at<float>(sr, sc)));
   // 100 mm below it on the plane: lit.
-  const Eigen::Vector2d lit_px = config.rig.camera.project(shadow_centre + Eigen::Vector3d(0, 100, 0));
+  const Eigen::Vector2d lit_px =
+      config.rig.camera.project(shadow_centre + Eigen::Vector3d(0, 100, 0));
   CHECK(gt.lit.at<std::uint8_t>(int(std::lround(lit_px.y())), int(std::lround(lit_px.x()))) == 255);
 
   // Every plane pixel around the shadow: unlit exactly when the segment to
@@ -268,8 +268,8 @@ TEST_CASE("radiometry without noise equals the model within quantisation", "[sim
             bit_depth == 8 ? image.at<std::uint8_t>(r, c) : image.at<std::uint16_t>(r, c);
         double expected = config.ambient_dn * tilted.albedo;
         if (gt.lit.at<std::uint8_t>(r, c))
-          expected = modelSignal(*sensor, images[frame], tilted.normal.normalized(),
-                                 tilted.albedo, r, c);
+          expected =
+              modelSignal(*sensor, images[frame], tilted.normal.normalized(), tilted.albedo, r, c);
         INFO("bit depth " << bit_depth << " frame " << frame << " pixel (" << c << ", " << r
                           << ")");
         CHECK(std::abs(pixel - expected * to_output) <= 0.5 + 1e-4 * expected * to_output);
@@ -314,8 +314,7 @@ TEST_CASE("noise has variance gain * signal + read^2", "[sim][radiometry]") {
       mean_bias += mean - signal;
     }
   const double n = block.area();
-  INFO("measured std " << std::sqrt(measured_var / n) << " model std "
-                       << std::sqrt(model_var / n));
+  INFO("measured std " << std::sqrt(measured_var / n) << " model std " << std::sqrt(model_var / n));
   CHECK(std::sqrt(measured_var / n) == Approx(std::sqrt(model_var / n)).epsilon(0.10));
   CHECK(std::abs(mean_bias / n) < 0.5);  // noise is zero-mean
   CHECK(cv::mean(expected)[0] > 60);     // a well-lit region: shot noise dominates

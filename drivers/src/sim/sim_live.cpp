@@ -87,8 +87,7 @@ void LiveSchedule::select(const std::string& name) {
   if (it == sequences_.end()) {
     std::string known;
     for (const ProjectorSequence& s : sequences_) known += (known.empty() ? "" : ", ") + s.name;
-    throw std::invalid_argument("projector: unknown pattern '" + name + "' (known: " + known +
-                                ")");
+    throw std::invalid_argument("projector: unknown pattern '" + name + "' (known: " + known + ")");
   }
   std::lock_guard lock(mutex_);
   if (runningLocked(nowNs()))

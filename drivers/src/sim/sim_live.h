@@ -9,11 +9,10 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <opencv2/core/mat.hpp>
 
 #include "sl/drivers/camera.h"
 #include "sl/drivers/projector.h"
@@ -41,7 +40,8 @@ inline constexpr std::int64_t kStartDelayNs = 20'000'000;
 // triggered at t0 + k * n * dt, its frame i exposed at t0 + (k * n + i) * dt,
 // with t0 = start time + 20 ms, n the pattern's frame count and
 // dt = 1 / camera_fps. It ends after `count` sequences or at stop(); frames
-// and triggers stamped before the end are still delivered.
+// and triggers stamped before the end are still delivered. A new schedule
+// replaces the old one: what was not yet taken from the old one is discarded.
 class LiveSchedule {
  public:
   LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps, int bit_depth,

@@ -116,8 +116,9 @@ cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
                     const SensorResponse& response, std::uint64_t noise_seed) {
   if (pattern_image.type() != CV_8UC1 || pattern_image.cols != maps.texture_width ||
       !pattern_image.isContinuous())
-    throw std::invalid_argument("renderImage: pattern image must be continuous CV_8UC1 of the "
-                                "projector's width");
+    throw std::invalid_argument(
+        "renderImage: pattern image must be continuous CV_8UC1 of the "
+        "projector's width");
   const bool noise = response.gain_dn_per_electron > 0 || response.read_noise_dn > 0;
   const std::uint8_t* texture = pattern_image.ptr<std::uint8_t>();
   if (response.bit_depth == 8) {

@@ -3,7 +3,6 @@
 #pragma once
 
 #include <cstdint>
-
 #include <opencv2/core/mat.hpp>
 
 #include "sim_scene.h"
@@ -21,7 +20,7 @@ struct SensorResponse {
 // Standard normal variates from a 64-bit seed, fast enough for one draw per
 // pixel at video rate: a splitmix64 stream indexes a table of 2^16 normal
 // quantiles (rescaled to unit variance; tails end at about 4.3 sigma).
-// Thread-safe: the table is immutable once built.
+// Thread-compatible (the shared table is immutable once built).
 class NormalSource {
  public:
   explicit NormalSource(std::uint64_t seed);

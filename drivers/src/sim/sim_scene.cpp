@@ -1,10 +1,9 @@
 #include "sim_scene.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <Eigen/Dense>
 #include <opencv2/core.hpp>
 
 namespace sl::drivers::sim {
@@ -60,8 +59,7 @@ std::optional<SurfaceHit> intersectScene(const SimScene& scene, const Eigen::Vec
     for (double s : {(-b - root) / a, (-b + root) / a}) {
       if (s > min_s && s < max_s) {
         const Eigen::Vector3d point = origin + s * direction;
-        keepNearest(best, s, min_s, max_s, (point - sphere.center) / sphere.radius,
-                    sphere.albedo);
+        keepNearest(best, s, min_s, max_s, (point - sphere.center) / sphere.radius, sphere.albedo);
         break;  // the first root in range is the nearer one
       }
     }
@@ -106,8 +104,8 @@ SceneView computeSceneView(const SimConfig& config) {
       const std::size_t i = static_cast<std::size_t>(row) * width + col;
       const Eigen::Vector2d xn = rig.camera.pixelToNormalized({double(col), double(row)});
       const Eigen::Vector3d ray{xn.x(), xn.y(), 1.0};  // s along it is the depth z (mm)
-      const std::optional<SurfaceHit> hit = intersectScene(config.scene, Eigen::Vector3d::Zero(),
-                                                           ray, 0.0, inf);
+      const std::optional<SurfaceHit> hit =
+          intersectScene(config.scene, Eigen::Vector3d::Zero(), ray, 0.0, inf);
       if (!hit) continue;
       const Eigen::Vector3d point = hit->distance * ray;
       depth_row[col] = static_cast<float>(point.z());
@@ -126,8 +124,7 @@ SceneView computeSceneView(const SimConfig& config) {
       const Eigen::Vector2d projector_px = rig.projector.project(point_in_projector);
       const double up = projector_px.x(), vp = projector_px.y();
       // A projector pixel covers [c - 0.5, c + 0.5) around its centre c.
-      if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5))
-        continue;
+      if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5)) continue;
       const Eigen::Vector3d to_projector = projector_center - point;
       const double distance = to_projector.norm();
       const double cos_incidence = normal.dot(to_projector) / distance;

@@ -3,11 +3,10 @@
 // in the projector image the light comes from and how bright it arrives.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "sl/drivers/sim.h"
 
@@ -29,8 +28,8 @@ std::optional<SurfaceHit> intersectScene(const SimScene& scene, const Eigen::Vec
 // What the renderer needs per camera pixel (row-major, camera size), stored
 // as separate arrays so the render loop streams through them.
 struct RenderMaps {
-  int width = 0;   // camera px
-  int height = 0;  // camera px
+  int width = 0;          // camera px
+  int height = 0;         // camera px
   int texture_width = 0;  // projector px: row stride of the pattern images
   // Ambient signal in 8-bit DN: ambient_dn * albedo, 0 where no surface.
   std::vector<float> ambient_dn;

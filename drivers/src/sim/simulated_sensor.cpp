@@ -1,18 +1,16 @@
 // SimulatedSensor::create: validation of the configuration, the scene view
 // computed once, and the live camera / projector / trigger source.
-#include "sl/drivers/sim.h"
-
+#include <Eigen/Dense>
 #include <cmath>
 #include <set>
 #include <stdexcept>
 #include <string>
 #include <utility>
 
-#include <Eigen/Dense>
-
 #include "sim_live.h"
 #include "sim_render.h"
 #include "sim_scene.h"
+#include "sl/drivers/sim.h"
 
 namespace sl::drivers {
 
@@ -88,12 +86,11 @@ void validateConfig(const SimConfig& c) {
     } catch (const std::invalid_argument& e) {
       fail(name, std::string("is invalid: ") + e.what());
     }
-    if (p.projector_width != c.rig.projector.width ||
-        p.projector_height != c.rig.projector.height)
+    if (p.projector_width != c.rig.projector.width || p.projector_height != c.rig.projector.height)
       fail(name + ".projector_width/height",
            "(" + std::to_string(p.projector_width) + "x" + std::to_string(p.projector_height) +
-               ") must equal rig.projector's size (" + std::to_string(c.rig.projector.width) +
-               "x" + std::to_string(c.rig.projector.height) + ")");
+               ") must equal rig.projector's size (" + std::to_string(c.rig.projector.width) + "x" +
+               std::to_string(c.rig.projector.height) + ")");
   }
 }
 
@@ -139,8 +136,7 @@ class SceneRenderer {
 class SimulatedSensorImpl final : public SimulatedSensor {
  public:
   explicit SimulatedSensorImpl(SimConfig config)
-      : config_(std::move(config)),
-        renderer_(std::make_shared<const SceneRenderer>(config_)) {
+      : config_(std::move(config)), renderer_(std::make_shared<const SceneRenderer>(config_)) {
     std::vector<ProjectorSequence> sequences;
     for (std::size_t i = 0; i < renderer_->names().size(); ++i)
       sequences.push_back({renderer_->names()[i], renderer_->frameCount(i)});
