@@ -5,21 +5,15 @@
 #include <random>
 #include <thread>
 
-#include "sensor_msgs/msg/PointCloud2.h"
+#include "msg_convert.h"
 #include "sl/daemon/dds.h"
 #include "sl/daemon/dds_bridge.h"
-#include "sl_msgs/msg/CommandReply.h"
-#include "sl_msgs/msg/CommandRequest.h"
-#include "sl_msgs/msg/Status.h"
 
 namespace sl::daemon {
 
 namespace {
 
-using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
-using Request = sl_msgs_msg_CommandRequest;
-using Reply = sl_msgs_msg_CommandReply;
-using Status = sl_msgs_msg_Status;
+using namespace msg;
 using Clock = std::chrono::steady_clock;
 
 std::string randomClientId() {
@@ -30,29 +24,6 @@ std::string randomClientId() {
   return text;
 }
 
-pipeline::TimestampNs fromTime(const builtin_interfaces_msg_dds__Time_& t) {
-  return static_cast<pipeline::TimestampNs>(t.sec) * 1'000'000'000 + t.nanosec;
-}
-
-std::vector<std::string> toStrings(const dds_sequence_string& seq) {
-  std::vector<std::string> out;
-  for (std::uint32_t i = 0; i < seq._length; ++i) out.emplace_back(seq._buffer[i]);
-  return out;
-}
-
-CommandResult::Code fromReplyCode(sl_msgs_msg_ReplyCode code) {
-  switch (code) {
-    case sl_msgs_msg_REPLY_OK: return CommandResult::Code::kOk;
-    case sl_msgs_msg_REPLY_UNKNOWN_PATTERN: return CommandResult::Code::kUnknownPattern;
-    case sl_msgs_msg_REPLY_BUSY: return CommandResult::Code::kBusy;
-    case sl_msgs_msg_REPLY_INVALID_COUNT: return CommandResult::Code::kInvalidCount;
-    case sl_msgs_msg_REPLY_INVALID_COMMAND: return CommandResult::Code::kInvalidCommand;
-    case sl_msgs_msg_REPLY_DEVICE_ERROR: return CommandResult::Code::kDeviceError;
-    case sl_msgs_msg_REPLY_NOT_RUNNING: return CommandResult::Code::kNotRunning;
-  }
-  return CommandResult::Code::kInvalidCommand;
-}
-
 // Decodes a PointCloud2 with float32 x, y, z (m) and optional intensity into
 // the pipeline type (mm). Throws std::runtime_error on a layout it cannot read.
 pipeline::PointCloud toPointCloud(const PointCloud2& msg) {
@@ -61,7 +32,7 @@ pipeline::PointCloud toPointCloud(const PointCloud2& msg) {
   for (std::uint32_t i = 0; i < msg.fields._length; ++i) {
     const auto& f = msg.fields._buffer[i];
     for (int k = 0; k < 4; ++k)
-      if (std::strcmp(f.name, names[k]) == 0 && f.datatype == 7 /* FLOAT32 */)
+      if (std::strcmp(f.name, names[k]) == 0 && f.datatype == kFloat32)
         offsets[k] = static_cast<int>(f.offset);
   }
   if (offsets[0] < 0 || offsets[1] < 0 || offsets[2] < 0)

@@ -6,33 +6,15 @@
 #include <cstring>
 #include <vector>
 
-#include "sensor_msgs/msg/PointCloud2.h"
+#include "msg_convert.h"
 #include "sl/daemon/dds.h"
 #include "sl/daemon/log.h"
-#include "sl_msgs/msg/CommandReply.h"
-#include "sl_msgs/msg/CommandRequest.h"
-#include "sl_msgs/msg/ProjectorMaps.h"
-#include "sl_msgs/msg/Status.h"
 
 namespace sl::daemon {
 
 namespace {
 
-using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
-using PointField = sensor_msgs_msg_dds__PointField_;
-using Request = sl_msgs_msg_CommandRequest;
-using Reply = sl_msgs_msg_CommandReply;
-using Status = sl_msgs_msg_Status;
-using Maps = sl_msgs_msg_ProjectorMaps;
-
-constexpr std::uint8_t kFloat32 = 7;  // sensor_msgs/PointField FLOAT32
-
-builtin_interfaces_msg_dds__Time_ toTime(pipeline::TimestampNs ns) {
-  builtin_interfaces_msg_dds__Time_ t;
-  t.sec = static_cast<std::int32_t>(ns / 1'000'000'000);
-  t.nanosec = static_cast<std::uint32_t>(ns % 1'000'000'000);
-  return t;
-}
+using namespace msg;
 
 pipeline::TimestampNs nowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -58,19 +40,6 @@ struct StringList {
     for (auto& s : values) pointers.push_back(s.data());
   }
 };
-
-sl_msgs_msg_ReplyCode toReplyCode(CommandResult::Code code) {
-  switch (code) {
-    case CommandResult::Code::kOk: return sl_msgs_msg_REPLY_OK;
-    case CommandResult::Code::kUnknownPattern: return sl_msgs_msg_REPLY_UNKNOWN_PATTERN;
-    case CommandResult::Code::kBusy: return sl_msgs_msg_REPLY_BUSY;
-    case CommandResult::Code::kInvalidCount: return sl_msgs_msg_REPLY_INVALID_COUNT;
-    case CommandResult::Code::kInvalidCommand: return sl_msgs_msg_REPLY_INVALID_COMMAND;
-    case CommandResult::Code::kDeviceError: return sl_msgs_msg_REPLY_DEVICE_ERROR;
-    case CommandResult::Code::kNotRunning: return sl_msgs_msg_REPLY_NOT_RUNNING;
-  }
-  return sl_msgs_msg_REPLY_INVALID_COMMAND;
-}
 
 sl_msgs_msg_State toState(ScanState s) {
   switch (s) {
