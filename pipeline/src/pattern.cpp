@@ -1,5 +1,6 @@
 #include "sl/pipeline/pattern.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -31,7 +32,10 @@ void PhaseShift33Pattern::validate() const {
     throw std::invalid_argument("pattern '" + name + "': projector size must be positive");
   if (fringes < 1)
     throw std::invalid_argument("pattern '" + name + "': fringes must be >= 1");
-  const int extent = direction == Direction::kVertical ? projector_height : projector_width;
+  // The shortest encoded axis bounds the fringe count (both axes for kBoth).
+  const int extent = direction == Direction::kVertical     ? projector_height
+                     : direction == Direction::kHorizontal ? projector_width
+                                                           : std::min(projector_width, projector_height);
   if (fringes * 4 > extent)
     throw std::invalid_argument("pattern '" + name + "': fringes too many for the projector (" +
                                 std::to_string(fringes) + " periods over " +
