@@ -9,85 +9,13 @@
 
 #include <Eigen/Geometry>
 
+#include "calibration_yaml.h"
+#include "sl/daemon/calibration_io.h"
 #include "yaml_reader.h"
 
 namespace sl::daemon {
 
 namespace {
-
-Eigen::Vector3d vec3(const YamlMap& m, const std::string& key) {
-  const auto v = m.get<std::vector<double>>(key);
-  if (v.size() != 3) m.fail(key, "expected 3 numbers, found " + std::to_string(v.size()));
-  return {v[0], v[1], v[2]};
-}
-
-Eigen::Vector3d vec3(const YamlMap& m, const std::string& key, const Eigen::Vector3d& fallback) {
-  return m.has(key) ? vec3(m, key) : fallback;
-}
-
-double positive(const YamlMap& m, const std::string& key, double fallback) {
-  const double v = m.get<double>(key, fallback);
-  if (!(v > 0)) m.fail(key, "must be > 0");
-  return v;
-}
-
-double nonNegative(const YamlMap& m, const std::string& key, double fallback) {
-  const double v = m.get<double>(key, fallback);
-  if (!(v >= 0)) m.fail(key, "must be >= 0");
-  return v;
-}
-
-pipeline::PinholeModel parsePinhole(const YamlMap& m) {
-  pipeline::PinholeModel model;
-  model.width = m.get<int>("width");
-  model.height = m.get<int>("height");
-  if (model.width <= 0) m.fail("width", "must be > 0");
-  if (model.height <= 0) m.fail("height", "must be > 0");
-  model.fx = positive(m, "fx", 0);
-  model.fy = positive(m, "fy", 0);
-  model.cx = m.get<double>("cx");
-  model.cy = m.get<double>("cy");
-  const auto d = m.get<std::vector<double>>("distortion", {0, 0, 0, 0, 0});
-  if (d.size() != 5) m.fail("distortion", "expected 5 numbers (k1 k2 p1 p2 k3)");
-  std::copy(d.begin(), d.end(), model.distortion.begin());
-  m.done();
-  return model;
-}
-
-// Projector pose relative to the camera: X_p = R * X_c + t.
-void parsePose(const YamlMap& m, pipeline::CameraProjectorCalibration& c) {
-  const bool has_matrix = m.has("rotation");
-  const bool has_angles = m.has("rotation_deg");
-  if (has_matrix == has_angles)
-    m.fail(has_matrix ? "rotation" : "rotation_deg",
-           "give exactly one of 'rotation' (9 numbers, row-major) or 'rotation_deg' "
-           "([rx, ry, rz], R = Rz * Ry * Rx)");
-  if (has_matrix) {
-    const auto r = m.get<std::vector<double>>("rotation");
-    if (r.size() != 9) m.fail("rotation", "expected 9 numbers (row-major 3x3)");
-    c.R = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(r.data());
-    if ((c.R * c.R.transpose() - Eigen::Matrix3d::Identity()).norm() > 1e-6 ||
-        c.R.determinant() < 0)
-      m.fail("rotation", "is not a rotation matrix");
-  } else {
-    const Eigen::Vector3d a = vec3(m, "rotation_deg") * std::numbers::pi / 180.0;
-    c.R = (Eigen::AngleAxisd(a.z(), Eigen::Vector3d::UnitZ()) *
-           Eigen::AngleAxisd(a.y(), Eigen::Vector3d::UnitY()) *
-           Eigen::AngleAxisd(a.x(), Eigen::Vector3d::UnitX()))
-              .toRotationMatrix();
-  }
-  c.t = vec3(m, "translation_mm");
-  m.done();
-}
-
-pipeline::CameraProjectorCalibration parseCalibration(const YamlMap& m) {
-  pipeline::CameraProjectorCalibration c;
-  c.camera = parsePinhole(m.map("camera"));
-  c.projector = parsePinhole(m.map("projector"));
-  parsePose(m.map("projector_pose"), c);
-  m.done();
-  return c;
-}
 
 drivers::SimScene parseScene(const YamlMap& sim) {
   drivers::SimScene scene;
@@ -137,8 +65,9 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
   radiometry.done();
   const YamlMap rig = m.map("rig");
   sim.camera_id = rig.get<std::string>("camera_id", sim.camera_id);
-  sim.rig = parseCalibration(YamlMap(rig.raw("calibration"), rig.origin(),
-                                     rig.keyPath("calibration")));
+  const YamlMap calibration(rig.raw("calibration"), rig.origin(), rig.keyPath("calibration"));
+  sim.rig = parseCalibrationKeys(calibration);
+  calibration.done();
   rig.done();
   sim.scene = parseScene(m);
   m.done();
@@ -248,15 +177,9 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   } else {
     std::filesystem::path path(calibration);
     if (path.is_relative()) path = base_dir / path;
-    YAML::Node node;
-    try {
-      node = YAML::LoadFile(path.string());
-    } catch (const YAML::BadFile&) {
+    if (!std::filesystem::exists(path))
       root.fail("calibration", "cannot read calibration file '" + path.string() + "'");
-    } catch (const YAML::Exception& e) {
-      throw ConfigError(path.string() + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
-    }
-    config.calibration = parseCalibration(YamlMap(node, path.string(), ""));
+    config.calibration = loadCalibration(path.string()).calibration;
   }
   if (config.calibration.camera.width != config.sim.rig.camera.width ||
       config.calibration.camera.height != config.sim.rig.camera.height)

@@ -138,4 +138,26 @@ template std::string YamlMap::get<std::string>(const std::string&, const std::st
 template std::vector<double> YamlMap::get<std::vector<double>>(
     const std::string&, const std::vector<double>&) const;
 
+Eigen::Vector3d vec3(const YamlMap& m, const std::string& key) {
+  const auto v = m.get<std::vector<double>>(key);
+  if (v.size() != 3) m.fail(key, "expected 3 numbers, found " + std::to_string(v.size()));
+  return {v[0], v[1], v[2]};
+}
+
+Eigen::Vector3d vec3(const YamlMap& m, const std::string& key, const Eigen::Vector3d& fallback) {
+  return m.has(key) ? vec3(m, key) : fallback;
+}
+
+double positive(const YamlMap& m, const std::string& key, double fallback) {
+  const double v = m.get<double>(key, fallback);
+  if (!(v > 0)) m.fail(key, "must be > 0");
+  return v;
+}
+
+double nonNegative(const YamlMap& m, const std::string& key, double fallback) {
+  const double v = m.get<double>(key, fallback);
+  if (!(v >= 0)) m.fail(key, "must be >= 0");
+  return v;
+}
+
 }  // namespace sl::daemon

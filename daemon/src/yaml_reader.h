@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <yaml-cpp/yaml.h>
 
 #include "sl/daemon/config.h"
@@ -48,5 +49,11 @@ class YamlMap {
   std::string path_;
   mutable std::set<std::string> used_;
 };
+
+// Typed helpers shared by the config and calibration readers.
+Eigen::Vector3d vec3(const YamlMap& m, const std::string& key);  // required, 3 numbers
+Eigen::Vector3d vec3(const YamlMap& m, const std::string& key, const Eigen::Vector3d& fallback);
+double positive(const YamlMap& m, const std::string& key, double fallback);     // > 0
+double nonNegative(const YamlMap& m, const std::string& key, double fallback);  // >= 0
 
 }  // namespace sl::daemon

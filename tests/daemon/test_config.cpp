@@ -6,7 +6,12 @@
 #include <regex>
 #include <sstream>
 
+#include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
+
+#include <unistd.h>
+
+#include <cstdio>
 
 namespace {
 
@@ -109,4 +114,44 @@ TEST_CASE("a missing file and malformed YAML are one clear error") {
   CHECK(message.find("malformed YAML") != std::string::npos);
   CHECK(errorOf("- just\n- a list\n").find("expected a map of keys at the top level") !=
         std::string::npos);
+}
+
+TEST_CASE("SLStudio's calibration.xml imports and round-trips through the project's format") {
+  const std::string xml = std::string(SL_SHARED_DATA_DIR) + "/slstudio-skull/calibration.xml";
+  const sl::daemon::CalibrationFile slstudio = sl::daemon::loadCalibration(xml);
+  const auto& c = slstudio.calibration;
+  CHECK(c.camera.width == 1688);
+  CHECK(c.camera.height == 1352);
+  CHECK(c.camera.fx == Approx(2195.12036));
+  CHECK(c.camera.cy == Approx(675.5));
+  CHECK(c.camera.distortion[0] == Approx(-0.0580352657));
+  CHECK(c.projector.width == 1824);
+  CHECK(c.projector.height == 1140);
+  CHECK(c.projector.cy == Approx(1109.11121));
+  CHECK(c.R(0, 2) == Approx(0.235467508));
+  CHECK(c.t.x() == Approx(-145.282562));
+  REQUIRE(slstudio.errors);
+  CHECK(slstudio.errors->stereo_rms_px == Approx(0.4219975));
+
+  const std::string yaml = "/tmp/sl_test_calibration_" + std::to_string(::getpid()) + ".yaml";
+  sl::daemon::saveCalibration(slstudio, yaml);
+  const sl::daemon::CalibrationFile again = sl::daemon::loadCalibration(yaml);
+  std::remove(yaml.c_str());
+  CHECK(again.calibration.camera.fx == c.camera.fx);
+  CHECK(again.calibration.projector.distortion == c.projector.distortion);
+  CHECK(again.calibration.R == c.R);  // 17 significant digits: exact
+  CHECK(again.calibration.t == c.t);
+  REQUIRE(again.errors);
+  CHECK(again.errors->camera_rms_px == slstudio.errors->camera_rms_px);
+  CHECK(again.source == slstudio.source);
+}
+
+TEST_CASE("calibration files that cannot be used are one clear error") {
+  CHECK_THROWS_WITH(sl::daemon::loadCalibration("/nonexistent/c.yaml"),
+                    "/nonexistent/c.yaml: calibration file not found");
+  const std::string bad = "/tmp/sl_test_bad_calibration_" + std::to_string(::getpid()) + ".yaml";
+  std::ofstream(bad) << "format: sl-sensor-calibration/1\ncamera: {width: 10}\n";
+  CHECK_THROWS_WITH(sl::daemon::loadCalibration(bad),
+                    Catch::Contains("key 'camera.height' is required"));
+  std::remove(bad.c_str());
 }
