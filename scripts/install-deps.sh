@@ -12,6 +12,8 @@ packages=(
   libyaml-cpp-dev
   catch2
   libbenchmark-dev
+  libaravis-dev
+  libhidapi-dev
   systemd
 )
 
