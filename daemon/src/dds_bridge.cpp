@@ -108,7 +108,7 @@ struct DdsBridge::Impl {
   std::vector<float> cloud_buffer;
 
   void publishCloud(const pipeline::PointCloud& cloud);
-  void publishMaps(const pipeline::ProjectorMaps& maps);
+  void publishMaps(const pipeline::ProjectorMaps& maps, const ScanResult& result);
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
   void answer(ScanEngine& engine, const Request& request);
 };
@@ -146,7 +146,7 @@ void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud) {
   if (!points_writer.write(msg)) ++writes_timed_out;
 }
 
-void DdsBridge::Impl::publishMaps(const pipeline::ProjectorMaps& maps) {
+void DdsBridge::Impl::publishMaps(const pipeline::ProjectorMaps& maps, const ScanResult& result) {
   const int rows = maps.status.rows, cols = maps.status.cols;
   const std::size_t n = static_cast<std::size_t>(rows) * cols;
   auto floats = [&](const cv::Mat& m) {
@@ -160,9 +160,12 @@ void DdsBridge::Impl::publishMaps(const pipeline::ProjectorMaps& maps) {
   std::vector<float> up = floats(maps.up), vp = floats(maps.vp), mod = floats(maps.modulation);
   cv::Mat status = maps.status.isContinuous() ? maps.status : maps.status.clone();
   std::string frame_id = config.frame_id;
+  std::string pattern = result.pattern;
   Maps msg{};
   msg.header.stamp = toTime(maps.stamp_ns);
   msg.header.frame_id = frame_id.data();
+  msg.pattern = pattern.data();
+  msg.scan_index = result.scan_index;
   msg.height = static_cast<std::uint32_t>(rows);
   msg.width = static_cast<std::uint32_t>(cols);
   borrow(msg.up, up.data(), n);
@@ -234,7 +237,7 @@ DdsBridge::~DdsBridge() = default;
 
 void DdsBridge::publish(const ScanResult& result) {
   if (result.cloud) impl_->publishCloud(*result.cloud);
-  if (impl_->config.publish_projector_maps && result.maps) impl_->publishMaps(*result.maps);
+  if (impl_->config.publish_projector_maps && result.maps) impl_->publishMaps(*result.maps, result);
 }
 
 void DdsBridge::serve(ScanEngine& engine) {

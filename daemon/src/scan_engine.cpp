@@ -34,9 +34,12 @@ struct FrameEvent {
 struct TriggerEvent {
   pipeline::TimestampNs stamp_ns = 0;
 };
-struct PatternEvent {  // a new request: reset the synchroniser
+struct PatternEvent {  // a new schedule: reset the synchroniser
   std::string name;
   int frame_count = 0;
+  // Frames and triggers stamped before this belong to an earlier schedule
+  // (possibly another pattern) and are never grouped into this one's sets.
+  pipeline::TimestampNs not_before_ns = 0;
 };
 struct Event {
   std::uint64_t generation = 0;
@@ -130,6 +133,7 @@ struct ScanEngine::Impl {
   void processLoop(Heartbeat& hb);
   void outputLoop(Heartbeat& hb);
   void finishRequestLocked(const std::string& error);
+  void launchLocked(const std::string& name, int frame_count, int count);
   void recordError(const std::string& error);
 };
 
@@ -169,6 +173,7 @@ void ScanEngine::Impl::syncLoop(Heartbeat& hb) {
   for (const auto& c : devices.cameras) camera_ids.push_back(c->id());
   pipeline::Synchroniser synchroniser(camera_ids, config.synchroniser);
   std::uint64_t active_generation = 0;
+  pipeline::TimestampNs not_before_ns = 0;
   pipeline::SynchroniserCounters reported{};
   while (running) {
     hb.beat();
@@ -176,13 +181,16 @@ void ScanEngine::Impl::syncLoop(Heartbeat& hb) {
     if (!event) continue;
     if (auto* pattern = std::get_if<PatternEvent>(&event->payload)) {
       active_generation = event->generation;
+      not_before_ns = pattern->not_before_ns;
       synchroniser.setPattern(pattern->name, pattern->frame_count);
       continue;
     }
     if (event->generation != active_generation) continue;  // from a stopped request
     if (auto* frame = std::get_if<FrameEvent>(&event->payload)) {
+      if (frame->frame.stamp_ns < not_before_ns) continue;
       synchroniser.pushFrame(frame->camera, std::move(frame->frame));
     } else if (auto* trigger = std::get_if<TriggerEvent>(&event->payload)) {
+      if (trigger->stamp_ns < not_before_ns) continue;
       synchroniser.pushTrigger(trigger->stamp_ns);
     }
     for (auto& set : synchroniser.takeCompleted()) {
@@ -262,6 +270,21 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
   }
 }
 
+// Starts a new projector schedule of `count` sequences (0 = until stop) of
+// pattern `name` as a new generation; caller holds the mutex. Throws what the
+// projector throws.
+void ScanEngine::Impl::launchLocked(const std::string& name, int frame_count, int count) {
+  const std::uint64_t next = generation.load() + 1;
+  devices.projector->select(name);
+  current_pattern = name;
+  const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                       std::chrono::system_clock::now().time_since_epoch())
+                       .count();
+  events.push({next, PatternEvent{name, frame_count, now}});
+  generation = next;
+  devices.projector->start(count);
+}
+
 // Ends the current request; caller holds the mutex.
 void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   try {
@@ -323,12 +346,7 @@ CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
   const std::string name = pattern_name.empty() ? d.current_pattern : pattern_name;
   const pipeline::PhaseShift33Pattern* pattern = d.config.findPattern(name);
   if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
-  const std::uint64_t generation = d.generation.load() + 1;
   try {
-    d.devices.projector->select(name);
-    d.current_pattern = name;
-    d.events.push({generation, PatternEvent{name, pattern->frameCount()}});
-    d.generation = generation;
     d.scans_requested = static_cast<std::uint64_t>(count);
     d.scans_done = 0;
     d.scan_rate_hz = 0;
@@ -340,7 +358,7 @@ CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
                                         std::chrono::duration<double>(count * sequence_s + 2.0));
     d.last_error.clear();
     d.state = ScanState::kScanning;
-    d.devices.projector->start(count);
+    d.launchLocked(name, pattern->frameCount(), count);
   } catch (const std::exception& e) {
     d.state = ScanState::kError;
     d.last_error = std::string("projector: ") + e.what();
@@ -364,15 +382,28 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
   Impl& d = *impl_;
   using Code = CommandResult::Code;
   std::lock_guard lock(d.mutex);
-  if (d.state == ScanState::kScanning)
-    return {Code::kBusy, "cannot switch pattern while scanning; send stop first"};
-  if (!d.config.findPattern(name)) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
+  const pipeline::PhaseShift33Pattern* pattern = d.config.findPattern(name);
+  if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
+  const bool scanning = d.state == ScanState::kScanning;
+  if (scanning && d.scans_requested != 0)
+    return {Code::kBusy, "cannot switch pattern during a request of " +
+                             std::to_string(d.scans_requested) +
+                             " scans; wait for it or send stop (continuous scans switch)"};
   try {
-    d.devices.projector->select(name);
+    if (scanning) {
+      // Continuous scan: end the schedule and start the new pattern's. The
+      // sequence in progress is abandoned; no set mixes the two patterns
+      // (see PatternEvent::not_before_ns).
+      d.devices.projector->stop();
+      d.launchLocked(name, pattern->frameCount(), 0);
+    } else {
+      d.devices.projector->select(name);
+      d.current_pattern = name;
+    }
   } catch (const std::exception& e) {
+    if (scanning) d.finishRequestLocked(std::string("projector: ") + e.what());
     return {Code::kDeviceError, std::string("projector: ") + e.what()};
   }
-  d.current_pattern = name;
   ++d.status_version;
   return {};
 }

@@ -38,10 +38,12 @@ inline std::string uniqueNamespace(const std::string& prefix) {
          std::to_string(std::chrono::steady_clock::now().time_since_epoch().count() % 100000);
 }
 
-// Writes config/sim.yaml with dds.namespace replaced, and returns its path.
-inline std::string writeTestConfig(const std::string& ns) {
+// Writes config/sim.yaml with dds.namespace replaced (and projector maps
+// published if asked), and returns its path.
+inline std::string writeTestConfig(const std::string& ns, bool publish_maps = false) {
   YAML::Node root = YAML::LoadFile(sourcePath("config/sim.yaml"));
   root["dds"]["namespace"] = ns;
+  root["dds"]["publish_projector_maps"] = publish_maps;
   const std::string path = "/tmp/sl_test_" + ns + ".yaml";
   std::ofstream(path) << root;
   return path;

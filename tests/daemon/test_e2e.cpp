@@ -32,7 +32,10 @@
 #include <Eigen/Dense>
 
 #include "daemon_process.h"
+#include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/client.h"
+#include "sl/daemon/dds.h"
+#include "sl_msgs/msg/ProjectorMaps.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/sim.h"
 
@@ -193,9 +196,6 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     reply = client.request(Command::kStart, "3+3_horizontal", 1, 5s);
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kBusy);
-    reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, 5s);
-    REQUIRE(reply);
-    CHECK(reply->code == sl::daemon::CommandResult::Code::kBusy);
     const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
                         std::chrono::system_clock::now().time_since_epoch()).count();
     CHECK(client.receiveCloud(t0, 10s));  // the continuous scan delivers
@@ -255,4 +255,94 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   CHECK(std::string(buffer, m > 0 ? m : 0) == "STOPPING=1");
   ::close(fd);
   ::unlink(socket_path.c_str());
+}
+
+// Pattern switching during a continuous scan (issue 7): horizontal -> both ->
+// horizontal through the request topic. Every published projector-map sample
+// must come from exactly one pattern: a horizontal scan encodes only columns
+// (vp all NaN), a 'both' scan columns and rows; the patterns appear in the
+// requested order, each at least twice.
+TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("switch");
+  const std::string config_path = sl::test::writeTestConfig(ns, /*publish_maps=*/true);
+  sl::test::DaemonProcess daemon(config_path);
+  REQUIRE(daemon.started());
+
+  sl::dds::Participant participant(0);
+  sl::dds::Topic<sl_msgs_msg_ProjectorMaps> topic(participant, "rt/" + ns + "/projector_maps",
+                                                  sl_msgs_msg_ProjectorMaps_desc);
+  sl::dds::Reader<sl_msgs_msg_ProjectorMaps> reader(participant, topic,
+                                                    sl::dds::Qos().reliable().keepLast(8));
+  sl::daemon::ClientOptions options;
+  options.ns = ns;
+  options.subscribe_points = false;
+  sl::daemon::SensorClient client(options);
+  REQUIRE(client.waitForDaemon(20s));
+  REQUIRE(reader.waitForWriters(1, DDS_SECS(10)));
+
+  struct Sample {
+    std::string pattern;
+    double up_valid, vp_valid;  // fractions of pixels
+  };
+  std::vector<Sample> samples;
+  // Collects maps until `count` samples of `pattern` arrived (bounded).
+  auto collect = [&](const std::string& pattern, int count) {
+    int seen = 0;
+    const auto deadline = std::chrono::steady_clock::now() + 15s;
+    while (seen < count && std::chrono::steady_clock::now() < deadline) {
+      auto loan = reader.take(4);
+      if (loan.empty()) {
+        std::this_thread::sleep_for(10ms);
+        continue;
+      }
+      for (std::size_t i = 0; i < loan.size(); ++i) {
+        if (!loan.isValid(i)) continue;
+        const auto& m = loan[i];
+        std::size_t up = 0, vp = 0;
+        for (std::uint32_t k = 0; k < m.up._length; ++k) up += std::isfinite(m.up._buffer[k]);
+        for (std::uint32_t k = 0; k < m.vp._length; ++k) vp += std::isfinite(m.vp._buffer[k]);
+        const double n = double(m.width) * m.height;
+        samples.push_back({m.pattern, up / n, vp / n});
+        seen += samples.back().pattern == pattern;
+      }
+    }
+    return seen >= count;
+  };
+
+  auto reply = client.request(Command::kStart, "3+3_horizontal", 0, 5s);
+  REQUIRE(reply);
+  REQUIRE(reply->accepted);
+  CHECK(collect("3+3_horizontal", 2));
+  reply = client.request(Command::kSetPattern, "3+3_both", 0, 5s);
+  REQUIRE(reply);
+  CHECK(reply->accepted);
+  CHECK(collect("3+3_both", 2));
+  reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, 5s);
+  REQUIRE(reply);
+  CHECK(reply->accepted);
+  std::size_t before_last = samples.size();
+  CHECK(collect("3+3_horizontal", 2));
+  reply = client.request(Command::kStop, "", 0, 5s);
+  REQUIRE(reply);
+  CHECK(reply->accepted);
+
+  // Patterns appear in the requested order: h+, both+, h+.
+  std::vector<std::string> runs;
+  for (const auto& s : samples)
+    if (runs.empty() || runs.back() != s.pattern) runs.push_back(s.pattern);
+  CHECK(runs == std::vector<std::string>{"3+3_horizontal", "3+3_both", "3+3_horizontal"});
+  CHECK(samples.size() > before_last);
+  for (const auto& s : samples) {
+    INFO(s.pattern << ": up valid " << s.up_valid << ", vp valid " << s.vp_valid);
+    CHECK(s.up_valid > 0.8);
+    if (s.pattern == "3+3_horizontal") {
+      CHECK(s.vp_valid == 0.0);
+    } else {
+      CHECK(s.vp_valid > 0.8);
+    }
+  }
+  const auto exit_status = daemon.terminate(5s);
+  REQUIRE(exit_status);
+  CHECK(*exit_status == 0);
 }

@@ -6,7 +6,7 @@ target_link_libraries(test_dds PRIVATE sl_dds sl_idl)
 
 # End to end: sl_sensord in a child process on the simulated sensor.
 sl_add_test(test_e2e daemon/test_e2e.cpp)
-target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers yaml-cpp)
+target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
 add_dependencies(test_e2e sl_sensord)
 
 # Config loading and its error messages.

@@ -81,6 +81,9 @@ class ScanEngine {
   // Starts `count` scans (0 = until stop) of `pattern` (empty = current).
   CommandResult start(const std::string& pattern, int count);
   CommandResult stop();
+  // Selects the pattern for the next start(); during a continuous scan it
+  // switches at once (the sequence in progress is abandoned; no image set
+  // ever mixes two patterns). Busy during a finite request.
   CommandResult selectPattern(const std::string& pattern);
   std::vector<std::string> patterns() const;
 
