@@ -138,9 +138,13 @@ std::optional<CommandReplyInfo> SensorClient::request(Command command, const std
   Request req{};
   req.client_id = client_id.data();
   req.request_id = d.next_request_id++;
-  req.command = command == Command::kStart  ? sl_msgs_msg_COMMAND_START
-                : command == Command::kStop ? sl_msgs_msg_COMMAND_STOP
-                                            : sl_msgs_msg_COMMAND_SET_PATTERN;
+  switch (command) {
+    case Command::kStart: req.command = sl_msgs_msg_COMMAND_START; break;
+    case Command::kStop: req.command = sl_msgs_msg_COMMAND_STOP; break;
+    case Command::kSetPattern: req.command = sl_msgs_msg_COMMAND_SET_PATTERN; break;
+    case Command::kListPatterns: req.command = sl_msgs_msg_COMMAND_LIST_PATTERNS; break;
+    case Command::kGetConfig: req.command = sl_msgs_msg_COMMAND_GET_CONFIG; break;
+  }
   req.pattern = pattern_copy.data();
   req.count = count;
   if (!d.request_writer.write(req)) return std::nullopt;
@@ -157,6 +161,7 @@ std::optional<CommandReplyInfo> SensorClient::request(Command command, const std
       info.code = fromReplyCode(r.code);
       info.reason = r.reason ? r.reason : "";
       info.patterns = toStrings(r.patterns);
+      info.detail = r.detail ? r.detail : "";
       return info;
     }
     if (replies.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(5));

@@ -222,7 +222,9 @@ DaemonConfig parseText(const std::string& text, const std::string& origin,
                       e.msg);
   }
   if (!root.IsMap()) throw ConfigError(origin + ": expected a map of keys at the top level");
-  return parseRoot(root, origin, base_dir);
+  DaemonConfig config = parseRoot(root, origin, base_dir);
+  config.source_text = text;
+  return config;
 }
 
 }  // namespace

@@ -207,16 +207,21 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
     case sl_msgs_msg_COMMAND_SET_PATTERN:
       result = engine.selectPattern(pattern);
       break;
+    case sl_msgs_msg_COMMAND_LIST_PATTERNS:
+    case sl_msgs_msg_COMMAND_GET_CONFIG:
+      break;  // every reply lists the patterns; the config text is added below
     default:
       result = {CommandResult::Code::kInvalidCommand,
                 "unknown command " + std::to_string(static_cast<int>(request.command))};
   }
   std::string client_id = request.client_id ? request.client_id : "";
   std::string reason = result.reason;
-  static const char* kCommands[] = {"start", "stop", "set_pattern"};
+  static const char* kCommands[] = {"start", "stop", "set_pattern", "list_patterns",
+                                    "get_config"};
   const int command = static_cast<int>(request.command);
-  logInfo("request " + std::to_string(request.request_id) + " from client " + client_id + ": " +
-          (command >= 0 && command < 3 ? kCommands[command] : "unknown") +
+  if (command < 3 || !result.accepted())  // queries are not worth a log line
+    logInfo("request " + std::to_string(request.request_id) + " from client " + client_id + ": " +
+          (command >= 0 && command < 5 ? kCommands[command] : "unknown") +
           (pattern.empty() ? "" : " '" + pattern + "'") +
           (request.command == sl_msgs_msg_COMMAND_START ? " count " + std::to_string(request.count)
                                                         : "") +
@@ -228,6 +233,9 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   reply.accepted = result.accepted();
   reply.code = toReplyCode(result.code);
   reply.reason = reason.data();
+  std::string detail =
+      request.command == sl_msgs_msg_COMMAND_GET_CONFIG ? engine.config().source_text : "";
+  reply.detail = detail.data();
   borrow(reply.patterns, names.pointers.data(), names.pointers.size());
   reply_writer.write(reply);
 }

@@ -1,6 +1,7 @@
 #include "sl/daemon/scan_engine.h"
 
 #include <chrono>
+#include <deque>
 #include <map>
 #include <variant>
 
@@ -112,7 +113,7 @@ struct ScanEngine::Impl {
   std::uint64_t status_version = 0;       // guarded by mutex
   std::string last_error;                 // guarded by mutex
   double scan_rate_hz = 0;                // guarded by mutex
-  Clock::time_point last_scan_time{};     // guarded by mutex
+  std::deque<Clock::time_point> recent_scans;  // guarded by mutex
   // A finite request that has not delivered every scan by then ends with an
   // error (frames were lost); guarded by mutex.
   Clock::time_point request_deadline = Clock::time_point::max();
@@ -249,12 +250,13 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
       std::lock_guard lock(mutex);
       if (item->generation != generation.load() || state != ScanState::kScanning) continue;
       item->result.scan_index = ++scans_done;
-      const auto now = Clock::now();
-      if (last_scan_time != Clock::time_point{}) {
-        const double rate = 1.0 / std::chrono::duration<double>(now - last_scan_time).count();
-        scan_rate_hz = scan_rate_hz == 0 ? rate : 0.7 * scan_rate_hz + 0.3 * rate;
-      }
-      last_scan_time = now;
+      // Rate over the last (up to) 10 scans: stable, and quick to follow a switch.
+      recent_scans.push_back(Clock::now());
+      if (recent_scans.size() > 10) recent_scans.pop_front();
+      if (recent_scans.size() >= 2)
+        scan_rate_hz = (recent_scans.size() - 1) /
+                       std::chrono::duration<double>(recent_scans.back() - recent_scans.front())
+                           .count();
       ++status_version;
     }
     try {
@@ -350,7 +352,7 @@ CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
     d.scans_requested = static_cast<std::uint64_t>(count);
     d.scans_done = 0;
     d.scan_rate_hz = 0;
-    d.last_scan_time = {};
+    d.recent_scans.clear();
     const double sequence_s = pattern->frameCount() * d.config.synchroniser.image_interval_ns * 1e-9;
     d.request_deadline =
         count == 0 ? Clock::time_point::max()
@@ -413,6 +415,8 @@ std::vector<std::string> ScanEngine::patterns() const {
   for (const auto& p : impl_->config.patterns) names.push_back(p.name);
   return names;
 }
+
+const DaemonConfig& ScanEngine::config() const { return impl_->config; }
 
 EngineStatus ScanEngine::status() const {
   const Impl& d = *impl_;

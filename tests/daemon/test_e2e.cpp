@@ -182,6 +182,15 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     CHECK(reply->reason.find("no_such_pattern") != std::string::npos);
     CHECK(reply->patterns.size() == config.patterns.size());
 
+    reply = client.request(Command::kListPatterns, "", 0, 5s);
+    REQUIRE(reply);
+    CHECK(reply->accepted);
+    CHECK(reply->patterns == std::vector<std::string>{"3+3_horizontal", "3+3_both"});
+    reply = client.request(Command::kGetConfig, "", 0, 5s);
+    REQUIRE(reply);
+    CHECK(reply->accepted);
+    CHECK(reply->detail.find("namespace: " + ns) != std::string::npos);
+
     reply = client.request(Command::kStart, "", -2, 5s);
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kInvalidCount);

@@ -11,7 +11,10 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
+
+#include <unistd.h>
 
 #include "common/ply.h"
 #include "sl/daemon/client.h"
@@ -31,6 +34,8 @@ constexpr const char* kUsage =
     "  stop               stop scanning\n"
     "  status             print the daemon's status\n"
     "  patterns           list the daemon's patterns\n"
+    "  config             print the daemon's configuration file\n"
+    "  watch [--count N]  print the status every second (N lines, default until Ctrl-C)\n"
     "  pattern set NAME   select the pattern for the next scans\n"
     "options:\n"
     "  --domain N         DDS domain id (default 0)\n"
@@ -67,6 +72,7 @@ int parseInt(const std::string& option, const std::string& value) {
 
 Args parseArgs(int argc, char** argv) {
   Args args;
+  bool count_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -90,6 +96,7 @@ Args parseArgs(int argc, char** argv) {
       if (!(args.timeout_s > 0)) usageError("--timeout must be > 0");
     } else if (a == "--count") {
       args.count = parseInt(a, value());
+      count_given = true;
     } else if (a == "--out") {
       args.out = value();
     } else if (a == "--pattern") {
@@ -108,6 +115,7 @@ Args parseArgs(int argc, char** argv) {
     }
   }
   if (args.command.empty()) usageError("no command given");
+  if (args.command == "watch" && !count_given) args.count = 0;
   return args;
 }
 
@@ -146,6 +154,14 @@ int sendCommand(SensorClient& client, const Args& args, Command command,
   return 0;
 }
 
+void progressBar(int done, int total) {
+  constexpr int kWidth = 30;
+  const int filled = total > 0 ? done * kWidth / total : 0;
+  std::fprintf(stderr, "\r[%s%s] %d/%d", std::string(filled, '#').c_str(),
+               std::string(kWidth - filled, '.').c_str(), done, total);
+  std::fflush(stderr);
+}
+
 int scan(SensorClient& client, const Args& args) {
   if (args.count < 1) usageError("scan --count must be >= 1");
   if (args.out.empty()) usageError("scan needs --out DIR");
@@ -160,6 +176,9 @@ int scan(SensorClient& client, const Args& args) {
   if (const int rc = sendCommand(client, args, Command::kStart, args.pattern, args.count))
     return rc;
   const char* unit = args.unit == sl::tools::LengthUnit::kMetre ? "m" : "mm";
+  // A progress bar on a terminal (stderr), for multi-scan requests.
+  const bool show_progress = args.count > 1 && ::isatty(STDERR_FILENO);
+  if (show_progress) progressBar(0, args.count);
   const double scale = args.unit == sl::tools::LengthUnit::kMetre ? 1e-3 : 1.0;
   for (int i = 1; i <= args.count; ++i) {
     const auto cloud = client.receiveCloud(requested_at, toMs(args.timeout_s));
@@ -183,6 +202,7 @@ int scan(SensorClient& client, const Args& args) {
       zsum += p.z;
     }
     const double total = static_cast<double>(cloud->points.size());
+    if (show_progress) std::fputs("\r\033[K", stderr);  // the bar gives way to the line
     if (written > 0) {
       std::printf("scan %d/%d: %dx%d, %zu valid points (%.1f %%), z %.1f..%.1f mean %.1f %s -> %s\n",
                   i, args.count, cloud->width, cloud->height, written, 100.0 * written / total,
@@ -192,7 +212,9 @@ int scan(SensorClient& client, const Args& args) {
                   cloud->height, path.c_str());
     }
     std::fflush(stdout);
+    if (show_progress) progressBar(i, args.count);
   }
+  if (show_progress) std::fputs("\n", stderr);
   return 0;
 }
 
@@ -211,6 +233,31 @@ int printStatus(SensorClient& client, const Args& args) {
   return 0;
 }
 
+// Prints one status line per second until the daemon stops answering,
+// `--count` lines were printed (0 = until Ctrl-C), or a signal ends slctl.
+int watch(SensorClient& client, const Args& args) {
+  int printed = 0;
+  while (args.count <= 0 || printed < args.count) {
+    const auto s = client.status(toMs(std::max(args.timeout_s, 2.0)));
+    if (!s) return noDaemon(args);
+    const std::string of =
+        s->scans_requested ? std::to_string(s->scans_requested) : std::string("continuous");
+    std::printf("%-8s %-20s scans %6llu of %-10s rate %5.2f Hz  dropped frames %llu sets %llu  "
+                "incomplete %llu%s%s\n",
+                sl::daemon::toString(s->state), s->pattern.c_str(),
+                static_cast<unsigned long long>(s->scans_done), of.c_str(), s->scan_rate_hz,
+                static_cast<unsigned long long>(s->frames_dropped),
+                static_cast<unsigned long long>(s->sets_dropped),
+                static_cast<unsigned long long>(s->sets_incomplete),
+                s->last_error.empty() ? "" : "  error: ", s->last_error.c_str());
+    std::fflush(stdout);
+    ++printed;
+    // Status arrives on every change (each scan); show the latest once a second.
+    std::this_thread::sleep_for(1s);
+  }
+  return 0;
+}
+
 int run(const Args& args) {
   sl::daemon::ClientOptions options;
   options.domain_id = args.domain;
@@ -218,6 +265,7 @@ int run(const Args& args) {
   options.subscribe_points = args.command == "scan";
   SensorClient client(options);
   if (args.command == "status") return printStatus(client, args);
+  if (args.command == "watch") return watch(client, args);
   if (!client.waitForDaemon(toMs(args.timeout_s))) return noDaemon(args);
   if (args.command == "scan") return scan(client, args);
   if (args.command == "start") {
@@ -231,10 +279,15 @@ int run(const Args& args) {
     return rc;
   }
   if (args.command == "patterns") {
-    // An empty SET_PATTERN is rejected, but every reply lists the patterns.
-    const auto answer = client.request(Command::kSetPattern, "", 0, toMs(args.timeout_s));
-    if (!answer) return noDaemon(args);
-    for (const auto& name : answer->patterns) std::printf("%s\n", name.c_str());
+    sl::daemon::CommandReplyInfo reply;
+    if (const int rc = sendCommand(client, args, Command::kListPatterns, "", 0, &reply)) return rc;
+    for (const auto& name : reply.patterns) std::printf("%s\n", name.c_str());
+    return 0;
+  }
+  if (args.command == "config") {
+    sl::daemon::CommandReplyInfo reply;
+    if (const int rc = sendCommand(client, args, Command::kGetConfig, "", 0, &reply)) return rc;
+    std::fputs(reply.detail.c_str(), stdout);
     return 0;
   }
   if (args.command == "pattern") {

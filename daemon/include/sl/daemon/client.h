@@ -26,6 +26,7 @@ struct CommandReplyInfo {
   CommandResult::Code code = CommandResult::Code::kOk;
   std::string reason;
   std::vector<std::string> patterns;
+  std::string detail;  // kGetConfig: the daemon's configuration text
 };
 
 struct StatusInfo {
@@ -39,7 +40,7 @@ struct StatusInfo {
   pipeline::TimestampNs stamp_ns = 0;
 };
 
-enum class Command { kStart, kStop, kSetPattern };
+enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };
 
 // Thread-compatible. Each client has a random id; replies to other clients
 // are ignored.

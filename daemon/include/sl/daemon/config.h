@@ -38,6 +38,7 @@ struct RuntimeConfig {
 
 struct DaemonConfig {
   std::string source_path;  // the file it was loaded from
+  std::string source_text;  // its text, as loaded (served by COMMAND_GET_CONFIG)
   std::string sensor = "sim";  // "sim" (hardware drivers come with later issues)
   drivers::SimConfig sim;
   // Calibration used by the triangulator. For the simulated sensor it

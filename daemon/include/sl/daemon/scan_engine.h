@@ -86,6 +86,7 @@ class ScanEngine {
   // ever mixes two patterns). Busy during a finite request.
   CommandResult selectPattern(const std::string& pattern);
   std::vector<std::string> patterns() const;
+  const DaemonConfig& config() const;
 
   EngineStatus status() const;
   // True while every thread has made progress within the last `max_age`
