@@ -1,0 +1,131 @@
+// A structured-light pattern described as data: family, parameters, encoded
+// direction, projector resolution and frame order. Codecs (codec.h) generate
+// the projector images of a PatternSpec and decode camera images of it.
+//
+// Conventions shared by all families:
+// - Projector coordinates are in projector px of the addressed resolution
+//   (1824 x 1140 for the LightCrafter 4500), origin at the centre of the
+//   top-left pixel: projector column c covers [c - 0.5, c + 0.5).
+// - Horizontal patterns encode the projector column u_p (the stripes are
+//   vertical lines), vertical patterns the row v_p; `both` is the horizontal
+//   block of frames followed by the vertical block.
+// - Relative projector intensity is in [0, 1] (0 = black, 1 = full white);
+//   8-bit images hold round(255 * intensity).
+// - A sinusoid of `f` periods across an axis of L px, shift delta:
+//   I(p) = offset + amplitude * cos(2*pi*f*p/L - delta). Frame n of an N-step
+//   set has delta_n = start_phase + shift_sign * 2*pi*n/N.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "sl/pipeline/pattern.h"
+
+namespace sl::pipeline {
+
+enum class PatternFamily {
+  // N-step phase shift (N >= 3) at one or more frequencies, temporal unwrapping.
+  kPhaseShift,
+  // 2+1 (sl_sensor's two_plus_one_with_tpu): per direction a quadrature pair
+  // at the first frequency with a flat frame between them, then a quadrature
+  // pair per further frequency (the unit-frequency cue):
+  // [f0 delta0, flat, f0 delta1, f1 delta0, f1 delta1, ...], delta1 = delta0
+  // + shift_sign * pi/2; the flat frame is `offset` (A).
+  kTwoPlusOne,
+  // Reflected binary Gray code of the projector coordinate, MSB first.
+  kGrayCode,
+  // Gray code for the fringe order + N-step phase shift with one period per
+  // Gray stripe (optionally complementary: one more Gray bit of half the
+  // stripe width against edge errors).
+  kGrayPhaseShift,
+};
+
+enum class Unwrapping {
+  // Each frequency is unwrapped with the next lower one (sorted by
+  // frequency); the lowest must be <= 1 period across the axis. A unit
+  // frequency cue (3+3) is the two-frequency case.
+  kHierarchical,
+  // Multi-wavelength heterodyne: beats of neighbouring frequencies (sorted
+  // descending), beats of the beats..., down to one beat of <= 1 period,
+  // then unwrapped back up to the highest frequency.
+  kHeterodyne,
+};
+
+const char* toString(PatternFamily f);
+const char* toString(Unwrapping u);
+// Parse the names used in YAML ("phase_shift", "two_plus_one", "gray_code",
+// "gray_phase_shift"; "hierarchical", "unit_cue", "heterodyne"). Throw
+// std::invalid_argument listing the valid names.
+PatternFamily patternFamilyFromString(const std::string& s);
+Unwrapping unwrappingFromString(const std::string& s);
+
+struct PatternSpec {
+  PatternSpec() = default;
+  // Implicit on purpose: the legacy 3+3 description converts to its spec, so
+  // code written for PhaseShift33Pattern keeps working (see toSpec()).
+  PatternSpec(const PhaseShift33Pattern& p);  // NOLINT(google-explicit-constructor)
+
+  std::string name = "pattern";
+  PatternFamily family = PatternFamily::kPhaseShift;
+  Direction direction = Direction::kHorizontal;
+  int projector_width = 1824;   // px, addressed resolution
+  int projector_height = 1140;  // px
+
+  // --- sinusoids (kPhaseShift, kTwoPlusOne, kGrayPhaseShift) ---
+  int steps = 3;  // N (kPhaseShift, kGrayPhaseShift); kTwoPlusOne always 2
+  // Periods across the encoded axis, in projection order (kPhaseShift,
+  // kTwoPlusOne). Need not be integers; the coordinate is periodic with the
+  // axis length when the coarsest frequency is 1.
+  std::vector<double> frequencies{16.0, 1.0};
+  Unwrapping unwrapping = Unwrapping::kHierarchical;
+  int shift_sign = 1;            // +1 or -1
+  double start_phase_rad = 0.0;  // delta_0
+  double offset = 0.5;           // mean relative intensity
+  double amplitude = 0.5;        // offset +- amplitude must stay in [0, 1]
+
+  // --- Gray code (kGrayCode, kGrayPhaseShift) ---
+  // Projected bits, MSB first, of the ceil(log2(L))-bit code of the
+  // coordinate; 0 = all. With b of B bits a stripe is 2^(B-b) px wide.
+  // kGrayPhaseShift: the phase period equals the stripe width.
+  int gray_bits = 0;
+  bool gray_inverse = false;      // each bit followed by its inverse
+  bool reference_frames = true;   // full white then black before the bits
+  bool complementary = false;     // kGrayPhaseShift: one extra bit of half a stripe
+
+  // Optional permutation: projected frame i (of one full sequence) shows
+  // canonical frame frame_order[i] (canonical order as documented above and
+  // in README.md). Empty = canonical order.
+  std::vector<int> frame_order;
+
+  // Frames of one full sequence (both directions for kBoth).
+  int frameCount() const;
+  // Frames of one direction.
+  int framesPerDirection() const;
+  // Extent (px) of the encoded axis: width for columns, height for rows.
+  int axisLength(bool columns) const { return columns ? projector_width : projector_height; }
+  // Gray code: bits of the full code of an axis of L px, and the bits used.
+  static int fullGrayBits(int axis_length);
+  int grayBitsUsed(int axis_length) const;
+  // Width (px) of a Gray stripe (= phase period for kGrayPhaseShift).
+  double stripeWidth(int axis_length) const;
+  // Period (px) of the finest sinusoid along an axis of L px (0 for kGrayCode).
+  double finestPeriod(int axis_length) const;
+
+  // Throws std::invalid_argument naming the pattern and the bad field.
+  void validate() const;
+};
+
+// The PatternSpec of the paper's 3+3 (phase shift, 3 steps, frequencies
+// {fringes, 1}, hierarchical unwrapping).
+PatternSpec toSpec(const PhaseShift33Pattern& p);
+
+// Relative projector intensity in [0, 1] of projected frame `frame` at the
+// continuous projector coordinate (u, v) (px). Gray stripes are sharp.
+// Throws std::out_of_range for a frame outside [0, frameCount()).
+double patternIntensity(const PatternSpec& spec, int frame, double u, double v);
+
+// The projector images (CV_8UC1, projector_height x projector_width) in
+// projection order: round(255 * intensity) at each pixel centre.
+std::vector<cv::Mat> generatePatternImages(const PatternSpec& spec);
+
+}  // namespace sl::pipeline

@@ -1,0 +1,164 @@
+// Codec base: frame checks, buffer handling, the per-row driver that feeds
+// each direction's canonical frames to the family's row kernel and combines
+// the two directions of kBoth; the factory.
+#include "sl/pipeline/codec.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "codec_families.h"
+#include "frame_layout.h"
+
+namespace sl::pipeline {
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+void ensureMap(cv::Mat& m, cv::Size size, int type, bool* allocated = nullptr) {
+  if (m.size() != size || m.type() != type || !m.isContinuous() || m.empty()) {
+    m.create(size, type);
+    if (allocated) *allocated = true;
+  }
+}
+
+}  // namespace
+
+Codec::Codec(PatternSpec spec, DecoderOptions options)
+    : spec_(std::move(spec)), options_(options) {
+  spec_.validate();
+  if (!(options_.min_modulation >= 0.0f))
+    throw std::invalid_argument("DecoderOptions: min_modulation must be >= 0");
+  if (!(options_.max_unwrap_error > 0.0f && options_.max_unwrap_error <= 0.5f))
+    throw std::invalid_argument("DecoderOptions: max_unwrap_error must be in (0, 0.5]");
+  const int n = spec_.frameCount();
+  position_.resize(n);
+  for (int i = 0; i < n; ++i) {
+    const int canonical = spec_.frame_order.empty() ? i : spec_.frame_order[i];
+    position_[canonical] = i;
+  }
+}
+
+void Codec::prepare(const std::vector<cv::Mat>& frames, int bit_depth, ProjectorMaps& out) const {
+  const std::string who = "Codec '" + spec_.name + "'";
+  if (static_cast<int>(frames.size()) != frameCount()) {
+    throw std::invalid_argument(who + ": expected " + std::to_string(frameCount()) +
+                                " frames, got " + std::to_string(frames.size()));
+  }
+  const cv::Mat& first = frames.front();
+  if (first.empty()) throw std::invalid_argument(who + ": frame 0 is empty");
+  if (first.type() != CV_8UC1 && first.type() != CV_16UC1)
+    throw std::invalid_argument(who + ": frames must be CV_8UC1 or CV_16UC1");
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    if (frames[i].size() != first.size())
+      throw std::invalid_argument(who + ": frame " + std::to_string(i) +
+                                  " differs in size from frame 0");
+    if (frames[i].type() != first.type())
+      throw std::invalid_argument(who + ": frame " + std::to_string(i) +
+                                  " differs in type from frame 0");
+  }
+  const int max_bits = first.type() == CV_8UC1 ? 8 : 16;
+  if (bit_depth < 1 || bit_depth > max_bits)
+    throw std::invalid_argument(who + ": bit_depth " + std::to_string(bit_depth) +
+                                " is outside 1.." + std::to_string(max_bits) +
+                                " for this image type");
+  const cv::Size size = first.size();
+  bool up_new = false, vp_new = false;
+  ensureMap(out.up, size, CV_32FC1, &up_new);
+  ensureMap(out.vp, size, CV_32FC1, &vp_new);
+  ensureMap(out.modulation, size, CV_32FC1);
+  ensureMap(out.offset, size, CV_32FC1);
+  ensureMap(out.status, size, CV_8UC1);
+  // The map of an axis the pattern does not encode is never written by
+  // decodeRows(): NaN it when it is (re)allocated. Reusing `out` with a codec
+  // of another direction therefore needs a fresh ProjectorMaps.
+  if (spec_.direction == Direction::kVertical && up_new) out.up.setTo(kNaN);
+  if (spec_.direction == Direction::kHorizontal && vp_new) out.vp.setTo(kNaN);
+}
+
+void Codec::decodeInto(const std::vector<cv::Mat>& frames, int bit_depth,
+                       ProjectorMaps& out) const {
+  prepare(frames, bit_depth, out);
+  decodeRows(frames, bit_depth, 0, frames.front().rows, out);
+}
+
+ProjectorMaps Codec::decode(const std::vector<cv::Mat>& frames, int bit_depth) const {
+  ProjectorMaps maps;
+  decodeInto(frames, bit_depth, maps);
+  return maps;
+}
+
+void Codec::decodeRows(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin,
+                       int row_end, ProjectorMaps& out) const {
+  const int width = frames.front().cols;
+  const bool eight = frames.front().type() == CV_8UC1;
+  const int per_direction = spec_.framesPerDirection();
+  const bool both = spec_.direction == Direction::kBoth;
+  const float dn_scale = std::ldexp(1.0f, bit_depth - 8);
+  const float saturation = options_.reject_saturated ? static_cast<float>((1 << bit_depth) - 1)
+                                                     : std::numeric_limits<float>::infinity();
+  std::vector<float> scratch(static_cast<std::size_t>(scratchRows()) * width);
+  // Second direction of kBoth: coordinate, B, A, status.
+  std::vector<float> coord2(both ? width : 0), mod2(both ? width : 0), off2(both ? width : 0);
+  std::vector<std::uint8_t> status2(both ? width : 0);
+  std::vector<const void*> rows(per_direction);
+
+  auto context = [&](bool columns) {
+    return RowContext{columns, static_cast<float>(spec_.axisLength(columns)), dn_scale, saturation,
+                      scratch.data()};
+  };
+  auto runRow = [&](int direction, int y, const RowContext& c, const RowOutput& o) {
+    for (int i = 0; i < per_direction; ++i)
+      rows[i] = frames[position_[direction * per_direction + i]].ptr(y);
+    if (eight) {
+      decodeRow8(c, reinterpret_cast<const std::uint8_t* const*>(rows.data()), width, o);
+    } else {
+      decodeRow16(c, reinterpret_cast<const std::uint16_t* const*>(rows.data()), width, o);
+    }
+  };
+
+  const bool first_columns = spec_.direction != Direction::kVertical;
+  const RowContext first_ctx = context(first_columns);
+  const RowContext second_ctx = context(false);
+  for (int y = row_begin; y < row_end; ++y) {
+    float* coord = (first_columns ? out.up : out.vp).ptr<float>(y);
+    float* modulation = out.modulation.ptr<float>(y);
+    float* offset = out.offset.ptr<float>(y);
+    std::uint8_t* status = out.status.ptr<std::uint8_t>(y);
+    runRow(0, y, first_ctx, RowOutput{coord, modulation, offset, status});
+    if (!both) {
+      for (int x = 0; x < width; ++x) coord[x] = status[x] == 0 ? coord[x] : kNaN;
+      continue;
+    }
+    runRow(1, y, second_ctx, RowOutput{coord2.data(), mod2.data(), off2.data(), status2.data()});
+    float* vp = out.vp.ptr<float>(y);
+    for (int x = 0; x < width; ++x) {
+      const std::uint8_t s = status[x] != 0 ? status[x] : status2[x];
+      status[x] = s;
+      modulation[x] = std::min(modulation[x], mod2[x]);
+      coord[x] = s == 0 ? coord[x] : kNaN;
+      vp[x] = s == 0 ? coord2[x] : kNaN;
+    }
+  }
+}
+
+std::unique_ptr<Codec> makeCodec(const PatternSpec& spec, const DecoderOptions& options) {
+  spec.validate();
+  switch (spec.family) {
+    case PatternFamily::kPhaseShift:
+    case PatternFamily::kTwoPlusOne:
+      return detail::makePhaseShiftCodec(spec, options);
+    case PatternFamily::kGrayCode:
+    case PatternFamily::kGrayPhaseShift:
+      return detail::makeGrayCodec(spec, options);
+  }
+  throw std::invalid_argument("makeCodec: unknown family");
+}
+
+Decoder::Decoder(const PatternSpec& spec, const DecoderOptions& options)
+    : codec_(makeCodec(spec, options)) {}
+
+}  // namespace sl::pipeline

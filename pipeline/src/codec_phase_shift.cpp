@@ -1,0 +1,281 @@
+// N-step phase shift at any list of frequencies with hierarchical or
+// heterodyne temporal unwrapping, and 2+1 (quadrature pair + flat frame).
+//
+// Per sinusoid set j with frames I_n = A + B cos(phi - delta_n):
+//   S = sum_n w_n (I_n - F) sin(delta_n),  C = sum_n (I_n - F) cos(delta_n)
+// with F = the flat frame (2+1) or 0 (N-step: the sums of sin and cos
+// vanish), so that phi = atan2(S, C) and B = b_scale * |(S, C)|
+// (b_scale = 2/N for N equally spaced steps, 1 for a quadrature pair).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numbers>
+#include <numeric>
+#include <vector>
+
+#include "codec_families.h"
+#include "fast_atan2.h"
+#include "frame_layout.h"
+
+namespace sl::pipeline::detail {
+
+namespace {
+
+constexpr float kTwoPi = 2.0f * std::numbers::pi_v<float>;
+constexpr float kInvTwoPi = 1.0f / kTwoPi;
+
+// round(x) for x > -1024 without a libm call (vectorizes on SSE2).
+inline float roundUp1024(float x) {
+  return static_cast<float>(static_cast<std::int32_t>(x + 1024.5f) - 1024);
+}
+
+// floor(x) for x > -1024.
+inline float floor1024(float x) {
+  return static_cast<float>(static_cast<std::int32_t>(x + 1024.0f) - 1024);
+}
+
+class PhaseShiftCodec final : public Codec {
+ public:
+  PhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options)
+      : Codec(spec, options) {
+    const auto all = canonicalFrames(spec);
+    const int per_direction = spec.framesPerDirection();
+    // Sets from the first direction's frames (both directions share the layout).
+    for (double f : spec.frequencies) {
+      Set s;
+      s.frequency = f;
+      sets_.push_back(s);
+    }
+    for (int i = 0; i < per_direction; ++i) {
+      const FrameInfo& fi = all[i];
+      if (fi.kind == FrameInfo::Kind::kFlat) {
+        flat_ = i;
+        continue;
+      }
+      for (Set& s : sets_) {
+        if (s.frequency == fi.frequency) {
+          s.frames.push_back(i);
+          s.ws.push_back(static_cast<float>(std::sin(fi.delta)));
+          s.wc.push_back(static_cast<float>(std::cos(fi.delta)));
+        }
+      }
+    }
+    for (Set& s : sets_) {
+      s.sum_ws = std::accumulate(s.ws.begin(), s.ws.end(), 0.0f);
+      s.sum_wc = std::accumulate(s.wc.begin(), s.wc.end(), 0.0f);
+      s.b_scale = flat_ >= 0 ? 1.0f : 2.0f / static_cast<float>(s.frames.size());
+    }
+    order_.resize(sets_.size());
+    std::iota(order_.begin(), order_.end(), 0);
+    const bool heterodyne = spec.unwrapping == Unwrapping::kHeterodyne;
+    std::sort(order_.begin(), order_.end(), [&](int a, int b) {
+      return heterodyne ? sets_[a].frequency > sets_[b].frequency
+                        : sets_[a].frequency < sets_[b].frequency;
+    });
+    finest_ = heterodyne ? order_.front() : order_.back();
+    if (heterodyne) {
+      // Frequencies of the item-0 beat of each level (level 0 = the finest).
+      std::vector<double> level;
+      for (int i : order_) level.push_back(sets_[i].frequency);
+      chain_frequency_.push_back(level[0]);
+      while (level.size() > 1) {
+        std::vector<double> next;
+        for (std::size_t i = 0; i + 1 < level.size(); ++i) next.push_back(level[i] - level[i + 1]);
+        level = next;
+        chain_frequency_.push_back(level[0]);
+      }
+      unit_frequency_ = chain_frequency_.back();
+    } else {
+      unit_frequency_ = sets_[order_.front()].frequency;
+    }
+  }
+
+  int scratchRows() const override { return 6 + 3 * static_cast<int>(sets_.size()); }
+
+ protected:
+  void decodeRow8(const RowContext& c, const std::uint8_t* const* frames, int width,
+                  const RowOutput& out) const override {
+    row(c, frames, width, out);
+  }
+  void decodeRow16(const RowContext& c, const std::uint16_t* const* frames, int width,
+                   const RowOutput& out) const override {
+    row(c, frames, width, out);
+  }
+
+ private:
+  struct Set {
+    double frequency = 0;
+    std::vector<int> frames;  // indices among the direction's frames
+    std::vector<float> ws, wc;
+    float sum_ws = 0, sum_wc = 0, b_scale = 1;
+  };
+
+  template <typename Pixel>
+  void row(const RowContext& c, const Pixel* const* frames, int width, const RowOutput& out) const {
+    const int n = width;
+    const int k_sets = static_cast<int>(sets_.size());
+    float* scratch = c.scratch;
+    auto next = [&]() {
+      float* r = scratch;
+      scratch += n;
+      return r;
+    };
+    float* __restrict s_acc = next();
+    float* __restrict c_acc = next();
+    float* __restrict b2_min = next();
+    float* __restrict peak = next();
+    float* __restrict phi_abs = next();
+    float* __restrict err = next();
+    std::vector<float*> phase(k_sets), work(k_sets), chain(k_sets);
+    for (int j = 0; j < k_sets; ++j) phase[j] = next();
+    for (int j = 0; j < k_sets; ++j) work[j] = next();
+    for (int j = 0; j < k_sets; ++j) chain[j] = next();
+
+    // Peak over all frames of the direction (saturation test).
+    {
+      const Pixel* f0 = frames[0];
+      for (int x = 0; x < n; ++x) peak[x] = f0[x];
+      const int count = static_cast<int>(spec().framesPerDirection());
+      for (int i = 1; i < count; ++i) {
+        const Pixel* f = frames[i];
+        for (int x = 0; x < n; ++x) peak[x] = std::max(peak[x], static_cast<float>(f[x]));
+      }
+    }
+    // Offset A: the flat frame, or the mean of the first listed set.
+    {
+      float* __restrict a = out.offset;
+      if (flat_ >= 0) {
+        const Pixel* f = frames[flat_];
+        for (int x = 0; x < n; ++x) a[x] = f[x];
+      } else {
+        const Set& s0 = sets_[0];
+        const float inv = 1.0f / static_cast<float>(s0.frames.size());
+        const Pixel* f = frames[s0.frames[0]];
+        for (int x = 0; x < n; ++x) a[x] = f[x];
+        for (std::size_t m = 1; m < s0.frames.size(); ++m) {
+          const Pixel* g = frames[s0.frames[m]];
+          for (int x = 0; x < n; ++x) a[x] += g[x];
+        }
+        for (int x = 0; x < n; ++x) a[x] *= inv;
+      }
+    }
+    // Wrapped phase and B^2 of each set.
+    for (int x = 0; x < n; ++x) b2_min[x] = std::numeric_limits<float>::max();
+    for (int j = 0; j < k_sets; ++j) {
+      const Set& s = sets_[j];
+      for (int x = 0; x < n; ++x) s_acc[x] = c_acc[x] = 0.0f;
+      for (std::size_t m = 0; m < s.frames.size(); ++m) {
+        const Pixel* f = frames[s.frames[m]];
+        const float ws = s.ws[m], wc = s.wc[m];
+        for (int x = 0; x < n; ++x) {
+          const float v = f[x];
+          s_acc[x] += ws * v;
+          c_acc[x] += wc * v;
+        }
+      }
+      if (flat_ >= 0) {
+        const Pixel* f = frames[flat_];
+        const float ws = s.sum_ws, wc = s.sum_wc;
+        for (int x = 0; x < n; ++x) {
+          const float v = f[x];
+          s_acc[x] -= ws * v;
+          c_acc[x] -= wc * v;
+        }
+      }
+      const float scale2 = s.b_scale * s.b_scale;
+      float* __restrict ph = phase[j];
+      const bool finest = j == finest_;
+      float* __restrict b_out = out.modulation;
+      for (int x = 0; x < n; ++x) {
+        const float sv = s_acc[x], cv = c_acc[x];
+        ph[x] = fastAtan2Positive(sv, cv);
+        const float b2 = (sv * sv + cv * cv) * scale2;
+        b2_min[x] = std::min(b2_min[x], b2);
+        if (finest) b_out[x] = b2;  // squared for now, rooted below
+      }
+    }
+    for (int x = 0; x < n; ++x) out.modulation[x] = std::sqrt(out.modulation[x]);
+
+    // Temporal unwrapping -> absolute phase of the finest set in phi_abs.
+    for (int x = 0; x < n; ++x) err[x] = 0.0f;
+    // In place on phi_abs (read, then overwritten at the same index).
+    auto unwrapStep = [&](const float* __restrict fine, float ratio) {
+      float* __restrict abs_phase = phi_abs;
+      for (int x = 0; x < n; ++x) {
+        const float cycles = (ratio * abs_phase[x] - fine[x]) * kInvTwoPi;
+        const float k = roundUp1024(cycles);
+        err[x] = std::max(err[x], std::fabs(cycles - k));
+        abs_phase[x] = fine[x] + kTwoPi * k;
+      }
+    };
+    if (spec().unwrapping == Unwrapping::kHierarchical) {
+      std::copy(phase[order_[0]], phase[order_[0]] + n, phi_abs);
+      for (int i = 1; i < k_sets; ++i) {
+        const float ratio =
+            static_cast<float>(sets_[order_[i]].frequency / sets_[order_[i - 1]].frequency);
+        unwrapStep(phase[order_[i]], ratio);
+      }
+    } else {
+      // Level 0: phases sorted by descending frequency; each next level holds
+      // the wrapped beats of neighbours; chain[l] = item 0 of level l.
+      for (int i = 0; i < k_sets; ++i) std::copy(phase[order_[i]], phase[order_[i]] + n, work[i]);
+      std::copy(work[0], work[0] + n, chain[0]);
+      for (int level = 1; level < k_sets; ++level) {
+        for (int i = 0; i + level < k_sets; ++i) {
+          float* __restrict a = work[i];
+          const float* __restrict b = work[i + 1];
+          for (int x = 0; x < n; ++x) {
+            const float d = a[x] - b[x];
+            a[x] = d < 0.0f ? d + kTwoPi : d;
+          }
+        }
+        std::copy(work[0], work[0] + n, chain[level]);
+      }
+      std::copy(chain[k_sets - 1], chain[k_sets - 1] + n, phi_abs);
+      for (int level = k_sets - 2; level >= 0; --level) {
+        const float ratio =
+            static_cast<float>(chain_frequency_[level] / chain_frequency_[level + 1]);
+        unwrapStep(chain[level], ratio);
+      }
+    }
+
+    // Coordinate, wrapped into one code period [0, P), and status.
+    const float to_px = static_cast<float>(c.axis_length / (2.0 * std::numbers::pi *
+                                                             sets_[finest_].frequency));
+    const float period = static_cast<float>(c.axis_length / unit_frequency_);
+    const float inv_period = 1.0f / period;
+    const float max_coord = c.axis_length - 0.5f;
+    const float min_b = options().min_modulation * c.dn_scale;
+    const float min_b2 = min_b * min_b;
+    const float max_err = options().max_unwrap_error;
+    const float saturation = c.saturation;
+    float* __restrict coord = out.coord;
+    std::uint8_t* __restrict status = out.status;
+    for (int x = 0; x < n; ++x) {
+      float p = phi_abs[x] * to_px;
+      p -= period * floor1024(p * inv_period);
+      coord[x] = p;
+      std::uint8_t s = p >= -0.5f && p <= max_coord ? 0 : 4;
+      s = err[x] > max_err ? 3 : s;
+      s = b2_min[x] >= min_b2 ? s : 1;
+      s = peak[x] >= saturation ? 2 : s;
+      status[x] = s;
+    }
+  }
+
+  std::vector<Set> sets_;        // in listed order
+  std::vector<int> order_;       // unwrapping order (see constructor)
+  std::vector<double> chain_frequency_;  // heterodyne: item-0 frequency per level
+  int finest_ = 0;
+  int flat_ = -1;                // 2+1: index of the flat frame
+  double unit_frequency_ = 1.0;  // frequency of the coarsest (beat) phase
+};
+
+}  // namespace
+
+std::unique_ptr<Codec> makePhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options) {
+  return std::make_unique<PhaseShiftCodec>(spec, options);
+}
+
+}  // namespace sl::pipeline::detail
