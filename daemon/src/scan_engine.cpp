@@ -6,7 +6,7 @@
 #include <variant>
 
 #include "sl/daemon/bounded_queue.h"
-#include "sl/pipeline/decoder.h"
+#include "sl/pipeline/codec.h"
 #include "sl/pipeline/synchroniser.h"
 #include "sl/pipeline/triangulator.h"
 
@@ -84,7 +84,7 @@ struct ScanEngine::Impl {
         results(config.runtime.queue_depth),
         triangulator(config.calibration, config.triangulator) {
     for (const auto& p : config.patterns)
-      decoders.emplace(p.name, pipeline::PhaseShift33Decoder(p, config.decoder));
+      decoders.emplace(p.name, pipeline::Decoder(p, config.decoder));
     current_pattern = config.runtime.default_pattern;
     this->devices.projector->select(current_pattern);
     for (auto& camera : this->devices.cameras) camera->start();
@@ -101,7 +101,7 @@ struct ScanEngine::Impl {
   BoundedQueue<ResultItem> results;
 
   // --- stages, each used by one thread only ---
-  std::map<std::string, pipeline::PhaseShift33Decoder> decoders;  // processing thread
+  std::map<std::string, pipeline::Decoder> decoders;               // processing thread
   pipeline::Triangulator triangulator;                             // processing thread
 
   // --- control state ---
@@ -346,7 +346,7 @@ CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
                              "); send stop first"};
   if (count < 0) return {Code::kInvalidCount, "count must be >= 0 (0 = continuous)"};
   const std::string name = pattern_name.empty() ? d.current_pattern : pattern_name;
-  const pipeline::PhaseShift33Pattern* pattern = d.config.findPattern(name);
+  const pipeline::PatternSpec* pattern = d.config.findPattern(name);
   if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
   try {
     d.scans_requested = static_cast<std::uint64_t>(count);

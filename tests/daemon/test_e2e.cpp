@@ -61,7 +61,7 @@ PlaneStats comparePlane(const sl::pipeline::PointCloud& cloud, const sl::daemon:
   const sl::drivers::SimPlane& plane = sim.scene.planes.at(0);
   const Eigen::Vector3d n = plane.normal.normalized();
   const auto& rig = sim.rig;
-  const double lambda = double(rig.projector.width) / config.patterns.at(0).fringes;
+  const double lambda = config.patterns.at(0).finestPeriod(rig.projector.width);
   const double read2 = sim.read_noise_dn * sim.read_noise_dn;
 
   PlaneStats s;

@@ -386,7 +386,7 @@ TEST_CASE("invalid configurations name the bad field", "[sim][config]") {
   c.patterns[1].name = c.patterns[0].name;
   throwsNaming(c, "patterns[1].name");
   c = planeAt(600);
-  c.patterns[0].fringes = 0;
+  c.patterns[0].frequencies = {0.0, 1.0};
   throwsNaming(c, "patterns[0]");
   c = planeAt(600);
   c.patterns[0].projector_width = 912;

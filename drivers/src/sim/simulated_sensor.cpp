@@ -77,7 +77,7 @@ void validateConfig(const SimConfig& c) {
   if (c.patterns.empty()) fail("patterns", "must name at least one pattern");
   std::set<std::string> names;
   for (std::size_t i = 0; i < c.patterns.size(); ++i) {
-    const pipeline::PhaseShift33Pattern& p = c.patterns[i];
+    const pipeline::PatternSpec& p = c.patterns[i];
     const std::string name = "patterns[" + std::to_string(i) + "]";
     if (p.name.empty()) fail(name + ".name", "must not be empty");
     if (!names.insert(p.name).second) fail(name + ".name", "duplicates '" + p.name + "'");
@@ -101,7 +101,7 @@ class SceneRenderer {
     response_.gain_dn_per_electron = config.gain_dn_per_electron;
     response_.read_noise_dn = config.read_noise_dn;
     response_.bit_depth = config.bit_depth;
-    for (const pipeline::PhaseShift33Pattern& p : config.patterns) {
+    for (const pipeline::PatternSpec& p : config.patterns) {
       names_.push_back(p.name);
       images_.push_back(pipeline::generatePatternImages(p));
     }

@@ -22,7 +22,7 @@
 #include "sl/drivers/projector.h"
 #include "sl/drivers/trigger_source.h"
 #include "sl/pipeline/camera_model.h"
-#include "sl/pipeline/pattern.h"
+#include "sl/pipeline/pattern_spec.h"
 
 namespace sl::drivers {
 
@@ -48,7 +48,7 @@ struct SimConfig {
   // True geometry of the rig: camera and projector models, projector pose.
   pipeline::CameraProjectorCalibration rig;
   SimScene scene;
-  std::vector<pipeline::PhaseShift33Pattern> patterns;  // sequences the projector knows
+  std::vector<pipeline::PatternSpec> patterns;  // sequences the projector knows (any family)
 
   double camera_fps = 30.0;       // dt_img = 1 / fps
   int bit_depth = 8;              // 8..16
