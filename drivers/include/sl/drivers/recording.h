@@ -1,0 +1,41 @@
+// Recorded image sets on disk, written by the daemon's recorder and played
+// back by the replay sensor.
+//
+// Format (sl-sensor-recording/1), one folder per recording:
+//   <dir>/recording.yml          format, creation time, free-text note
+//   <dir>/set_000001/meta.yml    sequence_id, pattern, trigger_stamp_ns and
+//                                per camera: id, bit_depth, stamps_ns[]
+//   <dir>/set_000001/<camera>_<i>.png   frame i of that camera, lossless PNG
+//                                (8-bit, or 16-bit for deeper sensors)
+// Sets are numbered in recording order from 1. The .yml files are OpenCV
+// FileStorage YAML. A set folder is complete once its meta.yml exists (it is
+// written last, atomically), so an interrupted recording loses at most the
+// set being written.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "sl/pipeline/types.h"
+
+namespace sl::drivers {
+
+// Creates `dir` (and recording.yml) if needed. Throws std::runtime_error
+// naming the path on failure.
+void createRecording(const std::string& dir, const std::string& note);
+
+// Writes `set` as set number `index` (1-based). Throws std::runtime_error
+// naming the file on failure.
+void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set);
+
+// The complete sets of a recording, in order (folder names only; no images
+// are loaded). Throws std::runtime_error if `dir` is not a recording.
+std::vector<std::string> listRecordedSets(const std::string& dir);
+
+// Loads one set folder; with load_images false only its metadata (frames
+// stay empty, stamps are filled). Throws std::runtime_error naming the file
+// on a missing or unreadable frame or a malformed meta.yml.
+pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images = true);
+
+}  // namespace sl::drivers

@@ -1,0 +1,157 @@
+#include "sl/drivers/recording.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <stdexcept>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+namespace sl::drivers {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kFormat = "sl-sensor-recording/1";
+
+std::string setName(std::uint64_t index) {
+  char name[32];
+  std::snprintf(name, sizeof name, "set_%06llu", static_cast<unsigned long long>(index));
+  return name;
+}
+
+std::string frameName(const std::string& camera, std::size_t i) {
+  char name[32];
+  std::snprintf(name, sizeof name, "_%02zu.png", i);
+  return camera + name;
+}
+
+// Stamps are int64 ns; FileStorage stores int32 or double only, so they are
+// written as decimal strings.
+std::vector<std::string> toStrings(const std::vector<pipeline::TimestampNs>& stamps) {
+  std::vector<std::string> out;
+  for (auto s : stamps) out.push_back(std::to_string(s));
+  return out;
+}
+
+}  // namespace
+
+void createRecording(const std::string& dir, const std::string& note) {
+  std::error_code error;
+  fs::create_directories(dir, error);
+  if (error) throw std::runtime_error(dir + ": cannot create recording folder: " + error.message());
+  const std::string path = (fs::path(dir) / "recording.yml").string();
+  if (fs::exists(path)) return;
+  cv::FileStorage out(path, cv::FileStorage::WRITE);
+  if (!out.isOpened()) throw std::runtime_error(path + ": cannot write");
+  out << "format" << kFormat;
+  out << "created_ns"
+      << std::to_string(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                            std::chrono::system_clock::now().time_since_epoch())
+                            .count());
+  out << "note" << note;
+}
+
+void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set) {
+  const fs::path folder = fs::path(dir) / setName(index);
+  std::error_code error;
+  fs::create_directories(folder, error);
+  if (error) throw std::runtime_error(folder.string() + ": cannot create: " + error.message());
+  for (const auto& camera : set.cameras) {
+    for (std::size_t i = 0; i < camera.frames.size(); ++i) {
+      const std::string path = (folder / frameName(camera.camera_id, i)).string();
+      if (!cv::imwrite(path, camera.frames[i], {cv::IMWRITE_PNG_COMPRESSION, 1}))
+        throw std::runtime_error(path + ": cannot write frame");
+    }
+  }
+  // meta.yml last, through a temporary name: its presence marks the set complete.
+  const std::string meta = (folder / "meta.yml").string();
+  const std::string temporary = (folder / "meta.tmp.yml").string();
+  {
+    cv::FileStorage out(temporary, cv::FileStorage::WRITE);
+    if (!out.isOpened()) throw std::runtime_error(temporary + ": cannot write");
+    out << "sequence_id" << std::to_string(set.sequence_id);
+    out << "pattern" << set.pattern_name;
+    out << "trigger_stamp_ns" << std::to_string(set.trigger_stamp_ns);
+    out << "cameras" << "[";
+    for (const auto& camera : set.cameras) {
+      out << "{" << "id" << camera.camera_id << "bit_depth" << camera.bit_depth
+          << "frame_count" << static_cast<int>(camera.frames.size()) << "stamps_ns"
+          << toStrings(camera.stamps_ns) << "}";
+    }
+    out << "]";
+  }
+  fs::rename(temporary, meta, error);
+  if (error) throw std::runtime_error(meta + ": cannot rename: " + error.message());
+}
+
+std::vector<std::string> listRecordedSets(const std::string& dir) {
+  const fs::path info = fs::path(dir) / "recording.yml";
+  cv::FileStorage in;
+  try {
+    in.open(info.string(), cv::FileStorage::READ);
+  } catch (const cv::Exception&) {
+  }
+  if (!in.isOpened() || static_cast<std::string>(in["format"]) != kFormat)
+    throw std::runtime_error(dir + ": not a recording (no readable recording.yml with format " +
+                             kFormat + ")");
+  std::vector<std::string> sets;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.is_directory() && name.rfind("set_", 0) == 0 &&
+        fs::exists(entry.path() / "meta.yml"))
+      sets.push_back(entry.path().string());
+  }
+  std::sort(sets.begin(), sets.end());
+  return sets;
+}
+
+pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images) {
+  const std::string meta = (fs::path(set_dir) / "meta.yml").string();
+  cv::FileStorage in;
+  try {
+    in.open(meta, cv::FileStorage::READ);
+  } catch (const cv::Exception& e) {
+    throw std::runtime_error(meta + ": malformed: " + e.msg);
+  }
+  if (!in.isOpened()) throw std::runtime_error(meta + ": cannot read");
+  auto int64 = [&](const cv::FileNode& node, const char* what) {
+    try {
+      return static_cast<std::int64_t>(std::stoll(static_cast<std::string>(node)));
+    } catch (const std::exception&) {
+      throw std::runtime_error(meta + ": '" + what + "' is not an integer");
+    }
+  };
+  pipeline::ImageSet set;
+  set.sequence_id = static_cast<std::uint64_t>(int64(in["sequence_id"], "sequence_id"));
+  set.pattern_name = static_cast<std::string>(in["pattern"]);
+  set.trigger_stamp_ns = int64(in["trigger_stamp_ns"], "trigger_stamp_ns");
+  const cv::FileNode cameras = in["cameras"];
+  if (!cameras.isSeq() || cameras.size() == 0)
+    throw std::runtime_error(meta + ": 'cameras' must be a non-empty list");
+  for (const auto& node : cameras) {
+    pipeline::CameraImages camera;
+    camera.camera_id = static_cast<std::string>(node["id"]);
+    camera.bit_depth = static_cast<int>(node["bit_depth"]);
+    const int frame_count = static_cast<int>(node["frame_count"]);
+    const cv::FileNode stamps = node["stamps_ns"];
+    if (camera.camera_id.empty() || frame_count <= 0 || !stamps.isSeq() ||
+        static_cast<int>(stamps.size()) != frame_count)
+      throw std::runtime_error(meta + ": camera entry needs id, frame_count and as many stamps_ns");
+    for (const auto& s : stamps) camera.stamps_ns.push_back(int64(s, "stamps_ns"));
+    for (int i = 0; load_images && i < frame_count; ++i) {
+      const std::string path = (fs::path(set_dir) / frameName(camera.camera_id, i)).string();
+      cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
+      if (image.empty()) throw std::runtime_error(path + ": missing or unreadable frame");
+      if (image.channels() != 1) throw std::runtime_error(path + ": not a single-channel image");
+      camera.frames.push_back(image);
+    }
+    set.cameras.push_back(std::move(camera));
+  }
+  return set;
+}
+
+}  // namespace sl::drivers
