@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include "calibration_yaml.h"
+#include "pattern_config_yaml.h"
 #include "sl/daemon/calibration_io.h"
 #include "yaml_reader.h"
 
@@ -74,30 +75,12 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
 }
 
 void parsePatterns(const YamlMap& root, const pipeline::PinholeModel& projector,
-                   std::vector<pipeline::PhaseShift33Pattern>& patterns) {
+                   const std::filesystem::path& base_dir,
+                   std::vector<pipeline::PatternSpec>& patterns) {
   std::set<std::string> names;
   for (const YamlMap& m : root.listOfMaps("patterns")) {
-    pipeline::PhaseShift33Pattern p;
-    p.name = m.get<std::string>("name");
-    if (p.name.empty()) m.fail("name", "must not be empty");
+    pipeline::PatternSpec p = parsePattern(m, "", &projector, base_dir.string());
     if (!names.insert(p.name).second) m.fail("name", "duplicate pattern name '" + p.name + "'");
-    const std::string family = m.get<std::string>("family", "phase_shift_3+3");
-    if (family != "phase_shift_3+3")
-      m.fail("family", "unknown pattern family '" + family + "' (supported: phase_shift_3+3)");
-    try {
-      p.direction = pipeline::directionFromString(m.get<std::string>("direction"));
-    } catch (const std::invalid_argument& e) {
-      m.fail("direction", e.what());
-    }
-    p.fringes = m.get<int>("fringes", p.fringes);
-    p.projector_width = projector.width;
-    p.projector_height = projector.height;
-    try {
-      p.validate();
-    } catch (const std::invalid_argument& e) {
-      m.fail("fringes", e.what());
-    }
-    m.done();
     patterns.push_back(p);
   }
 }
@@ -185,7 +168,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
       config.calibration.camera.height != config.sim.rig.camera.height)
     root.fail("calibration", "camera size differs from the sensor's camera");
 
-  parsePatterns(root, config.calibration.projector, config.patterns);
+  parsePatterns(root, config.calibration.projector, base_dir, config.patterns);
   config.sim.patterns = config.patterns;
   parseDecoder(root.optionalMap("decoder"), config.decoder);
   parseTriangulator(root.optionalMap("triangulator"), config.triangulator);
@@ -204,7 +187,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
 
 }  // namespace
 
-const pipeline::PhaseShift33Pattern* DaemonConfig::findPattern(const std::string& name) const {
+const pipeline::PatternSpec* DaemonConfig::findPattern(const std::string& name) const {
   for (const auto& p : patterns)
     if (p.name == name) return &p;
   return nullptr;

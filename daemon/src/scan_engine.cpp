@@ -384,7 +384,7 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
   Impl& d = *impl_;
   using Code = CommandResult::Code;
   std::lock_guard lock(d.mutex);
-  const pipeline::PhaseShift33Pattern* pattern = d.config.findPattern(name);
+  const pipeline::PatternSpec* pattern = d.config.findPattern(name);
   if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
   const bool scanning = d.state == ScanState::kScanning;
   if (scanning && d.scans_requested != 0)

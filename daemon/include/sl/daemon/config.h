@@ -8,8 +8,8 @@
 
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/camera_model.h"
-#include "sl/pipeline/decoder.h"
-#include "sl/pipeline/pattern.h"
+#include "sl/pipeline/codec.h"
+#include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/synchroniser.h"
 #include "sl/pipeline/triangulator.h"
 
@@ -44,14 +44,14 @@ struct DaemonConfig {
   // Calibration used by the triangulator. For the simulated sensor it
   // defaults to the simulated rig (perfect calibration).
   pipeline::CameraProjectorCalibration calibration;
-  std::vector<pipeline::PhaseShift33Pattern> patterns;
+  std::vector<pipeline::PatternSpec> patterns;
   pipeline::DecoderOptions decoder;
   pipeline::TriangulatorOptions triangulator;
   pipeline::SynchroniserOptions synchroniser;
   DdsConfig dds;
   RuntimeConfig runtime;
 
-  const pipeline::PhaseShift33Pattern* findPattern(const std::string& name) const;
+  const pipeline::PatternSpec* findPattern(const std::string& name) const;
 };
 
 // Loads and validates a config file. Throws ConfigError on a missing file,
