@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include "calibration_yaml.h"
+#include "hardware_config_yaml.h"
 #include "pattern_config_yaml.h"
 #include "sl/daemon/calibration_io.h"
 #include "yaml_reader.h"
@@ -149,13 +150,13 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   config.source_path = origin;
   const YamlMap root(root_node, origin, "");
   config.sensor = root.get<std::string>("sensor", config.sensor);
-  if (config.sensor != "sim")
-    root.fail("sensor", "unknown sensor '" + config.sensor +
-                            "' (this build supports: sim; hardware drivers are not built yet)");
-  parseSim(root.map("sim"), config.sim);
+  if (config.sensor != "sim" && config.sensor != "hardware")
+    root.fail("sensor", "unknown sensor '" + config.sensor + "' (supported: sim, hardware)");
+  if (config.sensor == "sim") parseSim(root.map("sim"), config.sim);
 
   const std::string calibration = root.get<std::string>("calibration", "sim");
   if (calibration == "sim") {
+    if (config.sensor != "sim") root.fail("calibration", "a hardware sensor needs a calibration file");
     config.calibration = config.sim.rig;
   } else {
     std::filesystem::path path(calibration);
@@ -164,15 +165,19 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
       root.fail("calibration", "cannot read calibration file '" + path.string() + "'");
     config.calibration = loadCalibration(path.string()).calibration;
   }
-  if (config.calibration.camera.width != config.sim.rig.camera.width ||
-      config.calibration.camera.height != config.sim.rig.camera.height)
+  if (config.sensor == "sim" && (config.calibration.camera.width != config.sim.rig.camera.width ||
+      config.calibration.camera.height != config.sim.rig.camera.height))
     root.fail("calibration", "camera size differs from the sensor's camera");
 
   parsePatterns(root, config.calibration.projector, base_dir, config.patterns);
   config.sim.patterns = config.patterns;
+  if (config.sensor == "hardware") parseHardware(root, config);
   parseDecoder(root.optionalMap("decoder"), config.decoder);
   parseTriangulator(root.optionalMap("triangulator"), config.triangulator);
-  parseSynchroniser(root.optionalMap("synchroniser"), config.sim.camera_fps, config.synchroniser);
+  parseSynchroniser(root.optionalMap("synchroniser"),
+                    config.sensor == "hardware" ? hardwareImageRate(root, config)
+                                                : config.sim.camera_fps,
+                    config.synchroniser);
   parseDds(root.optionalMap("dds"), config.dds);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   if (config.runtime.default_pattern.empty()) {

@@ -1,14 +1,18 @@
 #include "sl/daemon/devices.h"
 
+#include <map>
 #include <stdexcept>
 
+#include "sl/drivers/camera_stamp_trigger.h"
+#include "sl/drivers/lightcrafter4500.h"
 #include "sl/drivers/sim.h"
+#include "sl/drivers/versavis.h"
 
 namespace sl::daemon {
 
-EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
-  if (config.sensor != "sim")
-    throw std::runtime_error("sensor '" + config.sensor + "' is not supported by this build");
+namespace {
+
+EngineDevices openSimulated(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
   std::shared_ptr<drivers::SimulatedSensor> sim;
   try {
     sim = drivers::SimulatedSensor::create(config.sim);
@@ -21,6 +25,54 @@ EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& kee
   devices.projector = sim->projector();
   devices.trigger = sim->triggerSource();
   return devices;
+}
+
+// The real sensor: cameras, LightCrafter 4500, VersaVIS or camera-stamp trigger times.
+EngineDevices openHardware(const DaemonConfig& config) {
+  EngineDevices devices;
+  // --- cameras (Aravis, section `cameras:`): appended to devices.cameras here ---
+
+  if (devices.cameras.empty())
+    throw std::runtime_error(config.source_path +
+                             ": sensor 'hardware' has no cameras (this build has no camera "
+                             "driver configured)");
+
+  const drivers::LightCrafter4500Config& p = config.hardware.projector;
+  try {
+    devices.projector = std::make_shared<drivers::LightCrafter4500Projector>(p, [p] {
+      return drivers::openHidapiTransport(p.vendor_id, p.product_id, p.serial);
+    });
+  } catch (const std::exception& e) {
+    throw std::runtime_error("projector '" + p.id + "': " + e.what());
+  }
+
+  if (config.hardware.trigger == HardwareConfig::Trigger::kVersavis) {
+    devices.trigger = std::make_shared<drivers::VersavisTriggerSource>(config.hardware.versavis);
+  } else {
+    // The projector triggers the cameras: camera 0's stamps give the sequence
+    // starts; the projector tells their length and frame period.
+    auto source = std::make_shared<drivers::CameraStampTriggerSource>(
+        config.hardware.camera_stamps);
+    std::map<std::string, drivers::SequenceTapProjector::Timing> timing;
+    auto sequences = p.sequences;
+    for (const auto& s : drivers::builtinSequences(p.white_black_period_us)) sequences.push_back(s);
+    for (const auto& s : sequences)
+      timing[s.name] = {static_cast<int>(s.patterns.size()),
+                        static_cast<pipeline::TimestampNs>(s.frame_period_us) * 1000};
+    devices.cameras[0] = std::make_shared<drivers::StampTapCamera>(devices.cameras[0], source);
+    devices.projector =
+        std::make_shared<drivers::SequenceTapProjector>(devices.projector, source, timing);
+    devices.trigger = source;
+  }
+  return devices;
+}
+
+}  // namespace
+
+EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
+  if (config.sensor == "sim") return openSimulated(config, keep_alive);
+  if (config.sensor == "hardware") return openHardware(config);
+  throw std::runtime_error("sensor '" + config.sensor + "' is not supported by this build");
 }
 
 }  // namespace sl::daemon

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "sl/daemon/hardware_config.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/codec.h"
@@ -39,8 +40,9 @@ struct RuntimeConfig {
 struct DaemonConfig {
   std::string source_path;  // the file it was loaded from
   std::string source_text;  // its text, as loaded (served by COMMAND_GET_CONFIG)
-  std::string sensor = "sim";  // "sim" (hardware drivers come with later issues)
+  std::string sensor = "sim";  // "sim" or "hardware"
   drivers::SimConfig sim;
+  HardwareConfig hardware;  // sensor: hardware (projector, trigger)
   // Calibration used by the triangulator. For the simulated sensor it
   // defaults to the simulated rig (perfect calibration).
   pipeline::CameraProjectorCalibration calibration;
