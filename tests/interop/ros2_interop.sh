@@ -1,0 +1,97 @@
+#!/usr/bin/env bash
+# ROS 2 interoperability without ROS: sl_sensord on the simulated sensor
+# publishes on rt/<ns>/points through Cyclone DDS; an eProsima Fast DDS
+# subscriber (types from ros2_idl/ via fastddsgen) and a Cyclone DDS
+# subscriber (the daemon's types) both receive the clouds of
+# `slctl scan --count 3`, and every field of every cloud must be equal:
+# header stamp and frame_id, height, width, fields, is_bigendian, point_step,
+# row_step, the data bytes (length + FNV-1a hash), is_dense.
+# All traffic stays on 127.0.0.1, unicast only. Every wait is bounded.
+# usage: ros2_interop.sh SOURCE_DIR BINARY_DIR
+set -euo pipefail
+src=$1
+bin=$2
+export CYCLONEDDS_URI=file://$src/config/cyclonedds-loopback.xml
+export FASTRTPS_DEFAULT_PROFILES_FILE=$src/config/fastdds-loopback.xml
+work=$(mktemp -d)
+pids=()
+cleanup() {
+  for p in "${pids[@]}"; do kill -9 "$p" 2>/dev/null || true; done
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() {
+  echo "FAIL: $*" >&2
+  for f in "$work"/*.log; do [ -f "$f" ] && { echo "--- $(basename "$f")"; tail -n 20 "$f"; } >&2; done
+  exit 1
+}
+start=$SECONDS
+clouds=3
+
+ns="interop_$$_$RANDOM"
+sed "s/^  namespace: sl$/  namespace: $ns/" "$src/config/sim.yaml" > "$work/sim.yaml"
+grep -q "namespace: $ns" "$work/sim.yaml" || fail "could not set the namespace"
+topic="rt/$ns/points"
+
+"$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
+pids+=($!)
+daemon_pid=$!
+"$bin/tests/interop/fastdds_points_subscriber" --topic "$topic" --count $clouds --timeout 45 \
+  > "$work/fastdds.log" 2> "$work/fastdds.err" &
+pids+=($!)
+fastdds_pid=$!
+"$bin/tests/interop/cyclone_points_subscriber" --topic "$topic" --count $clouds --timeout 45 \
+  > "$work/cyclone.log" 2> "$work/cyclone.err" &
+pids+=($!)
+cyclone_pid=$!
+
+# Both subscribers must have matched the daemon's cloud writer before the
+# scan is requested (volatile topic: a reader that joins late misses clouds).
+for _ in $(seq 1 200); do
+  grep -q '^ready' "$work/fastdds.log" && grep -q '^ready' "$work/cyclone.log" && break
+  kill -0 "$daemon_pid" 2>/dev/null || fail "sl_sensord exited"
+  sleep 0.1
+done
+grep -q '^ready' "$work/cyclone.log" || fail "Cyclone subscriber did not match the daemon in 20 s"
+grep -q '^ready' "$work/fastdds.log" ||
+  fail "Fast DDS subscriber did not discover the daemon's writer on $topic in 20 s"
+echo "ok: both subscribers matched the daemon's writer after $((SECONDS - start)) s"
+
+"$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count $clouds --out "$work/scans" \
+  > "$work/slctl.log" 2>&1 || fail "slctl scan failed"
+cat "$work/slctl.log"
+
+wait "$cyclone_pid" || fail "Cyclone subscriber did not receive $clouds clouds"
+wait "$fastdds_pid" || fail "Fast DDS subscriber did not receive $clouds clouds"
+
+grep '^cloud ' "$work/cyclone.log" | sort > "$work/cyclone.clouds"
+grep '^cloud ' "$work/fastdds.log" | sort > "$work/fastdds.clouds"
+[ "$(wc -l < "$work/cyclone.clouds")" -eq $clouds ] || fail "Cyclone: not $clouds cloud lines"
+[ "$(wc -l < "$work/fastdds.clouds")" -eq $clouds ] || fail "Fast DDS: not $clouds cloud lines"
+[ "$(sort -u "$work/cyclone.clouds" | cut -d' ' -f2 | sort -u | wc -l)" -eq $clouds ] ||
+  fail "the $clouds clouds do not have distinct stamps"
+
+# What the daemon publishes (README "Topics"): an organized 1440 x 1080
+# cloud of float32 x, y, z, intensity, 16-byte little-endian points, with
+# NaN for invalid pixels.
+expected=" height=1080 width=1440 fields=x:0:7:1,y:4:7:1,z:8:7:1,intensity:12:7:1"
+expected+=" is_bigendian=0 point_step=16 row_step=23040 data_bytes=24883200 "
+while read -r line; do
+  case "$line" in
+    *"$expected"*is_dense=0) ;;
+    *) fail "unexpected cloud from the daemon: $line" ;;
+  esac
+done < "$work/cyclone.clouds"
+grep -q "frame_id=sl_camera_optical_frame " "$work/cyclone.clouds" || fail "unexpected frame_id"
+
+if ! diff "$work/cyclone.clouds" "$work/fastdds.clouds" > "$work/diff.log"; then
+  fail "Fast DDS received different clouds: $(cat "$work/diff.log")"
+fi
+echo "Fast DDS and Cyclone DDS received the same $clouds clouds:"
+cat "$work/fastdds.clouds"
+
+kill -TERM "$daemon_pid"
+for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
+kill -0 "$daemon_pid" 2>/dev/null && fail "daemon still running 2 s after SIGTERM"
+echo "ok: finished in $((SECONDS - start)) s"
+echo "1 passed, 0 failed"
