@@ -156,7 +156,8 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
 
   const std::string calibration = root.get<std::string>("calibration", "sim");
   if (calibration == "sim") {
-    if (config.sensor != "sim") root.fail("calibration", "a hardware sensor needs a calibration file");
+    if (config.sensor != "sim")
+      root.fail("calibration", "a hardware sensor needs a calibration file");
     config.calibration = config.sim.rig;
   } else {
     std::filesystem::path path(calibration);
@@ -165,8 +166,9 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
       root.fail("calibration", "cannot read calibration file '" + path.string() + "'");
     config.calibration = loadCalibration(path.string()).calibration;
   }
-  if (config.sensor == "sim" && (config.calibration.camera.width != config.sim.rig.camera.width ||
-      config.calibration.camera.height != config.sim.rig.camera.height))
+  if (config.sensor == "sim" &&
+      (config.calibration.camera.width != config.sim.rig.camera.width ||
+       config.calibration.camera.height != config.sim.rig.camera.height))
     root.fail("calibration", "camera size differs from the sensor's camera");
 
   parsePatterns(root, config.calibration.projector, base_dir, config.patterns);

@@ -39,9 +39,8 @@ EngineDevices openHardware(const DaemonConfig& config) {
 
   const drivers::LightCrafter4500Config& p = config.hardware.projector;
   try {
-    devices.projector = std::make_shared<drivers::LightCrafter4500Projector>(p, [p] {
-      return drivers::openHidapiTransport(p.vendor_id, p.product_id, p.serial);
-    });
+    devices.projector = std::make_shared<drivers::LightCrafter4500Projector>(
+        p, [p] { return drivers::openHidapiTransport(p.vendor_id, p.product_id, p.serial); });
   } catch (const std::exception& e) {
     throw std::runtime_error("projector '" + p.id + "': " + e.what());
   }
@@ -51,8 +50,8 @@ EngineDevices openHardware(const DaemonConfig& config) {
   } else {
     // The projector triggers the cameras: camera 0's stamps give the sequence
     // starts; the projector tells their length and frame period.
-    auto source = std::make_shared<drivers::CameraStampTriggerSource>(
-        config.hardware.camera_stamps);
+    auto source =
+        std::make_shared<drivers::CameraStampTriggerSource>(config.hardware.camera_stamps);
     std::map<std::string, drivers::SequenceTapProjector::Timing> timing;
     auto sequences = p.sequences;
     for (const auto& s : drivers::builtinSequences(p.white_black_period_us)) sequences.push_back(s);

@@ -36,8 +36,8 @@ std::uint8_t ledSelect(const YamlMap& m) {
   if (!m.has("leds")) return dl::kLedWhite;
   const std::string s = m.get<std::string>("leds");
   static const std::pair<const char*, std::uint8_t> names[] = {
-      {"red", 1}, {"green", 2}, {"yellow", 3}, {"blue", 4}, {"magenta", 5}, {"cyan", 6},
-      {"white", 7}};
+      {"red", 1},     {"green", 2}, {"yellow", 3}, {"blue", 4},
+      {"magenta", 5}, {"cyan", 6},  {"white", 7}};
   for (const auto& [name, bits] : names)
     if (s == name) return bits;
   m.fail("leds", "expected red, green, blue, yellow, magenta, cyan or white, not '" + s + "'");
@@ -48,8 +48,8 @@ dl::TriggerType triggerType(const YamlMap& m) {
   if (s == "internal") return dl::TriggerType::kInternal;
   if (s == "external_positive") return dl::TriggerType::kExternalPositive;
   if (s == "external_negative") return dl::TriggerType::kExternalNegative;
-  m.fail("first_trigger", "expected internal, external_positive or external_negative, not '" +
-                              s + "'");
+  m.fail("first_trigger",
+         "expected internal, external_positive or external_negative, not '" + s + "'");
 }
 
 drivers::LightCrafter4500Sequence parseSequence(const YamlMap& m) {
@@ -88,7 +88,7 @@ drivers::LightCrafter4500Sequence parseSequence(const YamlMap& m) {
   } catch (const std::invalid_argument& e) {
     const std::string what = e.what();
     const char* key = what.find("pattern number") != std::string::npos ? "channels"
-                      : what.find("bit depth") != std::string::npos     ? "bit_depths"
+                      : what.find("bit depth") != std::string::npos    ? "bit_depths"
                       : what.find("exposure") != std::string::npos ||
                               what.find("frame_period") != std::string::npos
                           ? "exposure_us"
@@ -210,8 +210,9 @@ double hardwareImageRate(const YamlMap& root, const DaemonConfig& config) {
   for (const auto& pattern : config.patterns) {
     const auto* s = findSequence(config.hardware.projector, pattern.name);
     if (period != 0 && s->frame_period_us != period)
-      root.fail("projector", "the patterns' sequences must share one frame_period_us (the "
-                             "synchroniser's image interval)");
+      root.fail("projector",
+                "the patterns' sequences must share one frame_period_us (the "
+                "synchroniser's image interval)");
     period = s->frame_period_us;
   }
   return 1e6 / period;

@@ -17,7 +17,7 @@ namespace sl::test {
 namespace dl = drivers::dlpc350;
 
 struct FakeDlpc350State {
-  std::vector<dl::Report> written;  // every report, in order
+  std::vector<dl::Report> written;                               // every report, in order
   std::map<std::uint16_t, std::vector<std::uint8_t>> registers;  // last write per command
   std::vector<std::vector<std::uint8_t>> mailbox_writes;         // LutData payloads
   std::set<std::uint16_t> nack;      // commands answered with the error flag
@@ -107,23 +107,38 @@ class FakeDlpc350 : public dl::HidTransport {
           out = {0};
         }
         break;
-      case 0x1A0A: out = {s_.hardware_status}; break;
-      case 0x1A0B: out = {s_.system_status}; break;
-      case 0x1A0C: out = {s_.main_status}; break;
-      case 0x1A42: out = {static_cast<std::uint8_t>(s_.images_in_flash)}; break;
-      case 0x1A1A:
-        out = {static_cast<std::uint8_t>(validation_polls_++ < s_.validation_busy_polls
-                                             ? 0x80
-                                             : s_.validation_bits)};
+      case 0x1A0A:
+        out = {s_.hardware_status};
         break;
-      case 0x1A29: reg(8); break;
-      case 0x1A31: reg(4); break;
-      case 0x0B01: reg(3); break;
+      case 0x1A0B:
+        out = {s_.system_status};
+        break;
+      case 0x1A0C:
+        out = {s_.main_status};
+        break;
+      case 0x1A42:
+        out = {static_cast<std::uint8_t>(s_.images_in_flash)};
+        break;
+      case 0x1A1A:
+        out = {static_cast<std::uint8_t>(
+            validation_polls_++ < s_.validation_busy_polls ? 0x80 : s_.validation_bits)};
+        break;
+      case 0x1A29:
+        reg(8);
+        break;
+      case 0x1A31:
+        reg(4);
+        break;
+      case 0x0B01:
+        reg(3);
+        break;
       case 0x1A34: {  // long read: 100 bytes, spans two reports
         for (int i = 0; i < 100; ++i) out.push_back(static_cast<std::uint8_t>(i));
         break;
       }
-      default: reg(1); break;
+      default:
+        reg(1);
+        break;
     }
     reply(flags, seq, out);
   }

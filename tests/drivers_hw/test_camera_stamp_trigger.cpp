@@ -1,6 +1,5 @@
 // Sequence start times from camera frame stamps (no trigger board).
 #include <catch2/catch.hpp>
-
 #include <thread>
 
 #include "sl/drivers/camera_stamp_trigger.h"
@@ -95,7 +94,10 @@ TEST_CASE("trigger source fed by a camera tap, sequence length from a projector 
   REQUIRE(e1);
   CHECK(e1->stamp_ns - e0->stamp_ns == 2 * kPeriod);
   CHECK_FALSE(source->next(10ms));
-  std::thread t([&] { std::this_thread::sleep_for(30ms); source->stop(); });
+  std::thread t([&] {
+    std::this_thread::sleep_for(30ms);
+    source->stop();
+  });
   const auto t0 = std::chrono::steady_clock::now();
   CHECK_FALSE(source->next(5000ms));
   t.join();

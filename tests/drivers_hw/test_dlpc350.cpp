@@ -55,8 +55,7 @@ TEST_CASE("every command code and payload layout") {
   CHECK(last(7) == Bytes{0x40, 0x01, 0x03, 0x00, 0x23, 0x1A, 0x01});
   // Exposure 16667 us = 0x0000411B, frame period 33333 us = 0x00008235.
   rig.device.setExposureFramePeriod(16667, 33333);
-  CHECK(last(14) ==
-        Bytes{0x40, 0x02, 0x0A, 0x00, 0x29, 0x1A, 0x1B, 0x41, 0, 0, 0x35, 0x82, 0, 0});
+  CHECK(last(14) == Bytes{0x40, 0x02, 0x0A, 0x00, 0x29, 0x1A, 0x1B, 0x41, 0, 0, 0x35, 0x82, 0, 0});
   CHECK(rig.device.exposureFramePeriod() == std::pair<std::uint32_t, std::uint32_t>{16667, 33333});
   // Pattern Display LUT Control: counts minus one, repeat flag.
   rig.device.setPatternConfig(PatternConfig{6, true, 6, 2});
@@ -149,8 +148,8 @@ TEST_CASE("pattern LUT upload: mailbox open, offset, multi-report data, close") 
   // 24 entries x 3 bytes = 72 data bytes + 2 command bytes = 74 = 0x4A.
   CHECK(head(w[2], 6) == Bytes{0x40, 0x02, 0x4A, 0x00, 0x34, 0x1A});
   // First entry: pattern 0, 8 bit, white = 0x007800; second pattern 1 = 0x007804.
-  CHECK(head(w[2], 12) == Bytes{0x40, 0x02, 0x4A, 0x00, 0x34, 0x1A, 0x00, 0x78, 0x00, 0x04,
-                                0x78, 0x00});
+  CHECK(head(w[2], 12) ==
+        Bytes{0x40, 0x02, 0x4A, 0x00, 0x34, 0x1A, 0x00, 0x78, 0x00, 0x04, 0x78, 0x00});
   // The first report carries 58 data bytes; the second report holds the
   // remaining 14 bytes with no header, then zeros.
   Bytes all;

@@ -100,10 +100,10 @@ TEST_CASE("start-up: version, leaves standby, status, pattern mode, LEDs, trigge
   LightCrafter4500Projector p(config(), rig.factory());
   CHECK(p.firmwareVersion() == "5.1.0");
   CHECK(rig.state.opens == 1);
-  CHECK(rig.commands() == std::vector<std::uint16_t>{0x0200, 0x1A1B, 0x1A24, 0x0B01, 0x1A07,
-                                                     0x1A1D});
-  CHECK(rig.state.registers[0x0200] == Bytes{0});  // normal operation
-  CHECK(rig.state.registers[0x1A1B] == Bytes{1});  // pattern display mode
+  CHECK(rig.commands() ==
+        std::vector<std::uint16_t>{0x0200, 0x1A1B, 0x1A24, 0x0B01, 0x1A07, 0x1A1D});
+  CHECK(rig.state.registers[0x0200] == Bytes{0});              // normal operation
+  CHECK(rig.state.registers[0x1A1B] == Bytes{1});              // pattern display mode
   CHECK(rig.state.registers[0x0B01] == Bytes{255, 195, 255});  // 255 - {0, 60, 0}
   CHECK(rig.state.registers[0x1A07] == Bytes{0x08});           // sequencer drives the LEDs
   CHECK(rig.state.registers[0x1A1D] == Bytes{0x00, 0xBB, 0xBB});
@@ -121,9 +121,9 @@ TEST_CASE("select uploads and validates; start and stop") {
   const std::size_t from = rig.state.written.size();
   rig.state.validation_busy_polls = 3;
   p.select("3+3_horizontal");
-  CHECK(rig.commands(from) ==
-        std::vector<std::uint16_t>{0x1A24, 0x1A22, 0x1A23, 0x1A29, 0x1A31, 0x1A33, 0x1A32,
-                                   0x1A34, 0x1A33, 0x1A33, 0x1A32, 0x1A34, 0x1A33, 0x1A1A});
+  CHECK(rig.commands(from) == std::vector<std::uint16_t>{0x1A24, 0x1A22, 0x1A23, 0x1A29, 0x1A31,
+                                                         0x1A33, 0x1A32, 0x1A34, 0x1A33, 0x1A33,
+                                                         0x1A32, 0x1A34, 0x1A33, 0x1A1A});
   CHECK(rig.state.registers[0x1A22] == Bytes{3});  // flash
   CHECK(rig.state.registers[0x1A23] == Bytes{1});  // internal / external trigger
   CHECK(rig.state.registers[0x1A29] == Bytes{0x1B, 0x41, 0, 0, 0x1B, 0x41, 0, 0});
@@ -157,9 +157,7 @@ TEST_CASE("select uploads and validates; start and stop") {
     CHECK(e.bit_depth == 1);
     CHECK(e.invert);
   }
-  SECTION("unknown names") {
-    CHECK_THROWS_AS(p.select("nope"), std::invalid_argument);
-  }
+  SECTION("unknown names") { CHECK_THROWS_AS(p.select("nope"), std::invalid_argument); }
 }
 
 TEST_CASE("a sequence the projector refuses is reported with its reason") {
@@ -204,8 +202,8 @@ TEST_CASE("device errors name the command; unplug and reconnect") {
     LightCrafter4500Projector p(config(), rig.factory());
     p.select("3+3_horizontal");
     rig.state.nack.insert(0x1A24);
-    CHECK_THROWS_WITH(p.start(0), Catch::Contains("PatternStartStop (USB 0x1A24)") &&
-                                      Catch::Contains("NACK"));
+    CHECK_THROWS_WITH(p.start(0),
+                      Catch::Contains("PatternStartStop (USB 0x1A24)") && Catch::Contains("NACK"));
   }
   SECTION("timeout on start") {
     LightCrafter4500Projector p(config(), rig.factory());
@@ -218,8 +216,8 @@ TEST_CASE("device errors name the command; unplug and reconnect") {
     p.select("3+3_horizontal");
     p.start(0);
     rig.state.unplugged = true;
-    CHECK_THROWS_WITH(p.stop(), Catch::Contains("PatternStartStop") &&
-                                    Catch::Contains("unplugged"));
+    CHECK_THROWS_WITH(p.stop(),
+                      Catch::Contains("PatternStartStop") && Catch::Contains("unplugged"));
     CHECK_THROWS_WITH(p.start(0), Catch::Contains("not found"));  // reopen fails
     rig.state.unplugged = false;
     const std::size_t from = rig.state.written.size();

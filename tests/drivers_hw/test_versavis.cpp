@@ -2,13 +2,12 @@
 // client against a scripted board on a pseudo-terminal pair (garbage,
 // checksum errors, time sync, topic negotiation, board hang-up and
 // reconnect). Every wait is bounded.
-#include <catch2/catch.hpp>
-
 #include <fcntl.h>
 #include <poll.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <catch2/catch.hpp>
 #include <cstdlib>
 #include <filesystem>
 #include <thread>
@@ -121,7 +120,8 @@ VersavisConfig testConfig(const std::string& device) {
 }
 
 // Calls next() until an event arrives or `timeout` passes.
-std::optional<TriggerEvent> nextEvent(VersavisTriggerSource& src, std::chrono::milliseconds timeout) {
+std::optional<TriggerEvent> nextEvent(VersavisTriggerSource& src,
+                                      std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (std::chrono::steady_clock::now() < deadline)
     if (auto e = src.next(50ms)) return e;
@@ -147,9 +147,9 @@ TEST_CASE("rosserial frames byte for byte") {
   CHECK(rs::encodeFrame(0, {}) == Bytes{0xFF, 0xFE, 0x00, 0x00, 0xFF, 0x00, 0x00, 0xFF});
   // std_msgs/Time 1.5 s on topic 10: length 8 (checksum 0xF7), secs 1,
   // nsecs 500000000 = 0x1DCD6500, checksum 255 - (10 + 1 + 0x65 + 0xCD + 0x1D) % 256.
-  CHECK(rs::encodeFrame(10, rs::encodeTime(1500000000)) ==
-        Bytes{0xFF, 0xFE, 0x08, 0x00, 0xF7, 0x0A, 0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x65, 0xCD,
-              0x1D, 0xA5});
+  CHECK(rs::encodeFrame(10, rs::encodeTime(1500000000)) == Bytes{0xFF, 0xFE, 0x08, 0x00, 0xF7, 0x0A,
+                                                                 0x00, 0x01, 0x00, 0x00, 0x00, 0x00,
+                                                                 0x65, 0xCD, 0x1D, 0xA5});
   // TimeNumbered: secs, nsecs, uint64 number.
   CHECK(rs::encodeTimeNumbered({2, 3, 0x0102030405ull}) ==
         Bytes{2, 0, 0, 0, 3, 0, 0, 0, 5, 4, 3, 2, 1, 0, 0, 0});
@@ -159,8 +159,8 @@ TEST_CASE("rosserial frames byte for byte") {
   CHECK_FALSE(rs::decodeTimeNumbered(Bytes(12, 0)));  // too short
   // TopicInfo: uint16 id, three length-prefixed strings, int32 buffer size.
   const Bytes info = rs::encodeTopicInfo({126, "/t", "a/B", "m", 512});
-  CHECK(info == Bytes{126, 0, 2, 0, 0, 0, '/', 't', 3, 0, 0, 0, 'a', '/', 'B', 1, 0, 0, 0, 'm',
-                      0, 2, 0, 0});
+  CHECK(info == Bytes{126, 0,   2,   0, 0, 0, '/', 't', 3, 0, 0, 0,
+                      'a', '/', 'B', 1, 0, 0, 0,   'm', 0, 2, 0, 0});
   const auto decoded = rs::decodeTopicInfo(info);
   REQUIRE(decoded);
   CHECK(decoded->topic_name == "/t");
@@ -175,9 +175,10 @@ TEST_CASE("frame parser: split input, garbage, bad checksums, lone sync bytes") 
   Bytes corrupt_msg = a;
   corrupt_msg[10] ^= 0x40;  // message byte changed: message checksum fails
   Bytes corrupt_len = a;
-  corrupt_len[4] ^= 0x01;  // length checksum fails
+  corrupt_len[4] ^= 0x01;                      // length checksum fails
   Bytes stream{0x00, 0x13, 0xFF, 0x37, 0xFF};  // garbage with lone sync bytes
-  for (const Bytes* part : std::initializer_list<const Bytes*>{&a, &corrupt_msg, &corrupt_len, &b}) {
+  for (const Bytes* part :
+       std::initializer_list<const Bytes*>{&a, &corrupt_msg, &corrupt_len, &b}) {
     stream.insert(stream.end(), part->begin(), part->end());
     stream.push_back(0xFF);
   }

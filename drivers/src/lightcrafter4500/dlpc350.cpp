@@ -32,28 +32,50 @@ void joinInto(std::string& out, const char* text) {
 
 std::string commandName(Command command) {
   switch (command) {
-    case Command::kPowerControl: return "PowerControl";
-    case Command::kGetVersion: return "GetVersion";
-    case Command::kLedCurrent: return "LedCurrent";
-    case Command::kInputSource: return "InputSource";
-    case Command::kLedEnable: return "LedEnable";
-    case Command::kHardwareStatus: return "HardwareStatus";
-    case Command::kSystemStatus: return "SystemStatus";
-    case Command::kMainStatus: return "MainStatus";
-    case Command::kValidate: return "ValidateLut";
-    case Command::kDisplayMode: return "DisplayMode";
-    case Command::kTriggerOut1: return "TriggerOut1";
-    case Command::kTriggerOut2: return "TriggerOut2";
-    case Command::kPatternSource: return "PatternSource";
-    case Command::kPatternTriggerMode: return "PatternTriggerMode";
-    case Command::kPatternStartStop: return "PatternStartStop";
-    case Command::kExposureFramePeriod: return "ExposureFramePeriod";
-    case Command::kPatternConfig: return "PatternConfig";
-    case Command::kMailboxOffset: return "LutOffset";
-    case Command::kMailboxControl: return "LutAccessControl";
-    case Command::kMailboxData: return "LutData";
-    case Command::kTriggerIn1Delay: return "TriggerIn1Delay";
-    case Command::kImagesInFlash: return "ImagesInFlash";
+    case Command::kPowerControl:
+      return "PowerControl";
+    case Command::kGetVersion:
+      return "GetVersion";
+    case Command::kLedCurrent:
+      return "LedCurrent";
+    case Command::kInputSource:
+      return "InputSource";
+    case Command::kLedEnable:
+      return "LedEnable";
+    case Command::kHardwareStatus:
+      return "HardwareStatus";
+    case Command::kSystemStatus:
+      return "SystemStatus";
+    case Command::kMainStatus:
+      return "MainStatus";
+    case Command::kValidate:
+      return "ValidateLut";
+    case Command::kDisplayMode:
+      return "DisplayMode";
+    case Command::kTriggerOut1:
+      return "TriggerOut1";
+    case Command::kTriggerOut2:
+      return "TriggerOut2";
+    case Command::kPatternSource:
+      return "PatternSource";
+    case Command::kPatternTriggerMode:
+      return "PatternTriggerMode";
+    case Command::kPatternStartStop:
+      return "PatternStartStop";
+    case Command::kExposureFramePeriod:
+      return "ExposureFramePeriod";
+    case Command::kPatternConfig:
+      return "PatternConfig";
+    case Command::kMailboxOffset:
+      return "LutOffset";
+    case Command::kMailboxControl:
+      return "LutAccessControl";
+    case Command::kMailboxData:
+      return "LutData";
+    case Command::kTriggerIn1Delay:
+      return "TriggerIn1Delay";
+    case Command::kImagesInFlash:
+      return "ImagesInFlash";
   }
   return "Command";
 }
@@ -71,10 +93,10 @@ std::vector<Report> encodeMessage(std::uint8_t flags, std::uint8_t sequence, Com
   std::vector<std::uint8_t> bytes;
   bytes.reserve(kHeaderSize + length);
   const auto code = static_cast<std::uint16_t>(command);
-  bytes.insert(bytes.end(), {flags, sequence, static_cast<std::uint8_t>(length & 0xFF),
-                             static_cast<std::uint8_t>(length >> 8),
-                             static_cast<std::uint8_t>(code & 0xFF),
-                             static_cast<std::uint8_t>(code >> 8)});
+  bytes.insert(bytes.end(),
+               {flags, sequence, static_cast<std::uint8_t>(length & 0xFF),
+                static_cast<std::uint8_t>(length >> 8), static_cast<std::uint8_t>(code & 0xFF),
+                static_cast<std::uint8_t>(code >> 8)});
   bytes.insert(bytes.end(), data.begin(), data.end());
   std::vector<Report> reports;
   for (std::size_t at = 0; at < bytes.size(); at += kReportSize) {
@@ -136,7 +158,8 @@ std::string ValidationStatus::errors() const {
 std::string ValidationStatus::warnings() const {
   std::string s;
   if (bits & 0x04) joinInto(s, "continuous trigger out 1 request or overlapping black sectors");
-  if (bits & 0x08) joinInto(s, "post vector was not inserted prior to an external triggered vector");
+  if (bits & 0x08)
+    joinInto(s, "post vector was not inserted prior to an external triggered vector");
   if (bits & 0x10) joinInto(s, "frame period or exposure difference is less than 230 us");
   return s;
 }
@@ -178,8 +201,8 @@ std::vector<std::uint8_t> Dlpc350::transact(Command command, std::uint8_t flags,
                                             std::size_t min_length) {
   using Kind = Dlpc350Error::Kind;
   const std::uint8_t seq = sequence_++;
-  const auto reports = encodeMessage(static_cast<std::uint8_t>(flags | kFlagReply), seq, command,
-                                     data);
+  const auto reports =
+      encodeMessage(static_cast<std::uint8_t>(flags | kFlagReply), seq, command, data);
   try {
     for (const Report& r : reports) transport_.write(r);
     const auto deadline = std::chrono::steady_clock::now() + reply_timeout_;
@@ -208,8 +231,8 @@ std::vector<std::uint8_t> Dlpc350::transact(Command command, std::uint8_t flags,
         throw Dlpc350Error(Kind::kNack, command, "the projector rejected the command (NACK)");
       if (payload.size() < min_length)
         throw Dlpc350Error(Kind::kProtocol, command,
-                           "reply has " + std::to_string(payload.size()) + " data bytes, expected " +
-                               std::to_string(min_length));
+                           "reply has " + std::to_string(payload.size()) +
+                               " data bytes, expected " + std::to_string(min_length));
       return payload;
     }
   } catch (const HidError& e) {
@@ -356,9 +379,8 @@ std::array<std::uint8_t, 3> Dlpc350::ledCurrents() {
 }
 
 void Dlpc350::setLedEnables(bool sequencer_controlled, bool red, bool green, bool blue) {
-  const std::uint8_t d[] = {static_cast<std::uint8_t>((red ? 1 : 0) | (green ? 2 : 0) |
-                                                      (blue ? 4 : 0) |
-                                                      (sequencer_controlled ? 8 : 0))};
+  const std::uint8_t d[] = {static_cast<std::uint8_t>(
+      (red ? 1 : 0) | (green ? 2 : 0) | (blue ? 4 : 0) | (sequencer_controlled ? 8 : 0))};
   write(Command::kLedEnable, d);
 }
 

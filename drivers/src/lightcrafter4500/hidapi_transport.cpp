@@ -39,16 +39,16 @@ class HidapiTransport : public dlpc350::HidTransport {
     buf[0] = 0;  // report id: the DLPC350 uses unnumbered reports
     std::copy(report.begin(), report.end(), buf + 1);
     if (hid_write(device_, buf, sizeof buf) < 0)
-      throw dlpc350::HidError(name_ + ": USB write failed (unplugged?): " +
-                              narrow(hid_error(device_)));
+      throw dlpc350::HidError(name_ +
+                              ": USB write failed (unplugged?): " + narrow(hid_error(device_)));
   }
 
   std::optional<dlpc350::Report> read(std::chrono::milliseconds timeout) override {
     dlpc350::Report r{};
     const int n = hid_read_timeout(device_, r.data(), r.size(), static_cast<int>(timeout.count()));
     if (n < 0)
-      throw dlpc350::HidError(name_ + ": USB read failed (unplugged?): " +
-                              narrow(hid_error(device_)));
+      throw dlpc350::HidError(name_ +
+                              ": USB read failed (unplugged?): " + narrow(hid_error(device_)));
     if (n == 0) return std::nullopt;
     return r;
   }

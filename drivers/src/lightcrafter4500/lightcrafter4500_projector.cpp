@@ -1,8 +1,8 @@
-#include "sl/drivers/lightcrafter4500.h"
-
 #include <set>
 #include <stdexcept>
 #include <thread>
+
+#include "sl/drivers/lightcrafter4500.h"
 
 namespace sl::drivers {
 

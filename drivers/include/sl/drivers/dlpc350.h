@@ -32,11 +32,11 @@
 
 namespace sl::drivers::dlpc350 {
 
-inline constexpr std::size_t kReportSize = 64;      // bytes per HID report (no report id)
-inline constexpr std::size_t kHeaderSize = 4;       // flags, sequence, length (2)
-inline constexpr std::uint8_t kFlagRead = 0x80;     // guide 1.2: bit 7
-inline constexpr std::uint8_t kFlagReply = 0x40;    // guide 1.2: bit 6
-inline constexpr std::uint8_t kFlagError = 0x20;    // guide 1.2: bit 5 (device reply)
+inline constexpr std::size_t kReportSize = 64;    // bytes per HID report (no report id)
+inline constexpr std::size_t kHeaderSize = 4;     // flags, sequence, length (2)
+inline constexpr std::uint8_t kFlagRead = 0x80;   // guide 1.2: bit 7
+inline constexpr std::uint8_t kFlagReply = 0x40;  // guide 1.2: bit 6
+inline constexpr std::uint8_t kFlagError = 0x20;  // guide 1.2: bit 5 (device reply)
 
 using Report = std::array<std::uint8_t, kReportSize>;
 
@@ -60,28 +60,28 @@ class HidTransport {
 
 // USB command codes (CMD2 << 8 | CMD3), as the guide's command tables list them.
 enum class Command : std::uint16_t {
-  kPowerControl = 0x0200,            // "Power Control"
-  kGetVersion = 0x0205,              // "Retrieve Firmware Version" (read only)
-  kLedCurrent = 0x0B01,              // "LED Driver Current Control"
-  kInputSource = 0x1A00,             // "Input Source Selection" (not used in pattern mode)
-  kLedEnable = 0x1A07,               // "LED Enable Outputs"
-  kHardwareStatus = 0x1A0A,          // "Hardware Status" (read only)
-  kSystemStatus = 0x1A0B,            // "System Status" (read only)
-  kMainStatus = 0x1A0C,              // "Main Status" (read only)
-  kValidate = 0x1A1A,                // "Validate Data Command Response"
-  kDisplayMode = 0x1A1B,             // "Display Mode Selection"
-  kTriggerOut1 = 0x1A1D,             // "Trigger Out1 Control"
-  kTriggerOut2 = 0x1A1E,             // "Trigger Out2 Control"
-  kPatternSource = 0x1A22,           // "Pattern Display Data Input Source"
-  kPatternTriggerMode = 0x1A23,      // "Pattern Trigger Mode Selection"
-  kPatternStartStop = 0x1A24,        // "Pattern Display Start/Stop Pattern Sequence"
-  kExposureFramePeriod = 0x1A29,     // "Pattern Exposure Time and Frame Period"
-  kPatternConfig = 0x1A31,           // "Pattern Display LUT Control"
-  kMailboxOffset = 0x1A32,           // "Pattern Display LUT Offset Pointer"
-  kMailboxControl = 0x1A33,          // "Pattern Display LUT Access Control"
-  kMailboxData = 0x1A34,             // "Pattern Display LUT Data"
-  kTriggerIn1Delay = 0x1A35,         // "Trigger In1 Control" (delay)
-  kImagesInFlash = 0x1A42,           // "Number of Images in Flash" (read only)
+  kPowerControl = 0x0200,         // "Power Control"
+  kGetVersion = 0x0205,           // "Retrieve Firmware Version" (read only)
+  kLedCurrent = 0x0B01,           // "LED Driver Current Control"
+  kInputSource = 0x1A00,          // "Input Source Selection" (not used in pattern mode)
+  kLedEnable = 0x1A07,            // "LED Enable Outputs"
+  kHardwareStatus = 0x1A0A,       // "Hardware Status" (read only)
+  kSystemStatus = 0x1A0B,         // "System Status" (read only)
+  kMainStatus = 0x1A0C,           // "Main Status" (read only)
+  kValidate = 0x1A1A,             // "Validate Data Command Response"
+  kDisplayMode = 0x1A1B,          // "Display Mode Selection"
+  kTriggerOut1 = 0x1A1D,          // "Trigger Out1 Control"
+  kTriggerOut2 = 0x1A1E,          // "Trigger Out2 Control"
+  kPatternSource = 0x1A22,        // "Pattern Display Data Input Source"
+  kPatternTriggerMode = 0x1A23,   // "Pattern Trigger Mode Selection"
+  kPatternStartStop = 0x1A24,     // "Pattern Display Start/Stop Pattern Sequence"
+  kExposureFramePeriod = 0x1A29,  // "Pattern Exposure Time and Frame Period"
+  kPatternConfig = 0x1A31,        // "Pattern Display LUT Control"
+  kMailboxOffset = 0x1A32,        // "Pattern Display LUT Offset Pointer"
+  kMailboxControl = 0x1A33,       // "Pattern Display LUT Access Control"
+  kMailboxData = 0x1A34,          // "Pattern Display LUT Data"
+  kTriggerIn1Delay = 0x1A35,      // "Trigger In1 Control" (delay)
+  kImagesInFlash = 0x1A42,        // "Number of Images in Flash" (read only)
 };
 // Guide title of a command, for error messages ("PatternConfig (USB 0x1A31)").
 std::string commandName(Command command);
@@ -90,10 +90,10 @@ std::string commandName(Command command);
 class Dlpc350Error : public std::runtime_error {
  public:
   enum class Kind {
-    kTimeout,    // no reply within the reply timeout
-    kNack,       // the device set the error flag (command not found or failed)
-    kDevice,     // HID I/O failed: device missing or unplugged
-    kProtocol,   // malformed reply (too short, wrong length)
+    kTimeout,   // no reply within the reply timeout
+    kNack,      // the device set the error flag (command not found or failed)
+    kDevice,    // HID I/O failed: device missing or unplugged
+    kProtocol,  // malformed reply (too short, wrong length)
   };
   Dlpc350Error(Kind kind, Command command, const std::string& detail);
   Kind kind() const { return kind_; }
@@ -172,10 +172,10 @@ PatternLutEntry decodePatternLutEntry(std::uint32_t word);
 
 // Pattern Display LUT Control (0x1A31); the device stores counts minus one.
 struct PatternConfig {
-  int lut_entries = 1;             // 1..128 pattern LUT entries
-  bool repeat = true;              // repeat the sequence until stopped
-  int trigger_out2_patterns = 1;   // 1..256: TRIG_OUT_2 every this many patterns
-  int image_lut_entries = 1;       // 1..64 image LUT entries (flash source only)
+  int lut_entries = 1;            // 1..128 pattern LUT entries
+  bool repeat = true;             // repeat the sequence until stopped
+  int trigger_out2_patterns = 1;  // 1..256: TRIG_OUT_2 every this many patterns
+  int image_lut_entries = 1;      // 1..64 image LUT entries (flash source only)
   bool operator==(const PatternConfig&) const = default;
 };
 
@@ -238,7 +238,7 @@ class Dlpc350 {
   // entry, close. With exactly two entries the DLPC350 firmware expects them
   // in reverse order (as TI's reference host code sends them); this does that.
   void writeImageLut(const std::vector<std::uint8_t>& image_indices);
-  void startValidation();           // write 0x1A1A
+  void startValidation();               // write 0x1A1A
   ValidationStatus validationStatus();  // read 0x1A1A
   // LED Driver Current Control: PWM values 0..255 for red, green, blue.
   void setLedCurrents(std::uint8_t red, std::uint8_t green, std::uint8_t blue);

@@ -20,20 +20,20 @@ namespace sl::drivers {
 
 // One pattern of a sequence: which bit planes of which flash image.
 struct LightCrafter4500Pattern {
-  int image_index = 0;   // flash image index (image LUT entry), 0..255
-  int channel = 0;       // pattern number within the image (Table 2-66), e.g. 0..2 for 8 bits
-  int bit_depth = 8;     // 1..8
+  int image_index = 0;  // flash image index (image LUT entry), 0..255
+  int channel = 0;      // pattern number within the image (Table 2-66), e.g. 0..2 for 8 bits
+  int bit_depth = 8;    // 1..8
   bool invert = false;
 };
 
 // A named sequence, as in sl_sensor's projector YAML (image indices, channel
 // numbers, bit depths, invert flags, exposure, LED colour).
 struct LightCrafter4500Sequence {
-  std::string name;  // the daemon's pattern name
+  std::string name;                               // the daemon's pattern name
   std::vector<LightCrafter4500Pattern> patterns;  // 1..128
-  std::uint8_t leds = dlpc350::kLedWhite;  // LED select bits: 1 red, 2 green, 4 blue
-  std::uint32_t exposure_us = 16667;       // per pattern, microseconds
-  std::uint32_t frame_period_us = 16667;   // per pattern, microseconds (>= exposure)
+  std::uint8_t leds = dlpc350::kLedWhite;         // LED select bits: 1 red, 2 green, 4 blue
+  std::uint32_t exposure_us = 16667;              // per pattern, microseconds
+  std::uint32_t frame_period_us = 16667;          // per pattern, microseconds (>= exposure)
   // Trigger of the first pattern: external (rising TRIG_IN_1, e.g. from the
   // VersaVIS) or internal (free running); later patterns follow the internal timer.
   dlpc350::TriggerType first_trigger = dlpc350::TriggerType::kInternal;
@@ -106,7 +106,7 @@ class LightCrafter4500Projector : public Projector {
   void start(int count) override;  // count is not enforced by the device: the engine stops it
   void stop() override;
 
-  std::string firmwareVersion() const;      // "major.minor.patch" read at open
+  std::string firmwareVersion() const;         // "major.minor.patch" read at open
   std::string lastValidationWarnings() const;  // warnings of the last validation, if any
 
  private:
@@ -122,11 +122,11 @@ class LightCrafter4500Projector : public Projector {
   mutable std::mutex mutex_;
   std::unique_ptr<dlpc350::HidTransport> transport_;  // guarded by mutex_; null = reconnect
   std::unique_ptr<dlpc350::Dlpc350> device_;          // guarded by mutex_
-  std::string selected_;   // guarded by mutex_
-  std::string uploaded_;   // guarded by mutex_: sequence on the device, "" = unknown
-  bool running_ = false;   // guarded by mutex_
-  std::string version_;    // guarded by mutex_
-  std::string warnings_;   // guarded by mutex_
+  std::string selected_;                              // guarded by mutex_
+  std::string uploaded_;  // guarded by mutex_: sequence on the device, "" = unknown
+  bool running_ = false;  // guarded by mutex_
+  std::string version_;   // guarded by mutex_
+  std::string warnings_;  // guarded by mutex_
 };
 
 // The built-in sequences "white" and "black".

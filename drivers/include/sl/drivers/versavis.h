@@ -47,7 +47,8 @@ inline constexpr std::uint16_t kTopicTime = 10;       // time request / std_msgs
 inline constexpr std::uint16_t kTopicTxStop = 11;     // host stops
 inline constexpr std::size_t kMaxMessage = 4096;      // longer lengths are treated as corrupt
 
-std::vector<std::uint8_t> encodeFrame(std::uint16_t topic_id, std::span<const std::uint8_t> message);
+std::vector<std::uint8_t> encodeFrame(std::uint16_t topic_id,
+                                      std::span<const std::uint8_t> message);
 
 struct Frame {
   std::uint16_t topic_id = 0;
@@ -113,15 +114,15 @@ struct VersavisConfig {
 };
 
 struct VersavisCounters {
-  std::uint64_t triggers = 0;          // events returned
-  std::uint64_t packets = 0;           // valid packets
-  std::uint64_t garbage_bytes = 0;     // skipped bytes
-  std::uint64_t checksum_errors = 0;   // packets with a bad length or message checksum
-  std::uint64_t malformed = 0;         // valid packets whose message did not decode
-  std::uint64_t time_requests = 0;     // time requests answered
-  std::uint64_t topic_requests = 0;    // topic requests sent
-  std::uint64_t connects = 0;          // successful opens of the device
-  std::uint64_t disconnects = 0;       // hang-ups / read errors
+  std::uint64_t triggers = 0;         // events returned
+  std::uint64_t packets = 0;          // valid packets
+  std::uint64_t garbage_bytes = 0;    // skipped bytes
+  std::uint64_t checksum_errors = 0;  // packets with a bad length or message checksum
+  std::uint64_t malformed = 0;        // valid packets whose message did not decode
+  std::uint64_t time_requests = 0;    // time requests answered
+  std::uint64_t topic_requests = 0;   // topic requests sent
+  std::uint64_t connects = 0;         // successful opens of the device
+  std::uint64_t disconnects = 0;      // hang-ups / read errors
 };
 
 // Thread-safety: next() must be called from one thread at a time (the
