@@ -1,0 +1,86 @@
+// sl_patterns: writes the projector images of a pattern file.
+//
+//   sl_patterns PATTERN.yaml --out DIR [--lightcrafter] [--calibration C]
+//
+// DIR/pattern_NN.png: 8-bit images at the addressed resolution, in
+// projection order. With --calibration the images are pre-distorted for the
+// projector lens of that calibration (decode them with projector distortion
+// ignored). With --lightcrafter also DIR/lightcrafter4500/: diamond_NN.png
+// (912 x 1140 native DMD images, see pipeline/projector_images.h) and
+// image_KK.bmp (24-bit, three 8-bit patterns each: pattern 3K -> green =
+// LightCrafter pattern index 0, 3K+1 -> red = index 1, 3K+2 -> blue = index 2).
+// Exit codes: 0 ok, 1 error, 2 usage.
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "sl/daemon/calibration_io.h"
+#include "sl/daemon/pattern_config.h"
+#include "sl/pipeline/codec.h"
+#include "sl/pipeline/projector_images.h"
+
+namespace {
+
+int usage(const std::string& message) {
+  std::cerr << "sl_patterns: " << message << "\n"
+            << "usage: sl_patterns PATTERN.yaml --out DIR [--lightcrafter] [--calibration C]\n";
+  return 2;
+}
+
+std::string numbered(const std::string& stem, std::size_t i, const char* ext) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "_%02zu", i);
+  return stem + buf + ext;
+}
+
+void write(const std::filesystem::path& path, const cv::Mat& image) {
+  if (!cv::imwrite(path.string(), image)) throw std::runtime_error(path.string() + ": cannot write");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string pattern_path, out_dir, calibration_path;
+  bool lightcrafter = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--out" && i + 1 < argc) out_dir = argv[++i];
+    else if (arg == "--calibration" && i + 1 < argc) calibration_path = argv[++i];
+    else if (arg == "--lightcrafter") lightcrafter = true;
+    else if (arg == "-h" || arg == "--help") return usage("help"), 0;
+    else if (!arg.empty() && arg[0] != '-' && pattern_path.empty()) pattern_path = arg;
+    else return usage("unexpected argument '" + arg + "'");
+  }
+  if (pattern_path.empty() || out_dir.empty()) return usage("PATTERN.yaml and --out are required");
+  try {
+    const sl::pipeline::PatternSpec spec = sl::daemon::loadPattern(pattern_path);
+    std::vector<cv::Mat> images = sl::pipeline::generatePatternImages(spec);
+    if (!calibration_path.empty()) {
+      const auto calibration = sl::daemon::loadCalibration(calibration_path).calibration;
+      for (cv::Mat& image : images) image = sl::pipeline::predistort(image, calibration.projector);
+    }
+    const std::filesystem::path dir(out_dir);
+    std::filesystem::create_directories(dir);
+    for (std::size_t i = 0; i < images.size(); ++i) write(dir / numbered("pattern", i, ".png"), images[i]);
+    if (lightcrafter) {
+      const auto lc = dir / "lightcrafter4500";
+      std::filesystem::create_directories(lc);
+      std::vector<cv::Mat> native;
+      for (const cv::Mat& image : images) native.push_back(sl::pipeline::diamondDownsample(image));
+      for (std::size_t i = 0; i < native.size(); ++i) write(lc / numbered("diamond", i, ".png"), native[i]);
+      const auto packed = sl::pipeline::packRgb24(native);
+      for (std::size_t i = 0; i < packed.size(); ++i) write(lc / numbered("image", i, ".bmp"), packed[i]);
+    }
+    std::cout << "sl_patterns: '" << spec.name << "' (" << sl::pipeline::toString(spec.family)
+              << ", " << sl::pipeline::toString(spec.direction) << ", " << images.size()
+              << " frames, " << spec.projector_width << "x" << spec.projector_height << ") -> "
+              << out_dir << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "sl_patterns: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,143 @@
+#include "sl_process/process.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <stdexcept>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common/ply.h"
+
+namespace sl::tools {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> listImages(const std::string& dir) {
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec);
+  if (ec) throw std::runtime_error(dir + ": cannot read folder: " + ec.message());
+  std::vector<std::string> files;
+  for (const fs::directory_entry& e : it) {
+    if (!e.is_regular_file()) continue;
+    std::string ext = e.path().extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    if (ext == ".png" || ext == ".bmp" || ext == ".tif" || ext == ".tiff" || ext == ".pgm")
+      files.push_back(e.path().string());
+  }
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+LoadedFrames loadFrames(const std::vector<std::string>& paths) {
+  LoadedFrames out;
+  for (const std::string& path : paths) {
+    cv::Mat image = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+    if (image.empty()) throw std::runtime_error(path + ": cannot read image");
+    if (image.channels() == 3) cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
+    if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2GRAY);
+    if (image.type() != CV_8UC1 && image.type() != CV_16UC1)
+      throw std::runtime_error(path + ": only 8- or 16-bit images are supported");
+    if (!out.frames.empty() && (image.size() != out.frames[0].size() ||
+                                image.type() != out.frames[0].type()))
+      throw std::runtime_error(path + ": size or depth differs from " + paths.front());
+    out.frames.push_back(image);
+  }
+  if (!out.frames.empty()) out.bit_depth = out.frames[0].type() == CV_8UC1 ? 8 : 16;
+  return out;
+}
+
+ProcessResult processCapture(const pipeline::PatternSpec& pattern,
+                             const pipeline::CameraProjectorCalibration& calibration,
+                             const LoadedFrames& frames, const pipeline::DecoderOptions& decoder,
+                             const pipeline::TriangulatorOptions& triangulator,
+                             bool undistort_images) {
+  if (frames.frames.empty()) throw std::invalid_argument("no frames");
+  const cv::Size size = frames.frames[0].size();
+  if (size.width != calibration.camera.width || size.height != calibration.camera.height)
+    throw std::invalid_argument("images are " + std::to_string(size.width) + "x" +
+                                std::to_string(size.height) + ", the calibrated camera is " +
+                                std::to_string(calibration.camera.width) + "x" +
+                                std::to_string(calibration.camera.height));
+  const auto codec = pipeline::makeCodec(pattern, decoder);
+  ProcessResult r;
+  if (undistort_images && calibration.camera.hasDistortion()) {
+    const pipeline::PinholeModel& cam = calibration.camera;
+    // Source pixel (distorted) of every ideal pixel.
+    cv::Mat map_x(size, CV_32FC1), map_y(size, CV_32FC1);
+    for (int v = 0; v < size.height; ++v) {
+      for (int u = 0; u < size.width; ++u) {
+        const Eigen::Vector2d xn((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy);
+        const Eigen::Vector2d q = cam.normalizedToPixel(xn);
+        map_x.at<float>(v, u) = static_cast<float>(q.x());
+        map_y.at<float>(v, u) = static_cast<float>(q.y());
+      }
+    }
+    std::vector<cv::Mat> ideal(frames.frames.size());
+    for (std::size_t i = 0; i < ideal.size(); ++i)
+      cv::remap(frames.frames[i], ideal[i], map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+    pipeline::CameraProjectorCalibration pinhole = calibration;
+    pinhole.camera.distortion = {0, 0, 0, 0, 0};
+    r.maps = codec->decode(ideal, frames.bit_depth);
+    r.cloud = pipeline::Triangulator(pinhole, triangulator).triangulate(r.maps);
+    return r;
+  }
+  r.maps = codec->decode(frames.frames, frames.bit_depth);
+  r.cloud = pipeline::Triangulator(calibration, triangulator).triangulate(r.maps);
+  return r;
+}
+
+namespace {
+
+void write(const std::string& path, const cv::Mat& image) {
+  if (!cv::imwrite(path, image)) throw std::runtime_error(path + ": cannot write");
+}
+
+}  // namespace
+
+std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::string& out_dir) {
+  fs::create_directories(out_dir);
+  const fs::path dir(out_dir);
+  const pipeline::PointCloud& cloud = result.cloud;
+  cv::Mat depth(cloud.height, cloud.width, CV_32FC1);
+  std::vector<float> finite;
+  for (int v = 0; v < cloud.height; ++v) {
+    for (int u = 0; u < cloud.width; ++u) {
+      const float z = cloud.points[static_cast<std::size_t>(v) * cloud.width + u].z;
+      depth.at<float>(v, u) = z;
+      if (std::isfinite(z)) finite.push_back(z);
+    }
+  }
+  write((dir / "up.tiff").string(), result.maps.up);
+  write((dir / "vp.tiff").string(), result.maps.vp);
+  write((dir / "modulation.tiff").string(), result.maps.modulation);
+  write((dir / "offset.tiff").string(), result.maps.offset);
+  write((dir / "depth.tiff").string(), depth);
+  write((dir / "status.png").string(), result.maps.status);
+
+  cv::Mat depth_preview(depth.size(), CV_8UC1, cv::Scalar(0));
+  if (!finite.empty()) {
+    std::sort(finite.begin(), finite.end());
+    const float lo = finite[finite.size() / 100], hi = finite[finite.size() * 99 / 100];
+    const float range = std::max(hi - lo, 1e-3f);
+    for (int v = 0; v < depth.rows; ++v) {
+      for (int u = 0; u < depth.cols; ++u) {
+        const float z = depth.at<float>(v, u);
+        if (!std::isfinite(z)) continue;
+        const float t = std::clamp((hi - z) / range, 0.0f, 1.0f);  // near = bright
+        depth_preview.at<std::uint8_t>(v, u) = static_cast<std::uint8_t>(30 + 225 * t);
+      }
+    }
+  }
+  write((dir / "depth.png").string(), depth_preview);
+  cv::Mat modulation_preview;
+  result.maps.modulation.convertTo(modulation_preview, CV_8UC1, std::ldexp(1.0, 8 - bit_depth));
+  write((dir / "modulation.png").string(), modulation_preview);
+  return writePly(cloud, (dir / "cloud.ply").string(), LengthUnit::kMillimetre);
+}
+
+}  // namespace sl::tools
