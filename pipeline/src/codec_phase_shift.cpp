@@ -35,6 +35,17 @@ inline float floor1024(float x) {
   return static_cast<float>(static_cast<std::int32_t>(x + 1024.0f) - 1024);
 }
 
+// Wrapped phase atan2(S, C) in [0, 2*pi) and the running minimum of B^2.
+// Branch-free so that it vectorizes.
+void phaseAndModulation(int n, const float* __restrict s, const float* __restrict c,
+                        float scale2, float* __restrict phase, float* __restrict b2_min) {
+  for (int x = 0; x < n; ++x) {
+    const float sv = s[x], cv = c[x];
+    phase[x] = fastAtan2Positive(sv, cv);
+    b2_min[x] = std::min(b2_min[x], (sv * sv + cv * cv) * scale2);
+  }
+}
+
 class PhaseShiftCodec final : public Codec {
  public:
   PhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options)
@@ -184,18 +195,13 @@ class PhaseShiftCodec final : public Codec {
         }
       }
       const float scale2 = s.b_scale * s.b_scale;
-      float* __restrict ph = phase[j];
-      const bool finest = j == finest_;
-      float* __restrict b_out = out.modulation;
-      for (int x = 0; x < n; ++x) {
-        const float sv = s_acc[x], cv = c_acc[x];
-        ph[x] = fastAtan2Positive(sv, cv);
-        const float b2 = (sv * sv + cv * cv) * scale2;
-        b2_min[x] = std::min(b2_min[x], b2);
-        if (finest) b_out[x] = b2;  // squared for now, rooted below
+      phaseAndModulation(n, s_acc, c_acc, scale2, phase[j], b2_min);
+      if (j == finest_) {
+        float* __restrict b_out = out.modulation;
+        for (int x = 0; x < n; ++x)
+          b_out[x] = std::sqrt((s_acc[x] * s_acc[x] + c_acc[x] * c_acc[x]) * scale2);
       }
     }
-    for (int x = 0; x < n; ++x) out.modulation[x] = std::sqrt(out.modulation[x]);
 
     // Temporal unwrapping -> absolute phase of the finest set in phi_abs.
     for (int x = 0; x < n; ++x) err[x] = 0.0f;

@@ -177,7 +177,7 @@ Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
   impl_ = std::move(impl);
 }
 
-PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
+std::pair<int, int> Triangulator::axesFor(const ProjectorMaps& maps) const {
   const Impl& im = *impl_;
   const cv::Size size(im.width, im.height);
   auto check = [&](const cv::Mat& map, const char* name) {
@@ -213,14 +213,30 @@ PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
       break;
     }
   }
+  return {first, second};
+}
 
-  PointCloud cloud;
+void Triangulator::prepare(const ProjectorMaps& maps, PointCloud& cloud) const {
+  const Impl& im = *impl_;
+  axesFor(maps);
   cloud.frame_id = maps.camera_id;
   cloud.stamp_ns = maps.stamp_ns;
   cloud.width = im.width;
   cloud.height = im.height;
   cloud.points.resize(static_cast<std::size_t>(im.width) * im.height);
+}
 
+PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
+  PointCloud cloud;
+  prepare(maps, cloud);
+  triangulateRows(maps, 0, impl_->height, cloud);
+  return cloud;
+}
+
+void Triangulator::triangulateRows(const ProjectorMaps& maps, int row_begin, int row_end,
+                                   PointCloud& cloud) const {
+  const Impl& im = *impl_;
+  const auto [first, second] = axesFor(maps);
   const cv::Mat* coord_maps[2] = {&maps.up, &maps.vp};
   const double min_z = im.options.min_depth_mm;
   const double max_z = im.options.max_depth_mm;
@@ -228,7 +244,7 @@ PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
   // Row scratch: chosen coordinate and axis per pixel, correction state.
   std::vector<double> p(im.width), decoded(im.width), p_prev(im.width), g_prev(im.width);
   std::vector<std::uint8_t> is_column(im.width);
-  for (int v = 0; v < im.height; ++v) {
+  for (int v = row_begin; v < row_end; ++v) {
     const float* first_row = coord_maps[first]->ptr<float>(v);
     const float* second_row = second >= 0 ? coord_maps[second]->ptr<float>(v) : nullptr;
     const float* offset_row = maps.offset.empty() ? nullptr : maps.offset.ptr<float>(v);
@@ -263,7 +279,6 @@ PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
       }
     }
   }
-  return cloud;
 }
 
 }  // namespace sl::pipeline

@@ -6,6 +6,8 @@
 // point costs a few multiply-adds and one division.
 #pragma once
 
+#include <utility>
+
 #include <opencv2/core/mat.hpp>
 
 #include "sl/pipeline/camera_model.h"
@@ -45,7 +47,19 @@ class Triangulator {
   // [min_depth_mm, max_depth_mm].
   PointCloud triangulate(const ProjectorMaps& maps) const;
 
+  // Buffer-reusing, row-range form of triangulate() for callers that pipeline
+  // decoding and triangulation per block of rows or split rows over their own
+  // threads (the triangulator starts none). prepare() checks the maps as
+  // triangulate() does and sizes `cloud` (its point buffer is reused when the
+  // size is unchanged); triangulateRows() then fills rows [row_begin,
+  // row_end), and concurrent calls on disjoint ranges of one cloud are safe.
+  void prepare(const ProjectorMaps& maps, PointCloud& cloud) const;
+  void triangulateRows(const ProjectorMaps& maps, int row_begin, int row_end,
+                       PointCloud& cloud) const;
+
  private:
+  // Checks the maps; the axes tried per pixel in order (second = -1: none).
+  std::pair<int, int> axesFor(const ProjectorMaps& maps) const;
   struct Impl;
   std::shared_ptr<const Impl> impl_;
 };
