@@ -15,6 +15,12 @@ packages=(
   libaravis-dev
   libhidapi-dev
   systemd
+  # ROS 2 interop test (tests/interop): Fast DDS, its IDL code generator
+  # (Java: pulls default-jre-headless) and the sensor_msgs/std_msgs .msg
+  # definitions the test checks its IDL against.
+  libfastrtps-dev fastddsgen ros-sensor-msgs
+  # Cyclone DDS shared memory (config/cyclonedds-shm.xml): the RouDi daemon.
+  iceoryx
 )
 
 missing=()

@@ -28,6 +28,37 @@ fail() {
 start=$SECONDS
 clouds=3
 
+# 0. ros2_idl/ against the message definitions in Debian's ros-sensor-msgs /
+# ros-std-msgs (ROS 1 .msg files; the ROS 2 definitions of these messages
+# have the same fields except that ROS 2's Header has no seq and its stamp is
+# builtin_interfaces/Time). Each field, in order, with its type mapped as
+# ROS 2 maps it to IDL.
+msg_fields() {  # FILE -> "type name" per field, constants and comments left out
+  sed 's/#.*//' "$1" | awk 'NF >= 2 && $0 !~ /=/ { print $1, $2 }'
+}
+idl_fields() {  # FILE STRUCT -> "type name" per member, ROS type names
+  awk -v s="$2" '$1 == "struct" && $2 == s { on = 1; next } on && /};/ { on = 0 }
+    on { sub(/\/\/.*/, ""); sub(/;/, ""); if (NF >= 2) { name = $NF; $NF = ""; print $0 "|" name } }' "$1" |
+    sed -e 's/ *|/ /' \
+      -e 's/^unsigned long /uint32 /; s/^long /int32 /; s/^octet /uint8 /; s/^boolean /bool /' \
+      -e 's/^sequence<octet> /uint8[] /' \
+      -e 's/^sequence<sensor_msgs::msg::dds_::\([A-Za-z]*\)_> /\1[] /' \
+      -e 's/^std_msgs::msg::dds_::Header_ /Header /; s/^builtin_interfaces::msg::dds_::Time_ /time /'
+}
+if [ -d /usr/share/sensor_msgs/msg ] && [ -d /usr/share/std_msgs/msg ]; then
+  for m in sensor_msgs/PointCloud2 sensor_msgs/PointField sensor_msgs/Image std_msgs/Header; do
+    name=${m#*/}
+    want=$(msg_fields "/usr/share/${m%/*}/msg/$name.msg")
+    [ "$name" = Header ] && want=$(echo "$want" | grep -v '^uint32 seq$')
+    got=$(idl_fields "$src/tests/interop/ros2_idl/$name.idl" "${name}_")
+    [ -n "$want" ] && [ "$want" = "$got" ] ||
+      fail "ros2_idl/$name.idl does not match $m.msg: $(diff <(echo "$want") <(echo "$got") | tr '\n' ' ')"
+  done
+  echo "ok: ros2_idl/ matches the .msg definitions of PointCloud2, PointField, Image, Header"
+else
+  echo "note: ros-sensor-msgs not installed, IDL vs .msg check skipped"
+fi
+
 ns="interop_$$_$RANDOM"
 sed "s/^  namespace: sl$/  namespace: $ns/" "$src/config/sim.yaml" > "$work/sim.yaml"
 grep -q "namespace: $ns" "$work/sim.yaml" || fail "could not set the namespace"

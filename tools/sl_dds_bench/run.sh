@@ -22,7 +22,14 @@ work=$(mktemp -d)
 roudi_pid=""
 cleanup() {
   if [ -n "$roudi_pid" ]; then
-    kill -TERM "$roudi_pid" 2>/dev/null || true
+    # RouDi removes its segments on SIGTERM; it may miss one sent right after
+    # start-up, so repeat it for up to 10 s before SIGKILL.
+    for _ in $(seq 1 20); do
+      kill -TERM "$roudi_pid" 2>/dev/null || break
+      sleep 0.5
+      case "$(ps -o stat= -p "$roudi_pid" 2>/dev/null)" in Z* | "") break ;; esac
+    done
+    kill -KILL "$roudi_pid" 2>/dev/null || true
     wait "$roudi_pid" 2>/dev/null || true
   fi
   rm -rf "$work"
