@@ -88,6 +88,17 @@ grep -q '^ready' "$work/fastdds.log" ||
   fail "Fast DDS subscriber did not discover the daemon's writer on $topic in 20 s"
 echo "ok: both subscribers matched the daemon's writer after $((SECONDS - start)) s"
 
+# Fast DDS must use 127.0.0.1 only (no multicast, no other interface): every
+# UDP socket it opened is bound to 127.0.0.1.
+if command -v ss > /dev/null; then
+  ss -uanp | grep "pid=$fastdds_pid," | awk '{ print $4 }' > "$work/fastdds.sockets" || true
+  [ -s "$work/fastdds.sockets" ] || fail "no UDP sockets of the Fast DDS subscriber found"
+  if grep -v '^127\.0\.0\.1:' "$work/fastdds.sockets"; then
+    fail "Fast DDS bound sockets outside 127.0.0.1"
+  fi
+  echo "ok: Fast DDS sockets all on 127.0.0.1: $(tr '\n' ' ' < "$work/fastdds.sockets")"
+fi
+
 "$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count $clouds --out "$work/scans" \
   > "$work/slctl.log" 2>&1 || fail "slctl scan failed"
 cat "$work/slctl.log"
