@@ -39,8 +39,8 @@ sl::interop::CloudInfo describe(const Cloud& m) {
 
 int main(int argc, char** argv) {
   const sl::interop::SubscriberArgs args = sl::interop::parseSubscriberArgs(argc, argv);
-  const auto deadline = std::chrono::steady_clock::now() +
-                        std::chrono::duration<double>(args.timeout_s);
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(args.timeout_s);
   try {
     namespace dds = sl::dds;
     dds::Participant participant(static_cast<dds_domainid_t>(args.domain));

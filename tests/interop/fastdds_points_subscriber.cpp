@@ -7,6 +7,8 @@
 // Fast DDS is configured from the XML file in FASTRTPS_DEFAULT_PROFILES_FILE
 // (as for any Fast DDS / ROS 2 program), e.g. config/fastdds-loopback.xml.
 // Usage and output: see subscriber_args.h and cloud_digest.h.
+#include <chrono>
+#include <cstdio>
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/subscriber/DataReader.hpp>
@@ -14,9 +16,6 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
-
-#include <chrono>
-#include <cstdio>
 #include <thread>
 
 #include "PointCloud2PubSubTypes.h"
@@ -35,7 +34,8 @@ sl::interop::CloudInfo describe(const Cloud& m) {
   c.frame_id = m.header().frame_id();
   c.height = m.height();
   c.width = m.width();
-  for (const auto& f : m.fields()) c.fields.push_back({f.name(), f.offset(), f.datatype(), f.count()});
+  for (const auto& f : m.fields())
+    c.fields.push_back({f.name(), f.offset(), f.datatype(), f.count()});
   c.is_bigendian = m.is_bigendian();
   c.point_step = m.point_step();
   c.row_step = m.row_step();
@@ -60,8 +60,8 @@ struct ParticipantGuard {
 
 int main(int argc, char** argv) {
   const sl::interop::SubscriberArgs args = sl::interop::parseSubscriberArgs(argc, argv);
-  const auto deadline = std::chrono::steady_clock::now() +
-                        std::chrono::duration<double>(args.timeout_s);
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(args.timeout_s);
   auto fail = [](const char* what) {
     std::fprintf(stderr, "fastdds_points_subscriber: %s failed\n", what);
     return 2;
@@ -87,8 +87,7 @@ int main(int argc, char** argv) {
   qos.durability().kind = fdds::VOLATILE_DURABILITY_QOS;
   qos.history().kind = fdds::KEEP_LAST_HISTORY_QOS;
   qos.history().depth = 4;
-  qos.endpoint().history_memory_policy =
-      eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
+  qos.endpoint().history_memory_policy = eprosima::fastrtps::rtps::DYNAMIC_REUSABLE_MEMORY_MODE;
   fdds::DataReader* reader = subscriber->create_datareader(topic, qos);
   if (!reader) return fail("create_datareader");
 

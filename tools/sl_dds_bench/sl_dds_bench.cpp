@@ -73,12 +73,18 @@ Args parse(int argc, char** argv) {
       continue;
     }
     if (*end != '\0' || number < 0) usage(opt + ": expected a number >= 0");
-    if (opt == "--count" && number >= 1) a.count = static_cast<long>(number);
-    else if (opt == "--rate") a.rate_hz = number;
-    else if (opt == "--width" && number >= 1) a.width = static_cast<std::uint32_t>(number);
-    else if (opt == "--height" && number >= 1) a.height = static_cast<std::uint32_t>(number);
-    else if (opt == "--timeout" && number > 0) a.timeout_s = number;
-    else usage("bad option or value: " + opt + " " + v);
+    if (opt == "--count" && number >= 1)
+      a.count = static_cast<long>(number);
+    else if (opt == "--rate")
+      a.rate_hz = number;
+    else if (opt == "--width" && number >= 1)
+      a.width = static_cast<std::uint32_t>(number);
+    else if (opt == "--height" && number >= 1)
+      a.height = static_cast<std::uint32_t>(number);
+    else if (opt == "--timeout" && number > 0)
+      a.timeout_s = number;
+    else
+      usage("bad option or value: " + opt + " " + v);
   }
   return a;
 }
@@ -126,7 +132,8 @@ int publish(const Args& a) {
   msg.is_bigendian = false;
   msg.point_step = 16;
   msg.row_step = 16 * a.width;
-  msg.data = {static_cast<std::uint32_t>(data.size() * 4), static_cast<std::uint32_t>(data.size() * 4),
+  msg.data = {static_cast<std::uint32_t>(data.size() * 4),
+              static_cast<std::uint32_t>(data.size() * 4),
               reinterpret_cast<std::uint8_t*>(data.data()), false};
   msg.is_dense = false;
 
@@ -148,10 +155,11 @@ int publish(const Args& a) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   // Let the reliable protocol finish before the writer goes away.
   dds_wait_for_acks(writer.handle(), DDS_SECS(5));
-  std::printf("pub: %ld clouds of %u x %u x 16 B (%.1f MB) in %.2f s (%.2f/s offered), "
-              "%ld not sent (write blocked > 200 ms)\n",
-              a.count, a.width, a.height, data.size() * 4 / 1e6, elapsed,
-              elapsed > 0 ? a.count / elapsed : 0.0, not_sent);
+  std::printf(
+      "pub: %ld clouds of %u x %u x 16 B (%.1f MB) in %.2f s (%.2f/s offered), "
+      "%ld not sent (write blocked > 200 ms)\n",
+      a.count, a.width, a.height, data.size() * 4 / 1e6, elapsed,
+      elapsed > 0 ? a.count / elapsed : 0.0, not_sent);
   return 0;
 }
 
@@ -213,11 +221,12 @@ int subscribe(const Args& a) {
     return latency_ms[i];
   };
   const double span_s = (last_rx - first_rx) * 1e-9;
-  std::printf("sub: received %ld of %ld clouds (lost %ld = %.1f %%, malformed %ld), "
-              "%.2f clouds/s delivered, latency median %.1f ms p99 %.1f ms max %.1f ms\n",
-              received, a.count, lost, 100.0 * lost / a.count, bad,
-              received > 1 && span_s > 0 ? (received - 1) / span_s : 0.0, quantile(0.5),
-              quantile(0.99), latency_ms.empty() ? 0.0 : latency_ms.back());
+  std::printf(
+      "sub: received %ld of %ld clouds (lost %ld = %.1f %%, malformed %ld), "
+      "%.2f clouds/s delivered, latency median %.1f ms p99 %.1f ms max %.1f ms\n",
+      received, a.count, lost, 100.0 * lost / a.count, bad,
+      received > 1 && span_s > 0 ? (received - 1) / span_s : 0.0, quantile(0.5), quantile(0.99),
+      latency_ms.empty() ? 0.0 : latency_ms.back());
   return received > 0 ? 0 : 1;
 }
 
