@@ -14,10 +14,77 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 // Keeps `candidate` in `best` when it lies in (min_s, max_s) and is nearer.
 void keepNearest(std::optional<SurfaceHit>& best, double candidate, double min_s, double max_s,
-                 const Eigen::Vector3d& normal, double albedo) {
+                 const Eigen::Vector3d& normal, double albedo, const SimPlane* plane = nullptr) {
   if (!(candidate > min_s && candidate < max_s)) return;
   if (best && best->distance <= candidate) return;
-  best = SurfaceHit{candidate, normal, albedo};
+  best = SurfaceHit{candidate, normal, albedo, plane};
+}
+
+// In-plane frame of a checkerboard: origin on the plane, orthonormal axes.
+struct BoardFrame {
+  Eigen::Vector3d origin, x, y;
+};
+
+BoardFrame boardFrame(const SimPlane& plane) {
+  const SimCheckerboard& b = *plane.checkerboard;
+  const Eigen::Vector3d n = plane.normal.normalized();
+  BoardFrame f;
+  f.origin = b.origin - n * n.dot(b.origin - plane.point);
+  f.x = (b.x_axis - n * n.dot(b.x_axis)).normalized();
+  f.y = (b.y_axis - n * n.dot(b.y_axis) - f.x * f.x.dot(b.y_axis)).normalized();
+  return f;
+}
+
+// Albedo at board coordinates (a, b) (mm along the board axes from the
+// origin); square (i, j) covers [i s, (i + 1) s) x [j s, (j + 1) s).
+double boardAlbedoAt(const SimCheckerboard& board, double margin_albedo, double a, double b) {
+  const double i = std::floor(a / board.square_mm), j = std::floor(b / board.square_mm);
+  if (i < -1 || i > board.cols - 1 || j < -1 || j > board.rows - 1) return margin_albedo;
+  return (static_cast<long long>(i + j) & 1) == 0 ? board.dark_albedo : board.light_albedo;
+}
+
+// The albedo a camera pixel sees on a checkerboard plane: the board averaged
+// over the pixel's footprint (the parallelogram spanned by the plane points
+// of the pixel's edges, 16 x 16 samples), or the point value when no square
+// edge comes near the footprint.
+double footprintAlbedo(const SimPlane& plane, const BoardFrame& frame,
+                       const pipeline::PinholeModel& camera, int col, int row,
+                       const Eigen::Vector3d& ray, const Eigen::Vector3d& point) {
+  const SimCheckerboard& board = *plane.checkerboard;
+  const Eigen::Vector3d n = plane.normal.normalized();
+  const Eigen::Vector3d rel = point - frame.origin;
+  const double a = rel.dot(frame.x), b = rel.dot(frame.y);
+  const double s = board.square_mm;
+  // Conservative reach of the footprint (mm): twice the pinhole estimate,
+  // which covers the lens's local magnification.
+  const double cos_view = std::abs(n.dot(ray.normalized()));
+  const double reach =
+      2.0 * point.z() / std::min(camera.fx, camera.fy) / std::max(cos_view, 0.05);
+  const double to_edge_a = std::abs(a - s * std::round(a / s));
+  const double to_edge_b = std::abs(b - s * std::round(b / s));
+  if (std::min(to_edge_a, to_edge_b) > reach) return boardAlbedoAt(board, plane.albedo, a, b);
+
+  const double plane_offset = n.dot(plane.point);
+  auto boardCoordinates = [&](double u, double v) {
+    const Eigen::Vector2d xn = camera.pixelToNormalized({u, v});
+    const Eigen::Vector3d r{xn.x(), xn.y(), 1.0};
+    const Eigen::Vector3d p = r * (plane_offset / n.dot(r)) - frame.origin;
+    return Eigen::Vector2d(p.dot(frame.x), p.dot(frame.y));
+  };
+  const Eigen::Vector2d centre(a, b);
+  const Eigen::Vector2d du = 2.0 * (boardCoordinates(col + 0.5, row) - centre);
+  const Eigen::Vector2d dv = 2.0 * (boardCoordinates(col, row + 0.5) - centre);
+  constexpr int kSamples = 16;
+  double sum = 0;
+  for (int k = 0; k < kSamples; ++k) {
+    const double fu = (k + 0.5) / kSamples - 0.5;
+    for (int l = 0; l < kSamples; ++l) {
+      const double fv = (l + 0.5) / kSamples - 0.5;
+      const Eigen::Vector2d q = centre + fu * du + fv * dv;
+      sum += boardAlbedoAt(board, plane.albedo, q.x(), q.y());
+    }
+  }
+  return sum / (kSamples * kSamples);
 }
 
 // Squared normalized radius up to which the radial distortion of `model`
@@ -45,7 +112,7 @@ std::optional<SurfaceHit> intersectScene(const SimScene& scene, const Eigen::Vec
     const double along = n.dot(direction);
     if (along == 0.0) continue;  // ray parallel to the plane
     const double s = n.dot(plane.point - origin) / along;
-    keepNearest(best, s, min_s, max_s, n, plane.albedo);
+    keepNearest(best, s, min_s, max_s, n, plane.albedo, &plane);
   }
   for (const SimSphere& sphere : scene.spheres) {
     // |origin + s d - c|^2 = r^2  <=>  a s^2 + 2 b s + c0 = 0
@@ -94,6 +161,9 @@ SceneView computeSceneView(const SimConfig& config) {
   maps.weight_y.assign(n, 0.0f);
 
   const double inf = std::numeric_limits<double>::infinity();
+  std::vector<std::optional<BoardFrame>> board_frames;  // per plane
+  for (const SimPlane& plane : config.scene.planes)
+    board_frames.push_back(plane.checkerboard ? std::optional(boardFrame(plane)) : std::nullopt);
   for (int row = 0; row < height; ++row) {
     auto* depth_row = gt.depth_mm.ptr<float>(row);
     auto* xyz_row = gt.xyz_mm.ptr<cv::Vec3f>(row);
@@ -110,7 +180,13 @@ SceneView computeSceneView(const SimConfig& config) {
       const Eigen::Vector3d point = hit->distance * ray;
       depth_row[col] = static_cast<float>(point.z());
       xyz_row[col] = cv::Vec3f(float(point.x()), float(point.y()), float(point.z()));
-      maps.ambient_dn[i] = static_cast<float>(config.ambient_dn * hit->albedo);
+      double albedo = hit->albedo;
+      if (hit->plane && hit->plane->checkerboard) {
+        const auto index = static_cast<std::size_t>(hit->plane - config.scene.planes.data());
+        albedo = footprintAlbedo(*hit->plane, *board_frames[index], rig.camera, col, row, ray,
+                                 point);
+      }
+      maps.ambient_dn[i] = static_cast<float>(config.ambient_dn * albedo);
 
       // The side of the surface the camera sees.
       const Eigen::Vector3d normal = hit->normal.dot(ray) > 0 ? -hit->normal : hit->normal;
@@ -134,7 +210,7 @@ SceneView computeSceneView(const SimConfig& config) {
       if (intersectScene(config.scene, point, to_projector, 1e-3 / distance, 1.0)) continue;
 
       const double falloff = config.reference_distance_mm / distance;
-      const double shading = hit->albedo * cos_incidence * falloff * falloff;
+      const double shading = albedo * cos_incidence * falloff * falloff;
       maps.projector_dn_per_level[i] =
           static_cast<float>(config.projector_brightness_dn * shading / 255.0);
       // Bilinear sampling at the pixel centres, clamped to the image edge.

@@ -17,6 +17,7 @@ struct SurfaceHit {
   double distance;         // ray parameter s of origin + s * direction (> 0)
   Eigen::Vector3d normal;  // unit, outward for spheres, as configured for planes
   double albedo;
+  const SimPlane* plane = nullptr;  // the plane hit (in the scene), nullptr for spheres
 };
 
 // Nearest intersection of origin + s * direction with s in (min_s, max_s), or

@@ -40,6 +40,24 @@ void requireAlbedo(double albedo, const std::string& field) {
   if (!(albedo >= 0 && albedo <= 1)) fail(field, "must be in [0, 1]");
 }
 
+void validateCheckerboard(const SimCheckerboard& b, const Eigen::Vector3d& normal,
+                          const std::string& name) {
+  if (b.cols < 1 || b.rows < 1) fail(name + ".cols/rows", "must be >= 1 inner corner");
+  if (!(b.square_mm > 0 && std::isfinite(b.square_mm))) fail(name + ".square_mm", "must be > 0");
+  if (!finite(b.origin)) fail(name + ".origin", "must be finite");
+  requireAlbedo(b.dark_albedo, name + ".dark_albedo");
+  requireAlbedo(b.light_albedo, name + ".light_albedo");
+  // The axes, projected into the plane, must span it.
+  const Eigen::Vector3d n = normal.normalized();
+  const Eigen::Vector3d x = b.x_axis - n * n.dot(b.x_axis);
+  if (!finite(b.x_axis) || x.norm() < 1e-6 * std::max(b.x_axis.norm(), 1e-300))
+    fail(name + ".x_axis", "must not be (nearly) parallel to the plane normal");
+  const Eigen::Vector3d xu = x.normalized();
+  const Eigen::Vector3d y = b.y_axis - n * n.dot(b.y_axis) - xu * xu.dot(b.y_axis);
+  if (!finite(b.y_axis) || y.norm() < 1e-6 * std::max(b.y_axis.norm(), 1e-300))
+    fail(name + ".y_axis", "must span the plane with x_axis");
+}
+
 void validateConfig(const SimConfig& c) {
   if (c.camera_id.empty()) fail("camera_id", "must not be empty");
   validatePinhole(c.rig.camera, "rig.camera");
@@ -65,6 +83,7 @@ void validateConfig(const SimConfig& c) {
     if (!finite(p.point)) fail(name + ".point", "must be finite");
     if (!finite(p.normal) || p.normal.norm() == 0) fail(name + ".normal", "must be non-zero");
     requireAlbedo(p.albedo, name + ".albedo");
+    if (p.checkerboard) validateCheckerboard(*p.checkerboard, p.normal, name + ".checkerboard");
   }
   for (std::size_t i = 0; i < c.scene.spheres.size(); ++i) {
     const SimSphere& s = c.scene.spheres[i];

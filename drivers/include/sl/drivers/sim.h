@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,10 +27,31 @@
 
 namespace sl::drivers {
 
+// A checkerboard printed on a plane (a calibration target). The board has
+// cols x rows inner corners, i.e. (cols + 1) x (rows + 1) squares; corner
+// (c, r) lies at origin + square_mm * (c * x + r * y), where x and y are the
+// in-plane unit axes made from x_axis and y_axis (x_axis projected into the
+// plane; y_axis projected perpendicular to the normal and to x). The square
+// that touches inner corner (0, 0) from the -x, -y side is dark; squares
+// alternate from there. Outside the squares the plane keeps its own albedo
+// (the board's margin). The camera sees each pixel's albedo averaged over the
+// pixel's footprint on the plane, so edges are anti-aliased as on a sensor.
+struct SimCheckerboard {
+  int cols = 13;                         // inner corners along x
+  int rows = 9;                          // inner corners along y
+  double square_mm = 10;
+  Eigen::Vector3d origin{0, 0, 600};     // mm, camera frame; projected onto the plane
+  Eigen::Vector3d x_axis{1, 0, 0};       // need not be unit or exactly in the plane
+  Eigen::Vector3d y_axis{0, 1, 0};
+  double dark_albedo = 0.15;             // [0, 1]
+  double light_albedo = 0.8;             // [0, 1]
+};
+
 struct SimPlane {
   Eigen::Vector3d point{0, 0, 600};   // mm, camera frame
   Eigen::Vector3d normal{0, 0, -1};   // need not be unit; faces the sensor
   double albedo = 0.8;                // diffuse reflectance in [0, 1]
+  std::optional<SimCheckerboard> checkerboard;  // none: constant albedo
 };
 
 struct SimSphere {
