@@ -4,7 +4,9 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <optional>
 #include <sstream>
+#include <utility>
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
@@ -110,34 +112,58 @@ CalibrationFile loadOwnYaml(const std::string& path) {
   return file;
 }
 
-// SLStudio's calibration.xml (OpenCV FileStorage).
-CalibrationFile loadSlStudioXml(const std::string& path) {
-  cv::FileStorage fs;
-  try {
-    fs.open(path, cv::FileStorage::READ);
-  } catch (const cv::Exception& e) {
-    throw ConfigError(path + ": cannot parse as OpenCV FileStorage XML: " + e.msg);
+// An OpenCV FileStorage file opened for reading, with typed accessors that
+// throw ConfigError naming the file and the key. `expected` describes the
+// file's format in the message for a missing key.
+class StorageReader {
+ public:
+  StorageReader(const std::string& path, std::string expected)
+      : path_(path), expected_(std::move(expected)) {
+    try {
+      fs_.open(path, cv::FileStorage::READ);
+    } catch (const cv::Exception& e) {
+      throw ConfigError(path + ": cannot parse as OpenCV FileStorage: " + e.msg);
+    }
+    if (!fs_.isOpened()) throw ConfigError(path + ": cannot open calibration file");
   }
-  if (!fs.isOpened()) throw ConfigError(path + ": cannot open calibration file");
-  auto matrix = [&](const char* key, int rows, int cols) {
+
+  bool has(const char* key) const { return !fs_[key].empty(); }
+
+  cv::Mat matrix(const char* key, int rows, int cols) const {
     cv::Mat m;
-    fs[key] >> m;
-    if (m.empty())
-      throw ConfigError(path + ": key '" + key +
-                        "' missing (expected SLStudio's calibration.xml: Kc, kc, Kp, kp, Rp, Tp)");
-    if (m.total() != std::size_t(rows) * cols)
-      throw ConfigError(path + ": key '" + key + "' must have " + std::to_string(rows * cols) +
+    try {
+      fs_[key] >> m;
+    } catch (const cv::Exception& e) {
+      throw ConfigError(path_ + ": key '" + key + "' is not a matrix: " + e.msg);
+    }
+    if (m.empty()) throw ConfigError(path_ + ": key '" + key + "' missing (expected " + expected_ + ")");
+    if (m.total() != std::size_t(rows) * cols || m.channels() != 1)
+      throw ConfigError(path_ + ": key '" + key + "' must have " + std::to_string(rows * cols) +
                         " elements");
     cv::Mat d;
     m.reshape(1, rows).convertTo(d, CV_64F);
+    if (!cv::checkRange(d)) throw ConfigError(path_ + ": key '" + key + "' is not finite");
     return d;
-  };
-  auto integer = [&](const char* key) {
-    const cv::FileNode node = fs[key];
-    if (node.empty() || !node.isInt()) throw ConfigError(path + ": key '" + key + "' missing");
-    return static_cast<int>(node);
-  };
-  auto pinhole = [&](const char* K_key, const char* k_key, int width, int height) {
+  }
+
+  int integer(const char* key) const {
+    const cv::FileNode node = fs_[key];
+    if (node.empty() || !node.isInt())
+      throw ConfigError(path_ + ": key '" + key + "' missing or not an integer (expected " +
+                        expected_ + ")");
+    const int value = static_cast<int>(node);
+    if (value <= 0) throw ConfigError(path_ + ": key '" + key + "' must be > 0");
+    return value;
+  }
+
+  std::optional<double> real(const char* key) const {
+    const cv::FileNode node = fs_[key];
+    if (node.empty() || !(node.isReal() || node.isInt())) return std::nullopt;
+    return static_cast<double>(node);
+  }
+
+  pipeline::PinholeModel pinhole(const char* K_key, const char* k_key, int width,
+                                 int height) const {
     const cv::Mat K = matrix(K_key, 3, 3), k = matrix(k_key, 5, 1);
     pipeline::PinholeModel model;
     model.width = width;
@@ -146,26 +172,59 @@ CalibrationFile loadSlStudioXml(const std::string& path) {
     model.fy = K.at<double>(1, 1);
     model.cx = K.at<double>(0, 2);
     model.cy = K.at<double>(1, 2);
+    if (!(model.fx > 0 && model.fy > 0))
+      throw ConfigError(path_ + ": key '" + K_key + "' must have positive focal lengths");
     for (int i = 0; i < 5; ++i) model.distortion[i] = k.at<double>(i, 0);
     return model;
-  };
+  }
+
+  // R (3x3 rotation) and t (3x1) into c.
+  void pose(const char* R_key, const char* t_key, pipeline::CameraProjectorCalibration& c) const {
+    const cv::Mat R = matrix(R_key, 3, 3), t = matrix(t_key, 3, 1);
+    for (int r = 0; r < 3; ++r) {
+      for (int col = 0; col < 3; ++col) c.R(r, col) = R.at<double>(r, col);
+      c.t(r) = t.at<double>(r, 0);
+    }
+    // Files store float: orthonormal to about 1e-7 per element.
+    if ((c.R * c.R.transpose() - Eigen::Matrix3d::Identity()).norm() > 1e-4 ||
+        c.R.determinant() < 0)
+      throw ConfigError(path_ + ": key '" + R_key + "' is not a rotation matrix");
+  }
+
+ private:
+  cv::FileStorage fs_;
+  std::string path_;
+  std::string expected_;
+};
+
+constexpr const char* kSlStudioKeys = "SLStudio's calibration.xml: Kc, kc, Kp, kp, Rp, Tp";
+
+// SLStudio's calibration.xml (OpenCV FileStorage).
+CalibrationFile loadSlStudioXml(const std::string& path) {
+  const StorageReader fs(path, kSlStudioKeys);
+  if (!fs.has("Kc") && fs.has("intrinsic_mat"))
+    throw ConfigError(path + ": this is an sl_sensor " +
+                      (fs.has("extrinsic_rot") ? "camera" : "projector") +
+                      " file; it needs its partner (camera + projector): convert both with "
+                      "'sl_calibrate --import-sl-sensor CAMERA.xml PROJECTOR.xml --out FILE.yaml'");
   CalibrationFile file;
   auto& c = file.calibration;
-  c.camera = pinhole("Kc", "kc", integer("frameWidth"), integer("frameHeight"));
-  c.projector = pinhole("Kp", "kp", integer("screenResX"), integer("screenResY"));
-  const cv::Mat R = matrix("Rp", 3, 3), t = matrix("Tp", 3, 1);
-  for (int r = 0; r < 3; ++r) {
-    for (int col = 0; col < 3; ++col) c.R(r, col) = R.at<double>(r, col);
-    c.t(r) = t.at<double>(r, 0);
-  }
-  if (std::abs(c.R.determinant() - 1.0) > 1e-4)
-    throw ConfigError(path + ": key 'Rp' is not a rotation matrix");
-  if (!fs["cam_error"].empty())
-    file.errors = CalibrationErrors{static_cast<double>(fs["cam_error"]),
-                                    static_cast<double>(fs["proj_error"]),
-                                    static_cast<double>(fs["stereo_error"])};
+  c.camera = fs.pinhole("Kc", "kc", fs.integer("frameWidth"), fs.integer("frameHeight"));
+  c.projector = fs.pinhole("Kp", "kp", fs.integer("screenResX"), fs.integer("screenResY"));
+  fs.pose("Rp", "Tp", c);
+  if (fs.has("cam_error"))
+    file.errors = CalibrationErrors{fs.real("cam_error").value_or(0),
+                                    fs.real("proj_error").value_or(0),
+                                    fs.real("stereo_error").value_or(0)};
   file.source = "SLStudio calibration.xml";
   return file;
+}
+
+bool startsWithOpenCvYamlHeader(const std::string& path) {
+  std::ifstream in(path);
+  std::string first;
+  std::getline(in, first);
+  return first.rfind("%YAML", 0) == 0;
 }
 
 void writePinhole(std::ostream& out, const char* name, const pipeline::PinholeModel& m) {
@@ -181,7 +240,8 @@ void writePinhole(std::ostream& out, const char* name, const pipeline::PinholeMo
 CalibrationFile loadCalibration(const std::string& path) {
   if (!std::filesystem::exists(path)) throw ConfigError(path + ": calibration file not found");
   if (hasSuffix(path, ".xml")) return loadSlStudioXml(path);
-  if (hasSuffix(path, ".yaml") || hasSuffix(path, ".yml")) return loadOwnYaml(path);
+  if (hasSuffix(path, ".yaml") || hasSuffix(path, ".yml"))
+    return startsWithOpenCvYamlHeader(path) ? loadSlStudioXml(path) : loadOwnYaml(path);
   throw ConfigError(path + ": unknown calibration format (expected .yaml/.yml in the project's "
                     "format or SLStudio's calibration .xml)");
 }
@@ -218,6 +278,71 @@ void saveCalibration(const CalibrationFile& file, const std::string& path) {
   std::error_code error;
   std::filesystem::rename(temporary, path, error);
   if (error) throw std::runtime_error(path + ": cannot rename from .part: " + error.message());
+}
+
+
+CalibrationFile loadSlSensorCalibration(const std::string& camera_path,
+                                        const std::string& projector_path) {
+  for (const std::string& p : {camera_path, projector_path})
+    if (!std::filesystem::exists(p)) throw ConfigError(p + ": calibration file not found");
+  const StorageReader camera(camera_path,
+                             "sl_sensor camera file: intrinsic_mat, lens_distortion, "
+                             "resolution_x/y, extrinsic_rot, extrinsic_trans");
+  const StorageReader projector(projector_path,
+                                "sl_sensor projector file: intrinsic_mat, lens_distortion, "
+                                "resolution_x/y");
+  CalibrationFile file;
+  auto& c = file.calibration;
+  c.camera = camera.pinhole("intrinsic_mat", "lens_distortion", camera.integer("resolution_x"),
+                            camera.integer("resolution_y"));
+  c.projector = projector.pinhole("intrinsic_mat", "lens_distortion",
+                                  projector.integer("resolution_x"),
+                                  projector.integer("resolution_y"));
+  if (projector.has("extrinsic_rot") && !camera.has("extrinsic_rot"))
+    throw ConfigError(camera_path + ": has no 'extrinsic_rot' but " + projector_path +
+                      " has: are the camera and projector files swapped?");
+  camera.pose("extrinsic_rot", "extrinsic_trans", c);
+  const auto camera_error = camera.real("calibration_error");
+  const auto projector_error = projector.real("calibration_error");
+  const auto stereo_error = camera.real("stereo_error");
+  if (camera_error || projector_error || stereo_error)
+    file.errors = CalibrationErrors{camera_error.value_or(0), projector_error.value_or(0),
+                                    stereo_error.value_or(0)};
+  file.source = "sl_sensor " + std::filesystem::path(camera_path).filename().string() + " + " +
+                std::filesystem::path(projector_path).filename().string();
+  return file;
+}
+
+void exportOpenCvCalibration(const CalibrationFile& file, const std::string& path) {
+  const auto& c = file.calibration;
+  auto intrinsics = [](const pipeline::PinholeModel& m) {
+    return cv::Mat((cv::Mat_<double>(3, 3) << m.fx, 0, m.cx, 0, m.fy, m.cy, 0, 0, 1));
+  };
+  auto distortion = [](const pipeline::PinholeModel& m) {
+    cv::Mat d(5, 1, CV_64F);
+    for (int i = 0; i < 5; ++i) d.at<double>(i) = m.distortion[i];
+    return d;
+  };
+  cv::Mat R(3, 3, CV_64F), t(3, 1, CV_64F);
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) R.at<double>(r, col) = c.R(r, col);
+    t.at<double>(r) = c.t(r);
+  }
+  try {
+    cv::FileStorage fs(path, cv::FileStorage::WRITE);
+    if (!fs.isOpened()) throw std::runtime_error(path + ": cannot open for writing");
+    fs << "Kc" << intrinsics(c.camera) << "kc" << distortion(c.camera);
+    fs << "Kp" << intrinsics(c.projector) << "kp" << distortion(c.projector);
+    fs << "Rp" << R << "Tp" << t;
+    if (file.errors)
+      fs << "cam_error" << file.errors->camera_rms_px << "proj_error"
+         << file.errors->projector_rms_px << "stereo_error" << file.errors->stereo_rms_px;
+    fs << "frameWidth" << c.camera.width << "frameHeight" << c.camera.height;
+    fs << "screenResX" << c.projector.width << "screenResY" << c.projector.height;
+    fs.release();
+  } catch (const cv::Exception& e) {
+    throw std::runtime_error(path + ": cannot write OpenCV FileStorage: " + e.msg);
+  }
 }
 
 }  // namespace sl::daemon

@@ -1,6 +1,7 @@
-// Calibration files: the project's own YAML format, SLStudio's
-// calibration.xml (OpenCV FileStorage) as an import. Read by the daemon, the
-// offline tools and the calibration tool.
+// Calibration files: the project's own YAML format; SLStudio's
+// calibration.xml and sl_sensor's camera + projector XML files (OpenCV
+// FileStorage) as imports; an export to OpenCV FileStorage with SLStudio's
+// keys. Read by the daemon, the offline tools and the calibration tool.
 //
 // The project's format (units mm and px; X_p = R * X_c + t):
 //   format: sl-sensor-calibration/1
@@ -41,11 +42,36 @@ struct CalibrationFile {
   std::string source;
 };
 
-// Reads a calibration: *.yaml / *.yml in the project's format, *.xml as
-// SLStudio's calibration.xml (Kc, kc, Kp, kp, Rp, Tp, frameWidth/Height,
-// screenResX/Y, cam/proj/stereo_error). Throws ConfigError naming the file
-// and the key on any problem.
+// Reads a calibration: *.yaml / *.yml in the project's format, *.xml (and
+// *.yaml / *.yml starting with OpenCV's "%YAML:1.0" header) as SLStudio's
+// calibration.xml (Kc, kc, Kp, kp, Rp, Tp, frameWidth/Height, screenResX/Y,
+// cam/proj/stereo_error), which is also what exportOpenCvCalibration writes.
+// An sl_sensor camera file is recognised and refused with a pointer to
+// loadSlSensorCalibration (it lacks the projector). Throws ConfigError naming
+// the file and the key on any problem.
 CalibrationFile loadCalibration(const std::string& path);
+
+// sl_sensor's calibration files (OpenCV FileStorage, as its calibrator
+// writes them; the same keys SLStudio-derived code uses):
+//   camera file:    intrinsic_mat (3x3), lens_distortion (5x1: k1 k2 p1 p2 k3),
+//                   calibration_error, resolution_x, resolution_y,
+//                   extrinsic_rot (3x3), extrinsic_trans (3x1), stereo_error
+//   projector file: intrinsic_mat, lens_distortion, calibration_error,
+//                   resolution_x, resolution_y
+// extrinsic_rot / extrinsic_trans are the camera -> projector transform of
+// cv::stereoCalibrate(camera points, projector points): X_p = R X_c + t, in
+// the unit of the board squares given to sl_sensor's calibrator (mm in its
+// shipped files and launch files; the file itself does not say).
+// Throws ConfigError naming the file and the key.
+CalibrationFile loadSlSensorCalibration(const std::string& camera_path,
+                                        const std::string& projector_path);
+
+// Writes `file` as OpenCV FileStorage (format from the extension: .xml,
+// .yaml / .yml, .json) with SLStudio's keys and conventions: Kc, kc, Kp, kp
+// (CV_64F), Rp, Tp (X_p = Rp X_c + Tp, mm), frameWidth/Height,
+// screenResX/Y, and cam_error, proj_error, stereo_error when known.
+// Throws std::runtime_error naming the file on failure.
+void exportOpenCvCalibration(const CalibrationFile& file, const std::string& path);
 
 // Writes the project's format (atomically: temporary file + rename).
 // Throws std::runtime_error naming the file on I/O failure.

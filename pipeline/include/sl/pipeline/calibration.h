@@ -43,17 +43,29 @@ struct CornerDetectionOptions {
   // Half size of cv::cornerSubPix's search window (camera px). It must stay
   // well inside one square: at most about a third of a square's image size.
   int subpixel_radius_px = 5;
+  // Gaussian smoothing (sigma, camera px) of the shading image before the
+  // sub-pixel refinement; 0 = none. Symmetric blur leaves the saddle point in
+  // place but spreads a sharp edge's gradient over several pixels, which
+  // removes most of cornerSubPix's pull towards pixel positions. Real lenses
+  // blur enough already; the simulator (no optical blur) needs about 1 px.
+  double presmooth_sigma_px = 0.0;
 };
 
 // The local homography of one corner (Moreno and Taubin): the decoded
 // projector coordinates of the valid camera pixels within `window_radius_px`
 // (square window) of the corner are fitted with a homography camera px ->
-// projector px, robustly (RANSAC, then least squares on the inliers), and the
-// corner is mapped through it.
+// projector px, robustly (least squares, then repeatedly without the pixels
+// whose residual exceeds max(outlier_factor * median residual,
+// min_outlier_px)), and the corner is mapped through it.
 struct LocalHomographyOptions {
-  int window_radius_px = 15;        // camera px
-  int min_valid_pixels = 100;       // fewer valid pixels (or inliers): corner dropped
-  double inlier_threshold_px = 1.0; // projector px, RANSAC reprojection threshold
+  int window_radius_px = 15;     // camera px
+  int min_valid_pixels = 100;    // fewer valid pixels (or kept after trimming): corner dropped
+  double outlier_factor = 3.0;   // times the median residual
+  double min_outlier_px = 0.5;   // projector px: never trim residuals below this
+  // Pixels whose modulation B is below this fraction of the window's 90th
+  // percentile are left out (dark squares decode with more phase noise);
+  // 0 = use every valid pixel. Needs ProjectorMaps::modulation.
+  double min_relative_modulation = 0.5;
 };
 
 // Maps camera px -> projector px at `camera_px` by a local homography fitted
@@ -71,6 +83,14 @@ std::optional<cv::Point2f> projectorPointByLocalHomography(const ProjectorMaps& 
 // not found.
 std::optional<std::vector<cv::Point2f>> detectCheckerboardCorners(
     const cv::Mat& shading, const Checkerboard& board, const CornerDetectionOptions& options);
+
+// The mean of `frames` (CV_8UC1 or CV_16UC1, one size) as CV_32FC1 in
+// camera DN: the shading image of a phase-shift sequence (every complete
+// N-step set of a sinusoid averages to its offset A), with less noise than A
+// of one set. Not for Gray codes (their frames do not average to a uniform
+// level); use ProjectorMaps::offset there. Throws std::invalid_argument on an
+// empty list or mismatched frames.
+cv::Mat meanImage(const std::vector<cv::Mat>& frames);
 
 // The correspondences of one board pose. Corners whose projector coordinate
 // could not be found are left out (corner_ids says which remain).

@@ -1,0 +1,351 @@
+// Camera-projector calibration: on SLStudio's real captures against its
+// published calibration, and a round trip on the simulated sensor with a
+// checkerboard-textured plane in known poses.
+#include <catch2/catch.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "sl/daemon/calibration_io.h"
+#include "sl/pipeline/calibration.h"
+#include "sl/drivers/sim.h"
+#include "sl/pipeline/decoder.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using sl::pipeline::BoardView;
+using sl::pipeline::CalibrationOptions;
+using sl::pipeline::CalibrationResult;
+using sl::pipeline::Checkerboard;
+using sl::pipeline::PhaseShift33Decoder;
+using sl::pipeline::PhaseShift33Pattern;
+
+double degreesBetween(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  return Eigen::AngleAxisd(a * b.transpose()).angle() * 180.0 / std::numbers::pi;
+}
+
+double percent(double value, double reference) { return 100.0 * (value - reference) / reference; }
+
+const fs::path kSkull = fs::path(SL_SHARED_DATA_DIR) / "slstudio-skull";
+
+PhaseShift33Pattern slStudioCalibrationPattern() {
+  PhaseShift33Pattern p;
+  p.name = "3+3_both";
+  p.direction = sl::pipeline::Direction::kBoth;
+  p.projector_width = 1824;
+  p.projector_height = 1140;
+  p.fringes = 16;
+  return p;
+}
+
+// Frames 0-5 columns, 6-11 rows (README of the data set).
+BoardView observeSlStudioPose(const std::string& pose, const Checkerboard& board) {
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < 12; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%02d.png", i);
+    frames.push_back(
+        cv::imread((kSkull / "calibration" / pose / name).string(), cv::IMREAD_GRAYSCALE));
+    REQUIRE(!frames.back().empty());
+  }
+  const PhaseShift33Decoder decoder(slStudioCalibrationPattern(), {});
+  const sl::pipeline::ProjectorMaps maps = decoder.decode(frames, 8);
+  const auto result = sl::pipeline::observeBoard(sl::pipeline::meanImage(frames), maps, board,
+                                                 pose, {}, {});
+  INFO(result.error);
+  REQUIRE(result.view);
+  return *result.view;
+}
+
+}  // namespace
+
+TEST_CASE("real captures: SLStudio calibration poses reproduce calibration.xml",
+          "[calibration][real]") {
+  if (!fs::exists(kSkull / "calibration")) {
+    WARN("shared data not found at " << kSkull << ": skipped");
+    return;
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const Checkerboard board{13, 9, 10.0};
+  std::vector<BoardView> views;
+  for (const char* pose : {"seq1", "seq3", "seq4", "seq5", "seq6"})
+    views.push_back(observeSlStudioPose(pose, board));
+
+  CalibrationOptions options;
+  // The camera model of calibration.xml: principal point fixed at the image
+  // centre, fx = fy, k1 only (its kc holds k1 alone). The projector gets the
+  // tool's default full model.
+  options.camera.fix_principal_point = true;
+  options.camera.fix_aspect_ratio = true;
+  options.camera.radial_terms = 1;
+  options.camera.tangential = false;
+  const CalibrationResult r = sl::pipeline::calibrateCameraProjector(
+      views, board, cv::Size(1688, 1352), cv::Size(1824, 1140), options);
+  const auto published = sl::daemon::loadCalibration((kSkull / "calibration.xml").string());
+  const auto& ref = published.calibration;
+  const auto& c = r.calibration;
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf(
+      "real data (%.1f s): RMS camera %.3f projector %.3f stereo %.3f px\n"
+      "  camera fx %+.2f %% fy %+.2f %% cx %+.1f cy %+.1f px; projector fx %+.2f %% fy %+.2f %% "
+      "cx %+.1f cy %+.1f px\n"
+      "  |dt| %.2f mm (t %.2f %.2f %.2f vs %.2f %.2f %.2f), rotation %.3f deg\n",
+      seconds, r.report.camera_rms_px, r.report.projector_rms_px, r.report.stereo_rms_px,
+      percent(c.camera.fx, ref.camera.fx), percent(c.camera.fy, ref.camera.fy),
+      c.camera.cx - ref.camera.cx, c.camera.cy - ref.camera.cy,
+      percent(c.projector.fx, ref.projector.fx), percent(c.projector.fy, ref.projector.fy),
+      c.projector.cx - ref.projector.cx, c.projector.cy - ref.projector.cy, (c.t - ref.t).norm(),
+      c.t.x(), c.t.y(), c.t.z(), ref.t.x(), ref.t.y(), ref.t.z(), degreesBetween(c.R, ref.R));
+  for (const auto& p : r.report.poses)
+    std::printf("  %s: %d corners, camera %.3f projector %.3f stereo %.3f px\n", p.label.c_str(),
+                p.corners, p.camera_rms_px, p.projector_rms_px, p.stereo_rms_px);
+  for (const auto& w : r.report.warnings) std::printf("  warning: %s\n", w.c_str());
+
+  CHECK(r.report.camera_rms_px < 0.5);
+  CHECK(r.report.projector_rms_px < 0.5);
+  CHECK(r.report.stereo_rms_px < 0.5);
+  CHECK(std::abs(percent(c.camera.fx, ref.camera.fx)) < 1.5);
+  CHECK(std::abs(percent(c.camera.fy, ref.camera.fy)) < 1.5);
+  CHECK(std::abs(percent(c.projector.fx, ref.projector.fx)) < 1.5);
+  CHECK(std::abs(percent(c.projector.fy, ref.projector.fy)) < 1.5);
+  CHECK(std::hypot(c.projector.cx - ref.projector.cx, c.projector.cy - ref.projector.cy) < 25.0);
+  CHECK((c.t - ref.t).norm() < 3.0);
+}
+
+namespace {
+
+double radians(double degrees) { return degrees * std::numbers::pi / 180.0; }
+
+// The simulated rig of config/sim.yaml with a distorting camera lens.
+sl::pipeline::CameraProjectorCalibration simulatedRig() {
+  sl::pipeline::CameraProjectorCalibration rig;
+  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
+  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
+  rig.R = Eigen::AngleAxisd(radians(15.25), Eigen::Vector3d::UnitY()).toRotationMatrix();
+  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
+  return rig;
+}
+
+struct BoardPose {
+  double tilt_x_deg, tilt_y_deg, spin_deg;  // R = Rx * Ry * Rz of the board
+  Eigen::Vector3d centre_mm;                // board centre, camera frame
+};
+
+// A plane carrying `board` centred at pose.centre_mm, facing the camera.
+sl::drivers::SimPlane boardPlane(const Checkerboard& board, const BoardPose& pose) {
+  const Eigen::Matrix3d R =
+      (Eigen::AngleAxisd(radians(pose.tilt_x_deg), Eigen::Vector3d::UnitX()) *
+       Eigen::AngleAxisd(radians(pose.tilt_y_deg), Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(radians(pose.spin_deg), Eigen::Vector3d::UnitZ()))
+          .toRotationMatrix();
+  sl::drivers::SimCheckerboard texture;
+  texture.cols = board.cols;
+  texture.rows = board.rows;
+  texture.square_mm = board.square_mm;
+  texture.x_axis = R.col(0);
+  texture.y_axis = R.col(1);
+  texture.origin = pose.centre_mm - 0.5 * board.square_mm *
+                                        ((board.cols - 1) * texture.x_axis +
+                                         (board.rows - 1) * texture.y_axis);
+  texture.dark_albedo = 0.25;
+  texture.light_albedo = 0.85;
+  sl::drivers::SimPlane plane;
+  plane.point = pose.centre_mm;
+  plane.normal = -R.col(2);
+  plane.albedo = 0.85;
+  plane.checkerboard = texture;
+  return plane;
+}
+
+}  // namespace
+
+TEST_CASE("simulator round trip: calibration recovers the simulated rig",
+          "[calibration][sim]") {
+  const auto start = std::chrono::steady_clock::now();
+  const Checkerboard board{13, 9, 15.0};
+  PhaseShift33Pattern pattern;
+  pattern.name = "3+3_both";
+  pattern.direction = sl::pipeline::Direction::kBoth;
+  const std::vector<BoardPose> poses = {
+      {0, 0, 0, {0, 0, 560}},          {25, 0, 0, {0, 0, 560}},
+      {-25, 0, 5, {0, 0, 570}},        {0, 25, 0, {10, 0, 550}},
+      {0, -25, -5, {-10, 0, 570}},     {18, 18, 10, {0, 10, 610}},
+      {-18, 18, -10, {0, -10, 530}},   {18, -18, 0, {15, 0, 520}},
+      {-18, -18, 15, {-15, 0, 630}},   {10, -10, 30, {0, 0, 660}},
+      {35, 10, 0, {0, 0, 600}},   {-35, -10, 0, {0, 0, 600}},
+      {10, 35, 0, {0, 0, 600}},   {-10, -35, 0, {0, 0, 600}},
+  };
+  const sl::pipeline::CameraProjectorCalibration truth = simulatedRig();
+  const PhaseShift33Decoder decoder(pattern, {});
+  // The simulator has no optical blur: smooth its razor-sharp edges a little
+  // before the sub-pixel refinement. Its squares span ~60 px: a wider window
+  // averages more decoding noise into each local homography.
+  sl::pipeline::CornerDetectionOptions corners;
+  corners.presmooth_sigma_px = 1.0;
+  sl::pipeline::LocalHomographyOptions homographies;
+  homographies.window_radius_px = 25;
+  std::vector<BoardView> views;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    sl::drivers::SimConfig config;
+    config.rig = truth;
+    config.patterns = {pattern};
+    config.scene.planes = {boardPlane(board, poses[i])};
+    const auto sensor = sl::drivers::SimulatedSensor::create(config);
+    std::vector<cv::Mat> frames;
+    for (int f = 0; f < pattern.frameCount(); ++f)
+      frames.push_back(sensor->render(pattern.name, f, 1000 * i + f));
+    const auto maps = decoder.decode(frames, 8);
+    const auto result = sl::pipeline::observeBoard(sl::pipeline::meanImage(frames), maps, board,
+                                                   "pose" + std::to_string(i), corners,
+                                                   homographies);
+    INFO(result.error);
+    REQUIRE(result.view);
+    // The observations themselves against the true projections.
+    const sl::drivers::SimCheckerboard& texture = *config.scene.planes[0].checkerboard;
+    const BoardView& view = *result.view;
+    double camera_sum = 0, projector_sum = 0;
+    for (std::size_t k = 0; k < view.corner_ids.size(); ++k) {
+      const int id = view.corner_ids[k];
+      const Eigen::Vector3d X = texture.origin + board.square_mm * ((id % board.cols) * texture.x_axis +
+                                                                    (id / board.cols) * texture.y_axis);
+      const Eigen::Vector2d qc = truth.camera.project(X);
+      const Eigen::Vector2d qp = truth.projector.project(truth.R * X + truth.t);
+      camera_sum += (Eigen::Vector2d(view.camera_px[k].x, view.camera_px[k].y) - qc).squaredNorm();
+      projector_sum +=
+          (Eigen::Vector2d(view.projector_px[k].x, view.projector_px[k].y) - qp).squaredNorm();
+    }
+    const double n = static_cast<double>(view.corner_ids.size());
+    CHECK(view.corner_ids.size() >= 110);
+    CHECK(std::sqrt(camera_sum / n) < 0.1);
+    CHECK(std::sqrt(projector_sum / n) < 0.15);
+    views.push_back(*result.view);
+  }
+
+  const CalibrationResult r = sl::pipeline::calibrateCameraProjector(
+      views, board, cv::Size(1440, 1080), cv::Size(1824, 1140), CalibrationOptions{});
+  const auto& c = r.calibration;
+  const double baseline_error = (c.R.transpose() * c.t).norm() - (truth.R.transpose() * truth.t).norm();
+  const double rotation_error = degreesBetween(c.R, truth.R);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf(
+      "simulator (%.1f s, %zu poses): RMS camera %.3f projector %.3f stereo %.3f px\n"
+      "  camera fx %+.3f %% fy %+.3f %% cx %+.2f cy %+.2f px; projector fx %+.3f %% fy %+.3f %% "
+      "cx %+.2f cy %+.2f px\n"
+      "  baseline %+.3f mm, |dt| %.3f mm, rotation %.4f deg\n",
+      seconds, views.size(), r.report.camera_rms_px, r.report.projector_rms_px,
+      r.report.stereo_rms_px, percent(c.camera.fx, truth.camera.fx),
+      percent(c.camera.fy, truth.camera.fy), c.camera.cx - truth.camera.cx,
+      c.camera.cy - truth.camera.cy, percent(c.projector.fx, truth.projector.fx),
+      percent(c.projector.fy, truth.projector.fy), c.projector.cx - truth.projector.cx,
+      c.projector.cy - truth.projector.cy, baseline_error, (c.t - truth.t).norm(),
+      rotation_error);
+  for (const auto& p : r.report.poses)
+    std::printf("  %s: %d corners, camera %.3f projector %.3f stereo %.3f px\n", p.label.c_str(),
+                p.corners, p.camera_rms_px, p.projector_rms_px, p.stereo_rms_px);
+
+  CHECK(std::abs(percent(c.camera.fx, truth.camera.fx)) < 0.2);
+  CHECK(std::abs(percent(c.camera.fy, truth.camera.fy)) < 0.2);
+  CHECK(std::abs(percent(c.projector.fx, truth.projector.fx)) < 0.2);
+  CHECK(std::abs(percent(c.projector.fy, truth.projector.fy)) < 0.2);
+  CHECK(std::hypot(c.camera.cx - truth.camera.cx, c.camera.cy - truth.camera.cy) < 1.0);
+  CHECK(std::hypot(c.projector.cx - truth.projector.cx, c.projector.cy - truth.projector.cy) <
+        1.0);
+  CHECK(std::abs(baseline_error) < 0.1);
+  CHECK(rotation_error < 0.02);
+}
+
+TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import round trip",
+          "[calibration][io]") {
+  sl::daemon::CalibrationFile file;
+  auto& c = file.calibration;
+  c.camera = {1440, 1080, 2401.5, 2399.25, 719.75, 540.125, {-0.08, 0.12, 0.0005, -0.0003, 0.01}};
+  c.projector = {1824, 1140, 2200.5, 2201.0, 911.0, 1130.5, {0.02, -0.01, 0, 0, 0}};
+  c.R = Eigen::AngleAxisd(0.27, Eigen::Vector3d(0.1, 1, 0.05).normalized()).toRotationMatrix();
+  c.t = Eigen::Vector3d(-144.7, 1.5, 39.5);
+  file.errors = sl::daemon::CalibrationErrors{0.11, 0.22, 0.33};
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_calibration_io";
+  fs::create_directories(dir);
+
+  // Relative tolerance for intrinsics, absolute for distortion, R and t (mm).
+  auto same = [](const sl::daemon::CalibrationFile& a, const sl::daemon::CalibrationFile& b,
+                 double tolerance) {
+    const auto& x = a.calibration;
+    const auto& y = b.calibration;
+    for (bool camera : {true, false}) {
+      const auto& p = camera ? x.camera : x.projector;
+      const auto& q = camera ? y.camera : y.projector;
+      CHECK(p.width == q.width);
+      CHECK(p.height == q.height);
+      CHECK(p.fx == Approx(q.fx).epsilon(tolerance));
+      CHECK(p.fy == Approx(q.fy).epsilon(tolerance));
+      CHECK(p.cx == Approx(q.cx).epsilon(tolerance));
+      CHECK(p.cy == Approx(q.cy).epsilon(tolerance));
+      for (int i = 0; i < 5; ++i) CHECK(p.distortion[i] == Approx(q.distortion[i]).margin(tolerance));
+    }
+    CHECK((x.R - y.R).norm() < tolerance);
+    CHECK((x.t - y.t).norm() < tolerance * 100);
+  };
+
+  SECTION("export as .xml and .yaml reads back through loadCalibration") {
+    for (const char* name : {"exported.xml", "exported.yaml"}) {
+      const std::string path = (dir / name).string();
+      sl::daemon::exportOpenCvCalibration(file, path);
+      const auto back = sl::daemon::loadCalibration(path);
+      same(file, back, 1e-12);
+      REQUIRE(back.errors);
+      CHECK(back.errors->stereo_rms_px == Approx(0.33));
+    }
+  }
+
+  SECTION("sl_sensor camera + projector files") {
+    // Written the way sl_sensor's calibrator writes them (float matrices).
+    const std::string camera = (dir / "primary_camera.xml").string();
+    const std::string projector = (dir / "projector.xml").string();
+    auto K = [](const sl::pipeline::PinholeModel& m) {
+      return cv::Matx33f(float(m.fx), 0, float(m.cx), 0, float(m.fy), float(m.cy), 0, 0, 1);
+    };
+    auto d = [](const sl::pipeline::PinholeModel& m) {
+      return cv::Vec<float, 5>(float(m.distortion[0]), float(m.distortion[1]),
+                               float(m.distortion[2]), float(m.distortion[3]),
+                               float(m.distortion[4]));
+    };
+    {
+      cv::FileStorage out(camera, cv::FileStorage::WRITE);
+      cv::Matx33f R;
+      for (int i = 0; i < 9; ++i) R.val[i] = float(c.R(i / 3, i % 3));
+      out << "intrinsic_mat" << cv::Mat(K(c.camera)) << "lens_distortion" << cv::Mat(d(c.camera))
+          << "calibration_error" << 0.11 << "resolution_x" << c.camera.width << "resolution_y"
+          << c.camera.height << "extrinsic_rot" << cv::Mat(R) << "extrinsic_trans"
+          << cv::Mat(cv::Vec3f(float(c.t.x()), float(c.t.y()), float(c.t.z())))
+          << "stereo_error" << 0.33;
+    }
+    {
+      cv::FileStorage out(projector, cv::FileStorage::WRITE);
+      out << "intrinsic_mat" << cv::Mat(K(c.projector)) << "lens_distortion"
+          << cv::Mat(d(c.projector)) << "calibration_error" << 0.22 << "resolution_x"
+          << c.projector.width << "resolution_y" << c.projector.height;
+    }
+    const auto imported = sl::daemon::loadSlSensorCalibration(camera, projector);
+    same(file, imported, 1e-6);
+    REQUIRE(imported.errors);
+    CHECK(imported.errors->projector_rms_px == Approx(0.22));
+    // One file alone is refused with a pointer to the pair import.
+    CHECK_THROWS_WITH(sl::daemon::loadCalibration(camera),
+                      Catch::Contains("sl_sensor camera file") &&
+                          Catch::Contains("--import-sl-sensor"));
+    CHECK_THROWS_WITH(sl::daemon::loadSlSensorCalibration(projector, camera),
+                      Catch::Contains("swapped"));
+  }
+}
