@@ -51,7 +51,7 @@ struct SimPlane {
   Eigen::Vector3d point{0, 0, 600};   // mm, camera frame
   Eigen::Vector3d normal{0, 0, -1};   // need not be unit; faces the sensor
   double albedo = 0.8;                // diffuse reflectance in [0, 1]
-  std::optional<SimCheckerboard> checkerboard;  // none: constant albedo
+  std::optional<SimCheckerboard> checkerboard{};  // none: constant albedo
 };
 
 struct SimSphere {
