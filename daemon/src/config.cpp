@@ -13,6 +13,7 @@
 #include "hardware_config_yaml.h"
 #include "pattern_config_yaml.h"
 #include "sl/daemon/calibration_io.h"
+#include "aravis_config.h"
 #include "yaml_reader.h"
 
 namespace sl::daemon {
@@ -150,14 +151,15 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   config.source_path = origin;
   const YamlMap root(root_node, origin, "");
   config.sensor = root.get<std::string>("sensor", config.sensor);
-  if (config.sensor != "sim" && config.sensor != "hardware")
-    root.fail("sensor", "unknown sensor '" + config.sensor + "' (supported: sim, hardware)");
-  if (config.sensor == "sim") parseSim(root.map("sim"), config.sim);
+  if (config.sensor != "sim" && config.sensor != "hardware" && config.sensor != "fake_gige")
+    root.fail("sensor", "unknown sensor '" + config.sensor +
+                            "' (supported: sim, hardware, fake_gige)");
+  const bool simulated = config.sensor != "hardware";  // fake_gige renders with the simulator
+  if (simulated) parseSim(root.map("sim"), config.sim);
 
   const std::string calibration = root.get<std::string>("calibration", "sim");
   if (calibration == "sim") {
-    if (config.sensor != "sim")
-      root.fail("calibration", "a hardware sensor needs a calibration file");
+    if (!simulated) root.fail("calibration", "a hardware sensor needs a calibration file");
     config.calibration = config.sim.rig;
   } else {
     std::filesystem::path path(calibration);
@@ -166,7 +168,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
       root.fail("calibration", "cannot read calibration file '" + path.string() + "'");
     config.calibration = loadCalibration(path.string()).calibration;
   }
-  if (config.sensor == "sim" &&
+  if (simulated &&
       (config.calibration.camera.width != config.sim.rig.camera.width ||
        config.calibration.camera.height != config.sim.rig.camera.height))
     root.fail("calibration", "camera size differs from the sensor's camera");
@@ -174,6 +176,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parsePatterns(root, config.calibration.projector, base_dir, config.patterns);
   config.sim.patterns = config.patterns;
   if (config.sensor == "hardware") parseHardware(root, config);
+  if (config.sensor != "sim") parseAravisSection(root, config);
   parseDecoder(root.optionalMap("decoder"), config.decoder);
   parseTriangulator(root.optionalMap("triangulator"), config.triangulator);
   parseSynchroniser(root.optionalMap("synchroniser"),

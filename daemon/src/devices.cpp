@@ -3,6 +3,7 @@
 #include <map>
 #include <stdexcept>
 
+#include "aravis_devices.h"
 #include "sl/drivers/camera_stamp_trigger.h"
 #include "sl/drivers/lightcrafter4500.h"
 #include "sl/drivers/sim.h"
@@ -31,6 +32,7 @@ EngineDevices openSimulated(const DaemonConfig& config, std::shared_ptr<void>& k
 EngineDevices openHardware(const DaemonConfig& config) {
   EngineDevices devices;
   // --- cameras (Aravis, section `cameras:`): appended to devices.cameras here ---
+  appendAravisCameras(config, devices);
 
   if (devices.cameras.empty())
     throw std::runtime_error(config.source_path +
@@ -71,6 +73,7 @@ EngineDevices openHardware(const DaemonConfig& config) {
 EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
   if (config.sensor == "sim") return openSimulated(config, keep_alive);
   if (config.sensor == "hardware") return openHardware(config);
+  if (config.sensor == "fake_gige") return openFakeGige(config, keep_alive);
   throw std::runtime_error("sensor '" + config.sensor + "' is not supported by this build");
 }
 

@@ -14,8 +14,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -26,7 +28,7 @@
 #include "sl/drivers/aravis_camera.h"
 #include "sl/drivers/aravis_fake_camera.h"
 #include "sl/drivers/sim.h"
-#include "sl/pipeline/decoder.h"
+#include "sl/pipeline/codec.h"
 #include "sl/pipeline/triangulator.h"
 
 using namespace std::chrono_literals;
@@ -114,7 +116,7 @@ std::optional<sl::pipeline::Frame> sendAndGrab(FakeGigeCamera& fake, AravisCamer
 // grabs it; returns the received frames.
 std::vector<sl::pipeline::Frame> sendPattern(const sl::drivers::SimulatedSensor& sim,
                                              FakeGigeCamera& fake, AravisCamera& camera,
-                                             const sl::pipeline::PhaseShift33Pattern& pattern,
+                                             const sl::pipeline::PatternSpec& pattern,
                                              std::vector<cv::Mat>& rendered, int& resent) {
   std::vector<sl::pipeline::Frame> frames;
   for (int k = 0; k < pattern.frameCount(); ++k) {
@@ -192,7 +194,7 @@ TEST_CASE("fake GigE camera: simulated images arrive bit-identical and give the 
   CHECK(gamma_noted);
   camera->start();
 
-  const sl::pipeline::PhaseShift33Pattern& pattern = config.patterns.front();
+  const sl::pipeline::PatternSpec& pattern = config.patterns.front();
   std::vector<cv::Mat> rendered;
   int resent = 0;
   const auto frames = sendPattern(*sim, fake, *camera, pattern, rendered, resent);
@@ -209,8 +211,9 @@ TEST_CASE("fake GigE camera: simulated images arrive bit-identical and give the 
   CHECK(resent <= 2);
   CHECK(fake.counters().frames_sent == frames.size() + resent);
 
-  // Decode + triangulate both image sets like the daemon's processing stage.
-  const sl::pipeline::PhaseShift33Decoder decoder(pattern, config.decoder);
+  // Decode + triangulate both image sets like the daemon's processing stage
+  // (sl::pipeline::Decoder of the pattern's spec, Triangulator).
+  const sl::pipeline::Decoder decoder(pattern, config.decoder);
   const sl::pipeline::Triangulator triangulator(config.calibration, config.triangulator);
   const auto direct = triangulator.triangulate(decoder.decode(rendered, 8));
   const auto over_gige = triangulator.triangulate(decoder.decode(received, frames[0].bit_depth));
@@ -358,4 +361,42 @@ TEST_CASE("fake GigE camera: a camera that disappears is reported and reopened w
   CHECK(c.connected);
   CHECK(c.connection_losses == 1);
   CHECK(c.reconnects == 1);
+}
+
+TEST_CASE("config: the fake GigE sensor file loads; camera keys are checked", "[aravis][config]") {
+  const auto config =
+      sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/fake-gige.yaml");
+  CHECK(config.sensor == "fake_gige");
+  REQUIRE(config.aravis.cameras.size() == 1);
+  const auto& c = config.aravis.cameras.front();
+  CHECK(c.device == "127.0.0.1");
+  CHECK(c.width == 1440);
+  CHECK(c.trigger.mode == AravisTriggerConfig::Mode::kSoftware);
+  CHECK(c.timestamp == AravisCameraConfig::Timestamp::kDevice);
+  CHECK_FALSE(c.packet_socket);
+  CHECK(config.aravis.fake.serial == "SL-FAKE-TOP");
+
+  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/fake-gige.yaml");
+  std::stringstream text;
+  text << in.rdbuf();
+  auto with = [&](const std::string& from, const std::string& to) {
+    std::string s = text.str();
+    const auto at = s.find(from);
+    REQUIRE(at != std::string::npos);
+    return s.replace(at, from.size(), to);
+  };
+  CHECK_THROWS_WITH(sl::daemon::parseConfig(with("    buffers: 16", "    bufers: 16"), "fg.yaml"),
+                    Catch::Contains("fg.yaml:") && Catch::Contains("cameras") &&
+                        Catch::Contains("bufers"));
+  CHECK_THROWS_WITH(
+      sl::daemon::parseConfig(with("pixel_format: Mono8", "pixel_format: Mono14"), "fg.yaml"),
+      Catch::Contains("pixel_format") && Catch::Contains("Mono14"));
+  CHECK_THROWS_WITH(
+      sl::daemon::parseConfig(with("trigger: {mode: software}", "trigger: {mode: sometimes}"),
+                              "fg.yaml"),
+      Catch::Contains("trigger.mode"));
+  CHECK_THROWS_WITH(
+      sl::daemon::parseConfig(with("trigger: {mode: software}", "trigger: {mode: hardware}"),
+                              "fg.yaml"),
+      Catch::Contains("software"));
 }

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "sl/daemon/aravis_config.h"
 #include "sl/daemon/hardware_config.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/camera_model.h"
@@ -43,6 +44,7 @@ struct DaemonConfig {
   std::string sensor = "sim";  // "sim" or "hardware"
   drivers::SimConfig sim;
   HardwareConfig hardware;  // sensor: hardware (projector, trigger)
+  AravisSensorConfig aravis;  // sensor: hardware / fake_gige (cameras)
   // Calibration used by the triangulator. For the simulated sensor it
   // defaults to the simulated rig (perfect calibration).
   pipeline::CameraProjectorCalibration calibration;
