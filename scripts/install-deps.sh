@@ -13,6 +13,7 @@ packages=(
   catch2
   libbenchmark-dev
   libaravis-dev
+  libusb-1.0-0-dev   # aravis-0.8.pc requires it (Requires.private), Debian does not pull it in
   libhidapi-dev
   systemd
   # ROS 2 interop test (tests/interop): Fast DDS, its IDL code generator
