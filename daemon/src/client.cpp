@@ -132,9 +132,10 @@ bool SensorClient::waitForDaemon(std::chrono::milliseconds timeout) {
 
 std::optional<CommandReplyInfo> SensorClient::request(Command command, const std::string& pattern,
                                                       int count,
-                                                      std::chrono::milliseconds timeout) {
+                                                      std::chrono::milliseconds timeout,
+                                                      const std::string& recording) {
   Impl& d = *impl_;
-  std::string client_id = d.client_id, pattern_copy = pattern;
+  std::string client_id = d.client_id, pattern_copy = pattern, recording_copy = recording;
   Request req{};
   req.client_id = client_id.data();
   req.request_id = d.next_request_id++;
@@ -147,6 +148,7 @@ std::optional<CommandReplyInfo> SensorClient::request(Command command, const std
   }
   req.pattern = pattern_copy.data();
   req.count = count;
+  req.recording = recording_copy.data();
   if (!d.request_writer.write(req)) return std::nullopt;
   const auto deadline = Clock::now() + timeout;
   while (Clock::now() < deadline) {
@@ -207,6 +209,8 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.sets_dropped = s.sets_dropped;
       info.sets_incomplete = s.sets_incomplete;
       info.last_error = s.last_error ? s.last_error : "";
+      info.recording = s.recording ? s.recording : "";
+      info.sets_recorded = s.sets_recorded;
       info.patterns = toStrings(s.patterns);
       info.stamp_ns = fromTime(s.stamp);
       latest = info;

@@ -142,6 +142,8 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   r.queue_depth = m.get<int>("queue_depth", r.queue_depth);
   if (r.queue_depth < 1 || r.queue_depth > 64) m.fail("queue_depth", "must be in 1..64");
   r.default_pattern = m.get<std::string>("default_pattern", r.default_pattern);
+  r.recording_root = m.get<std::string>("recording_root", r.recording_root);
+  if (r.recording_root.empty()) m.fail("recording_root", "must not be empty");
   m.done();
 }
 
@@ -185,6 +187,9 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
                     config.synchroniser);
   parseDds(root.optionalMap("dds"), config.dds);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
+  if (std::filesystem::path(config.runtime.recording_root).is_relative())
+    config.runtime.recording_root =
+        std::filesystem::absolute(base_dir / config.runtime.recording_root).lexically_normal().string();
   if (config.runtime.default_pattern.empty()) {
     config.runtime.default_pattern = config.patterns.front().name;
   } else if (!config.findPattern(config.runtime.default_pattern)) {

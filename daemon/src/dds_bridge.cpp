@@ -177,7 +177,7 @@ void DdsBridge::Impl::publishMaps(const pipeline::ProjectorMaps& maps, const Sca
 
 void DdsBridge::Impl::publishStatus(const EngineStatus& s,
                                     const std::vector<std::string>& patterns) {
-  std::string pattern = s.pattern, last_error = s.last_error;
+  std::string pattern = s.pattern, last_error = s.last_error, recording = s.recording;
   StringList names(patterns);
   Status msg{};
   msg.stamp = toTime(nowNs());
@@ -190,6 +190,8 @@ void DdsBridge::Impl::publishStatus(const EngineStatus& s,
   msg.sets_dropped = s.sets_dropped + writes_timed_out.load();
   msg.sets_incomplete = s.sets_incomplete;
   msg.last_error = last_error.data();
+  msg.recording = recording.data();
+  msg.sets_recorded = s.sets_recorded;
   borrow(msg.patterns, names.pointers.data(), names.pointers.size());
   status_writer.write(msg);
 }
@@ -199,7 +201,7 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   const std::string pattern = request.pattern ? request.pattern : "";
   switch (request.command) {
     case sl_msgs_msg_COMMAND_START:
-      result = engine.start(pattern, request.count);
+      result = engine.start(pattern, request.count, request.recording ? request.recording : "");
       break;
     case sl_msgs_msg_COMMAND_STOP:
       result = engine.stop();

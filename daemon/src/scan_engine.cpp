@@ -5,6 +5,7 @@
 #include <map>
 #include <variant>
 
+#include "recorder.h"
 #include "sl/daemon/bounded_queue.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/synchroniser.h"
@@ -99,6 +100,10 @@ struct ScanEngine::Impl {
   BoundedQueue<Event> events;
   BoundedQueue<SetItem> sets;
   BoundedQueue<ResultItem> results;
+
+  // Writes image sets of requests that ask for a recording (own thread).
+  Recorder recorder;
+  std::string recording_name;  // guarded by mutex
 
   // --- stages, each used by one thread only ---
   std::map<std::string, pipeline::Decoder> decoders;               // processing thread
@@ -209,6 +214,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     hb.beat();
     std::optional<SetItem> item = sets.pop(50ms);
     if (!item || item->generation != generation.load()) continue;
+    recorder.record(item->set);  // a no-op unless this request records
     const pipeline::ImageSet& set = *item->set;
     try {
       const auto decoder = decoders.find(set.pattern_name);
@@ -296,6 +302,8 @@ void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   }
   generation++;
   state = ScanState::kIdle;
+  recorder.stop();
+  recording_name.clear();
   if (!error.empty()) last_error = error;
   ++status_version;
 }
@@ -334,7 +342,18 @@ ScanEngine::~ScanEngine() {
   for (auto& t : d.threads) t.join();
 }
 
-CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
+namespace {
+
+bool validRecordingName(const std::string& name) {
+  if (name.empty() || name == "." || name == ".." || name.size() > 128) return false;
+  return name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.") ==
+         std::string::npos;
+}
+
+}  // namespace
+
+CommandResult ScanEngine::start(const std::string& pattern_name, int count,
+                                const std::string& recording) {
   Impl& d = *impl_;
   using Code = CommandResult::Code;
   std::lock_guard lock(d.mutex);
@@ -348,6 +367,18 @@ CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
   const std::string name = pattern_name.empty() ? d.current_pattern : pattern_name;
   const pipeline::PatternSpec* pattern = d.config.findPattern(name);
   if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
+  if (!recording.empty()) {
+    if (!validRecordingName(recording))
+      return {Code::kInvalidCommand, "recording name '" + recording +
+                                         "' must be letters, digits, '_', '-' or '.' (no paths)"};
+    const std::string dir = d.config.runtime.recording_root + "/" + recording;
+    try {
+      d.recorder.start(dir, "pattern " + name + ", " + std::to_string(count) + " scans requested");
+    } catch (const std::exception& e) {
+      return {Code::kDeviceError, std::string("cannot record: ") + e.what()};
+    }
+    d.recording_name = recording;
+  }
   try {
     d.scans_requested = static_cast<std::uint64_t>(count);
     d.scans_done = 0;
@@ -363,6 +394,8 @@ CommandResult ScanEngine::start(const std::string& pattern_name, int count) {
     d.launchLocked(name, pattern->frameCount(), count);
   } catch (const std::exception& e) {
     d.state = ScanState::kError;
+    d.recorder.stop();
+    d.recording_name.clear();
     d.last_error = std::string("projector: ") + e.what();
     ++d.status_version;
     return {Code::kDeviceError, d.last_error};
@@ -431,7 +464,11 @@ EngineStatus ScanEngine::status() const {
   s.frames_dropped = d.events.dropped() + d.frames_unmatched.load();
   s.sets_dropped = d.sets.dropped() + d.results.dropped();
   s.sets_incomplete = d.sets_incomplete.load();
-  s.last_error = d.last_error;
+  s.recording = d.recording_name;
+  s.sets_recorded = d.recorder.written();
+  const std::string recorder_error = d.recorder.lastError();
+  s.last_error = recorder_error.empty() ? d.last_error : recorder_error;
+  s.sets_dropped += d.recorder.dropped();
   return s;
 }
 

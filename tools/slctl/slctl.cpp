@@ -31,6 +31,9 @@ constexpr const char* kUsage =
     "  scan --count N --out DIR [--pattern NAME] [--units mm|m]\n"
     "                     take N scans, write DIR/scan_0001.ply ... (binary PLY, finite points)\n"
     "  start [--pattern NAME]  scan continuously until stop\n"
+    "  record NAME [--count N] [--pattern P]  scan and record the image sets under\n"
+    "                     NAME (in the daemon's runtime.recording_root) until N scans\n"
+    "                     (default: until 'slctl stop'); replay with sensor: replay\n"
     "  stop               stop scanning\n"
     "  status             print the daemon's status\n"
     "  patterns           list the daemon's patterns\n"
@@ -115,7 +118,8 @@ Args parseArgs(int argc, char** argv) {
     }
   }
   if (args.command.empty()) usageError("no command given");
-  if (args.command == "watch" && !count_given) args.count = 0;
+  // watch and record run until stopped unless --count is given.
+  if ((args.command == "watch" || args.command == "record") && !count_given) args.count = 0;
   return args;
 }
 
@@ -229,6 +233,9 @@ int printStatus(SensorClient& client, const Args& args) {
   std::printf("frames dropped:   %llu\n", static_cast<unsigned long long>(s->frames_dropped));
   std::printf("sets dropped:     %llu\n", static_cast<unsigned long long>(s->sets_dropped));
   std::printf("sets incomplete:  %llu\n", static_cast<unsigned long long>(s->sets_incomplete));
+  std::printf("recording:        %s (%llu sets recorded)\n",
+              s->recording.empty() ? "-" : s->recording.c_str(),
+              static_cast<unsigned long long>(s->sets_recorded));
   std::printf("last error:       %s\n", s->last_error.empty() ? "-" : s->last_error.c_str());
   return 0;
 }
@@ -272,6 +279,22 @@ int run(const Args& args) {
     const int rc = sendCommand(client, args, Command::kStart, args.pattern, 0);
     if (rc == 0) std::printf("scanning continuously; 'slctl stop' ends it\n");
     return rc;
+  }
+  if (args.command == "record") {
+    if (args.positional.size() != 1) usageError("usage: slctl record NAME [--count N]");
+    const int count = args.count;
+    if (count < 0) usageError("record --count must be >= 0");
+    const auto answer = client.request(Command::kStart, args.pattern, count, toMs(args.timeout_s),
+                                       args.positional[0]);
+    if (!answer) return noDaemon(args);
+    if (!answer->accepted) {
+      std::cerr << "slctl: request rejected (" << sl::daemon::toString(answer->code)
+                << "): " << answer->reason << "\n";
+      return 4;
+    }
+    std::printf("recording '%s' (%s); 'slctl stop' ends it\n", args.positional[0].c_str(),
+                count ? (std::to_string(count) + " scans").c_str() : "until stop");
+    return 0;
   }
   if (args.command == "stop") {
     const int rc = sendCommand(client, args, Command::kStop, "", 0);

@@ -35,6 +35,8 @@ struct StatusInfo {
   std::uint64_t scans_done = 0, scans_requested = 0;
   double scan_rate_hz = 0;
   std::uint64_t frames_dropped = 0, sets_dropped = 0, sets_incomplete = 0;
+  std::string recording;
+  std::uint64_t sets_recorded = 0;
   std::string last_error;
   std::vector<std::string> patterns;
   pipeline::TimestampNs stamp_ns = 0;
@@ -57,8 +59,10 @@ class SensorClient {
   bool waitForDaemon(std::chrono::milliseconds timeout);
 
   // Sends a request and waits for its reply; nullopt on timeout.
+  // `recording`: with kStart, also record the image sets under that name.
   std::optional<CommandReplyInfo> request(Command command, const std::string& pattern, int count,
-                                          std::chrono::milliseconds timeout);
+                                          std::chrono::milliseconds timeout,
+                                          const std::string& recording = "");
 
   // Next point cloud stamped at or after `not_before_ns`, converted back to
   // the pipeline type (mm); nullopt on timeout.

@@ -8,6 +8,7 @@
 
 #include "sl/daemon/aravis_config.h"
 #include "sl/daemon/hardware_config.h"
+#include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/codec.h"
@@ -36,6 +37,9 @@ struct DdsConfig {
 struct RuntimeConfig {
   int queue_depth = 2;   // image sets / clouds waiting between stages (drop oldest)
   std::string default_pattern;  // selected at startup; first pattern if empty
+  // Recordings requested over DDS go to <recording_root>/<name>; absolute
+  // after loading (a relative key is resolved against the config file).
+  std::string recording_root = "recordings";
 };
 
 struct DaemonConfig {
@@ -44,6 +48,7 @@ struct DaemonConfig {
   std::string sensor = "sim";  // "sim" or "hardware"
   drivers::SimConfig sim;
   HardwareConfig hardware;  // sensor: hardware (projector, trigger)
+  drivers::ReplayConfig replay;  // sensor: replay (a recording played back)
   AravisSensorConfig aravis;  // sensor: hardware / fake_gige (cameras)
   // Calibration used by the triangulator. For the simulated sensor it
   // defaults to the simulated rig (perfect calibration).

@@ -48,6 +48,8 @@ struct EngineStatus {
   std::uint64_t frames_dropped = 0;   // frames lost before grouping (queue overflow, unmatched)
   std::uint64_t sets_dropped = 0;     // image sets or clouds dropped by a full queue
   std::uint64_t sets_incomplete = 0;  // sequences purged before all frames arrived
+  std::string recording;              // recording in progress ("" = none)
+  std::uint64_t sets_recorded = 0;    // since start-up
   std::string last_error;
 };
 
@@ -78,8 +80,10 @@ class ScanEngine {
   ScanEngine(const ScanEngine&) = delete;
   ScanEngine& operator=(const ScanEngine&) = delete;
 
-  // Starts `count` scans (0 = until stop) of `pattern` (empty = current).
-  CommandResult start(const std::string& pattern, int count);
+  // Starts `count` scans (0 = until stop) of `pattern` (empty = current);
+  // with a `recording` name, the image sets are also written to
+  // <runtime.recording_root>/<recording> until the request ends.
+  CommandResult start(const std::string& pattern, int count, const std::string& recording = "");
   CommandResult stop();
   // Selects the pattern for the next start(); during a continuous scan it
   // switches at once (the sequence in progress is abandoned; no image set
