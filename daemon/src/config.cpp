@@ -14,6 +14,7 @@
 #include "pattern_config_yaml.h"
 #include "sl/daemon/calibration_io.h"
 #include "aravis_config.h"
+#include "sl/drivers/recording.h"
 #include "yaml_reader.h"
 
 namespace sl::daemon {
@@ -147,21 +148,56 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   m.done();
 }
 
+// `replay:` {dir, loop}. Returns the recording's camera frame rate (from the
+// first set's frame stamps), which the synchroniser's windows need.
+double parseReplay(const YamlMap& m, const std::filesystem::path& base_dir,
+                   drivers::ReplayConfig& replay) {
+  std::filesystem::path dir(m.get<std::string>("dir"));
+  if (dir.is_relative()) dir = base_dir / dir;
+  replay.dir = dir.lexically_normal().string();
+  replay.loop = m.get<bool>("loop", replay.loop);
+  m.done();
+  std::vector<std::string> sets;
+  try {
+    sets = drivers::listRecordedSets(replay.dir);
+  } catch (const std::exception& e) {
+    m.fail("dir", e.what());
+  }
+  if (sets.empty()) m.fail("dir", "the recording '" + replay.dir + "' holds no image sets");
+  pipeline::ImageSet first;
+  try {
+    first = drivers::readRecordedSet(sets.front(), /*load_images=*/false);
+  } catch (const std::exception& e) {
+    m.fail("dir", e.what());
+  }
+  const auto& stamps = first.cameras.front().stamps_ns;
+  if (stamps.size() < 2) return 30.0;
+  const double interval_s = (stamps.back() - stamps.front()) * 1e-9 / double(stamps.size() - 1);
+  if (!(interval_s > 0)) m.fail("dir", "the recording's frame stamps do not increase");
+  return 1.0 / interval_s;
+}
+
 DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
                        const std::filesystem::path& base_dir) {
   DaemonConfig config;
   config.source_path = origin;
   const YamlMap root(root_node, origin, "");
   config.sensor = root.get<std::string>("sensor", config.sensor);
-  if (config.sensor != "sim" && config.sensor != "hardware" && config.sensor != "fake_gige")
+  if (config.sensor != "sim" && config.sensor != "hardware" && config.sensor != "fake_gige" &&
+      config.sensor != "replay")
     root.fail("sensor", "unknown sensor '" + config.sensor +
-                            "' (supported: sim, hardware, fake_gige)");
-  const bool simulated = config.sensor != "hardware";  // fake_gige renders with the simulator
+                            "' (supported: sim, hardware, fake_gige, replay)");
+  // fake_gige renders with the simulator; replay plays a recording.
+  const bool simulated = config.sensor == "sim" || config.sensor == "fake_gige";
   if (simulated) parseSim(root.map("sim"), config.sim);
+  const bool replay = config.sensor == "replay";
+  double replay_fps = 0;
+  if (replay) replay_fps = parseReplay(root.map("replay"), base_dir, config.replay);
 
   const std::string calibration = root.get<std::string>("calibration", "sim");
   if (calibration == "sim") {
-    if (!simulated) root.fail("calibration", "a hardware sensor needs a calibration file");
+    if (!simulated)
+      root.fail("calibration", "a " + config.sensor + " sensor needs a calibration file");
     config.calibration = config.sim.rig;
   } else {
     std::filesystem::path path(calibration);
@@ -178,11 +214,12 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parsePatterns(root, config.calibration.projector, base_dir, config.patterns);
   config.sim.patterns = config.patterns;
   if (config.sensor == "hardware") parseHardware(root, config);
-  if (config.sensor != "sim") parseAravisSection(root, config);
+  if (config.sensor == "hardware" || config.sensor == "fake_gige") parseAravisSection(root, config);
   parseDecoder(root.optionalMap("decoder"), config.decoder);
   parseTriangulator(root.optionalMap("triangulator"), config.triangulator);
   parseSynchroniser(root.optionalMap("synchroniser"),
                     config.sensor == "hardware" ? hardwareImageRate(root, config)
+                    : replay                    ? replay_fps
                                                 : config.sim.camera_fps,
                     config.synchroniser);
   parseDds(root.optionalMap("dds"), config.dds);

@@ -6,6 +6,7 @@
 #include "aravis_devices.h"
 #include "sl/drivers/camera_stamp_trigger.h"
 #include "sl/drivers/lightcrafter4500.h"
+#include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/versavis.h"
 
@@ -25,6 +26,35 @@ EngineDevices openSimulated(const DaemonConfig& config, std::shared_ptr<void>& k
   devices.cameras.push_back(sim->camera());
   devices.projector = sim->projector();
   devices.trigger = sim->triggerSource();
+  return devices;
+}
+
+// A recording played back (sensor: replay). Every recorded pattern must be
+// one the config can decode.
+EngineDevices openReplay(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
+  std::shared_ptr<drivers::ReplaySensor> replay;
+  try {
+    replay = drivers::ReplaySensor::open(config.replay);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(config.source_path + ": replay: " + e.what());
+  }
+  keep_alive = replay;
+  EngineDevices devices;
+  devices.cameras = replay->cameras();
+  devices.projector = replay->projector();
+  devices.trigger = replay->triggerSource();
+  const auto& camera = *devices.cameras.front();
+  if (camera.width() != config.calibration.camera.width ||
+      camera.height() != config.calibration.camera.height)
+    throw std::runtime_error(config.source_path + ": replay: the recording's images are " +
+                             std::to_string(camera.width()) + "x" + std::to_string(camera.height()) +
+                             ", the calibration's camera " +
+                             std::to_string(config.calibration.camera.width) + "x" +
+                             std::to_string(config.calibration.camera.height));
+  for (const auto& sequence : devices.projector->sequences())
+    if (!config.findPattern(sequence.name))
+      throw std::runtime_error(config.source_path + ": replay: the recording holds pattern '" +
+                               sequence.name + "', which the config's patterns do not define");
   return devices;
 }
 
@@ -74,6 +104,7 @@ EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& kee
   if (config.sensor == "sim") return openSimulated(config, keep_alive);
   if (config.sensor == "hardware") return openHardware(config);
   if (config.sensor == "fake_gige") return openFakeGige(config, keep_alive);
+  if (config.sensor == "replay") return openReplay(config, keep_alive);
   throw std::runtime_error("sensor '" + config.sensor + "' is not supported by this build");
 }
 

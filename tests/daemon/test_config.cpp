@@ -155,3 +155,14 @@ TEST_CASE("calibration files that cannot be used are one clear error") {
                     Catch::Contains("key 'camera.height' is required"));
   std::remove(bad.c_str());
 }
+
+TEST_CASE("sensor: replay needs a readable recording and a calibration file") {
+  std::string text = shippedConfig();
+  text.replace(text.find("sensor: sim"), 11, "sensor: replay\nreplay: {dir: /nonexistent/rec}");
+  std::string message = errorOf(text);
+  CHECK(message.find("key 'replay.dir': /nonexistent/rec: not a recording") != std::string::npos);
+  text = shippedConfig();
+  text.replace(text.find("sensor: sim"), 11, "sensor: replay");
+  message = errorOf(text);
+  CHECK(message.find("key 'replay' is required") != std::string::npos);
+}

@@ -90,6 +90,8 @@ void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipelin
 
 std::vector<std::string> listRecordedSets(const std::string& dir) {
   const fs::path info = fs::path(dir) / "recording.yml";
+  if (!fs::exists(info))
+    throw std::runtime_error(dir + ": not a recording (no recording.yml)");
   cv::FileStorage in;
   try {
     in.open(info.string(), cv::FileStorage::READ);
@@ -111,6 +113,7 @@ std::vector<std::string> listRecordedSets(const std::string& dir) {
 
 pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images) {
   const std::string meta = (fs::path(set_dir) / "meta.yml").string();
+  if (!fs::exists(meta)) throw std::runtime_error(meta + ": missing");
   cv::FileStorage in;
   try {
     in.open(meta, cv::FileStorage::READ);
