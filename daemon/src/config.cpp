@@ -139,6 +139,23 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   m.done();
 }
 
+void parseMotion(const YamlMap& m, MotionConfig& motion) {
+  motion.enabled = m.get<bool>("enabled", motion.enabled);
+  auto& o = motion.options;
+  const std::string axis = m.get<std::string>("axis", "x");
+  if (axis == "x") o.axis = pipeline::MotionCompensationOptions::Axis::kX;
+  else if (axis == "y") o.axis = pipeline::MotionCompensationOptions::Axis::kY;
+  else m.fail("axis", "must be x or y (the image axis the scene moves along), not '" + axis + "'");
+  o.reference_frame = m.get<int>("reference_frame", o.reference_frame);
+  if (o.reference_frame < -1) m.fail("reference_frame", "must be -1 (middle frame) or a frame index");
+  o.subsample = m.get<int>("subsample", o.subsample);
+  if (o.subsample != 1 && o.subsample != 2 && o.subsample != 4)
+    m.fail("subsample", "must be 1, 2 or 4");
+  o.window = m.get<bool>("window", o.window);
+  o.max_shift_px = positive(m, "max_shift_px", o.max_shift_px);
+  m.done();
+}
+
 void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   r.queue_depth = m.get<int>("queue_depth", r.queue_depth);
   if (r.queue_depth < 1 || r.queue_depth > 64) m.fail("queue_depth", "must be in 1..64");
@@ -222,6 +239,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
                     : replay                    ? replay_fps
                                                 : config.sim.camera_fps,
                     config.synchroniser);
+  parseMotion(root.optionalMap("motion_compensation"), config.motion);
   parseDds(root.optionalMap("dds"), config.dds);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   if (std::filesystem::path(config.runtime.recording_root).is_relative())

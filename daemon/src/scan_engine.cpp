@@ -8,6 +8,7 @@
 #include "recorder.h"
 #include "sl/daemon/bounded_queue.h"
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/motion_compensation.h"
 #include "sl/pipeline/synchroniser.h"
 #include "sl/pipeline/triangulator.h"
 
@@ -83,7 +84,8 @@ struct ScanEngine::Impl {
         events(kEventQueueCapacity),
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
-        triangulator(config.calibration, config.triangulator) {
+        triangulator(config.calibration, config.triangulator),
+        motion(config.motion.options) {
     for (const auto& p : config.patterns)
       decoders.emplace(p.name, pipeline::Decoder(p, config.decoder));
     current_pattern = config.runtime.default_pattern;
@@ -108,6 +110,7 @@ struct ScanEngine::Impl {
   // --- stages, each used by one thread only ---
   std::map<std::string, pipeline::Decoder> decoders;               // processing thread
   pipeline::Triangulator triangulator;                             // processing thread
+  pipeline::MotionCompensator motion;                              // processing thread
 
   // --- control state ---
   mutable std::mutex mutex;
@@ -215,6 +218,19 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     std::optional<SetItem> item = sets.pop(50ms);
     if (!item || item->generation != generation.load()) continue;
     recorder.record(item->set);  // a no-op unless this request records
+    // Motion compensation aligns every frame with the reference frame of its
+    // sequence; the cloud is then stamped with the reference frame's time.
+    if (config.motion.enabled) {
+      try {
+        pipeline::MotionEstimate estimate;
+        item->set = motion.compensate(*item->set, &estimate);
+        if (!estimate.all_within_limit)
+          recordError("motion compensation: a shift beyond max_shift_px was ignored");
+      } catch (const std::exception& e) {
+        recordError(std::string("motion compensation: ") + e.what());
+        continue;
+      }
+    }
     const pipeline::ImageSet& set = *item->set;
     try {
       const auto decoder = decoders.find(set.pattern_name);

@@ -12,6 +12,7 @@
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/motion_compensation.h"
 #include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/synchroniser.h"
 #include "sl/pipeline/triangulator.h"
@@ -32,6 +33,12 @@ struct DdsConfig {
   bool publish_projector_maps = false;
   bool publish_image_sets = false;
   double status_period_s = 1.0;
+};
+
+// Linear-motion compensation (paper section 2.4.2), off by default.
+struct MotionConfig {
+  bool enabled = false;
+  pipeline::MotionCompensationOptions options;
 };
 
 struct RuntimeConfig {
@@ -57,6 +64,7 @@ struct DaemonConfig {
   pipeline::DecoderOptions decoder;
   pipeline::TriangulatorOptions triangulator;
   pipeline::SynchroniserOptions synchroniser;
+  MotionConfig motion;
   DdsConfig dds;
   RuntimeConfig runtime;
 
