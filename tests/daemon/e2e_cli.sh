@@ -58,8 +58,18 @@ wait "$listener_pid" || { cat "$work/listener.log"; fail "C listener did not rec
 cat "$work/listener.log"
 [ "$(grep -c '1440 x 1080' "$work/listener.log")" -ge 3 ] || fail "C listener output unexpected"
 
+# One organized PCD scan: header fields and exact payload size.
+"$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 1 --format pcd --units m --out "$work/pcd"
+pcd="$work/pcd/scan_0001.pcd"
+head -c 400 "$pcd" | grep -q "^WIDTH 1440$" || fail "pcd: no WIDTH 1440"
+head -c 400 "$pcd" | grep -q "^HEIGHT 1080$" || fail "pcd: no HEIGHT 1080"
+head -c 400 "$pcd" | grep -q "^DATA binary$" || fail "pcd: not binary"
+header_bytes=$(grep -a -b -m1 "^DATA binary$" "$pcd" | cut -d: -f1)
+expected=$((header_bytes + 12 + 1440 * 1080 * 16))
+[ "$(stat -c %s "$pcd")" -eq "$expected" ] || fail "pcd: size $(stat -c %s "$pcd"), expected $expected"
+
 "$bin/tools/slctl" --ns "$ns" status | tee "$work/status.log"
-grep -q "scans: *3 of 3" "$work/status.log" || fail "status does not show 3 of 3 scans"
+grep -q "scans: *1 of 1" "$work/status.log" || fail "status does not show 1 of 1 scans"
 
 kill -TERM "$daemon_pid"
 for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done

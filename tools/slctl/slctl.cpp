@@ -28,8 +28,9 @@ using sl::daemon::SensorClient;
 constexpr const char* kUsage =
     "usage: slctl [options] COMMAND\n"
     "commands:\n"
-    "  scan --count N --out DIR [--pattern NAME] [--units mm|m]\n"
-    "                     take N scans, write DIR/scan_0001.ply ... (binary PLY, finite points)\n"
+    "  scan --count N --out DIR [--pattern NAME] [--units mm|m] [--format ply|pcd]\n"
+    "                     take N scans, write DIR/scan_0001.ply ... (binary PLY: finite\n"
+    "                     points; binary PCD: organized, NaN for invalid pixels)\n"
     "  start [--pattern NAME]  scan continuously until stop\n"
     "  record NAME [--count N] [--pattern P]  scan and record the image sets under\n"
     "                     NAME (in the daemon's runtime.recording_root) until N scans\n"
@@ -56,6 +57,7 @@ struct Args {
   std::string out;
   std::string pattern;
   sl::tools::LengthUnit unit = sl::tools::LengthUnit::kMillimetre;
+  bool pcd = false;
 };
 
 [[noreturn]] void usageError(const std::string& message) {
@@ -104,6 +106,11 @@ Args parseArgs(int argc, char** argv) {
       args.out = value();
     } else if (a == "--pattern") {
       args.pattern = value();
+    } else if (a == "--format") {
+      const std::string v = value();
+      if (v == "ply") args.pcd = false;
+      else if (v == "pcd") args.pcd = true;
+      else usageError("--format must be ply or pcd, not '" + v + "'");
     } else if (a == "--units") {
       const std::string v = value();
       if (v == "mm") args.unit = sl::tools::LengthUnit::kMillimetre;
@@ -195,9 +202,10 @@ int scan(SensorClient& client, const Args& args) {
       return 1;
     }
     char name[32];
-    std::snprintf(name, sizeof name, "scan_%04d.ply", i);
+    std::snprintf(name, sizeof name, "scan_%04d.%s", i, args.pcd ? "pcd" : "ply");
     const std::string path = (std::filesystem::path(args.out) / name).string();
-    const std::size_t written = sl::tools::writePly(*cloud, path, args.unit);
+    const std::size_t written = args.pcd ? sl::tools::writePcd(*cloud, path, args.unit)
+                                         : sl::tools::writePly(*cloud, path, args.unit);
     double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin, zsum = 0;
     for (const auto& p : cloud->points) {
       if (!std::isfinite(p.z)) continue;
