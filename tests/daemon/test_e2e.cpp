@@ -246,12 +246,24 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &receive_timeout, sizeof receive_timeout);
 
   setenv("NOTIFY_SOCKET", socket_path.c_str(), 1);
+  setenv("WATCHDOG_USEC", "300000", 1);  // 0.3 s: pings every 0.1 s while healthy
   sl::test::DaemonProcess daemon(config_path);
   unsetenv("NOTIFY_SOCKET");
+  unsetenv("WATCHDOG_USEC");
   REQUIRE(daemon.started());
   char buffer[256] = {};
   const ssize_t n = ::recv(fd, buffer, sizeof buffer - 1, 0);
   CHECK(std::string(buffer, n > 0 ? n : 0) == "READY=1");
+  // Watchdog pings follow, well within the interval systemd asked for.
+  int pings = 0;
+  const auto watch_start = std::chrono::steady_clock::now();
+  while (pings < 5 && std::chrono::steady_clock::now() - watch_start < 3s) {
+    const ssize_t m = ::recv(fd, buffer, sizeof buffer - 1, 0);
+    if (m > 0 && std::string(buffer, m) == "WATCHDOG=1") ++pings;
+  }
+  const auto watch_elapsed = std::chrono::steady_clock::now() - watch_start;
+  CHECK(pings == 5);
+  CHECK(watch_elapsed < 1500ms);  // 5 pings at 0.1 s intervals
   // The daemon answers requests once it said it is ready.
   sl::daemon::ClientOptions options;
   options.ns = ns;
@@ -264,8 +276,11 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   const auto exit_status = daemon.terminate(5s);
   REQUIRE(exit_status);
   CHECK(*exit_status == 0);
-  const ssize_t m = ::recv(fd, buffer, sizeof buffer - 1, 0);
-  CHECK(std::string(buffer, m > 0 ? m : 0) == "STOPPING=1");
+  // STOPPING=1 comes after any watchdog pings still queued.
+  std::string last;
+  for (ssize_t m; (m = ::recv(fd, buffer, sizeof buffer - 1, MSG_DONTWAIT)) > 0;)
+    last.assign(buffer, m);
+  CHECK(last == "STOPPING=1");
   ::close(fd);
   ::unlink(socket_path.c_str());
 }

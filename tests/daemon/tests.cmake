@@ -9,6 +9,10 @@ sl_add_test(test_e2e daemon/test_e2e.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
 add_dependencies(test_e2e sl_sensord)
 
+# ScanEngine health (feeds the systemd watchdog), without DDS.
+sl_add_test(test_engine daemon/test_engine.cpp)
+target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
+
 # Config loading and its error messages.
 sl_add_test(test_config daemon/test_config.cpp)
 target_link_libraries(test_config PRIVATE sl_daemon)
