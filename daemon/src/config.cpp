@@ -135,6 +135,7 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   d.frame_id = m.get<std::string>("frame_id", d.frame_id);
   d.publish_projector_maps = m.get<bool>("publish_projector_maps", d.publish_projector_maps);
   d.publish_image_sets = m.get<bool>("publish_image_sets", d.publish_image_sets);
+  d.publish_images = m.get<bool>("publish_images", d.publish_images);
   d.status_period_s = positive(m, "status_period_s", d.status_period_s);
   m.done();
 }

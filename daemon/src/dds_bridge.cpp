@@ -1,5 +1,6 @@
 #include "sl/daemon/dds_bridge.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -54,12 +55,14 @@ sl_msgs_msg_State toState(ScanState s) {
 
 TopicNames TopicNames::forNamespace(const std::string& ns) {
   return {"rt/" + ns + "/points", "rt/" + ns + "/projector_maps", "rt/" + ns + "/image_sets",
-          "rt/" + ns + "/status", "rq/" + ns + "/commandRequest", "rr/" + ns + "/commandReply"};
+          "rt/" + ns + "/status", "rq/" + ns + "/commandRequest", "rr/" + ns + "/commandReply",
+          "rt/" + ns + "/depth/image", "rt/" + ns + "/shading/image", "rt/" + ns + "/camera_info"};
 }
 
 struct DdsBridge::Impl {
-  explicit Impl(const DdsConfig& config)
+  Impl(const DdsConfig& config, const pipeline::PinholeModel& camera)
       : config(config),
+        camera(camera),
         names(TopicNames::forNamespace(config.ns)),
         participant(config.domain_id),
         points_topic(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc),
@@ -67,6 +70,9 @@ struct DdsBridge::Impl {
         status_topic(participant, names.status, sl_msgs_msg_Status_desc),
         request_topic(participant, names.request, sl_msgs_msg_CommandRequest_desc),
         reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
+        depth_topic(participant, names.depth_image, sensor_msgs_msg_dds__Image__desc),
+        shading_topic(participant, names.shading_image, sensor_msgs_msg_dds__Image__desc),
+        info_topic(participant, names.camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
         // Clouds: reliable, a short history; a slow reader makes a write
         // time out (counted) rather than stall the pipeline for long.
         points_writer(participant, points_topic,
@@ -78,6 +84,12 @@ struct DdsBridge::Impl {
                       dds::Qos().reliable().transientLocal().keepLast(1).xcdr1()),
         request_reader(participant, request_topic, dds::Qos().reliable().keepLast(64)),
         reply_writer(participant, reply_topic, dds::Qos().reliable().keepLast(64).xcdr1()),
+        // Images: as the clouds (reliable, short history, bounded blocking).
+        depth_writer(participant, depth_topic,
+                     dds::Qos().reliable(DDS_MSECS(200)).keepLast(2).xcdr1()),
+        shading_writer(participant, shading_topic,
+                       dds::Qos().reliable(DDS_MSECS(200)).keepLast(2).xcdr1()),
+        info_writer(participant, info_topic, dds::Qos().reliable().keepLast(2).xcdr1()),
         request_condition(request_reader),
         wake(participant),
         waitset(participant) {
@@ -86,6 +98,7 @@ struct DdsBridge::Impl {
   }
 
   const DdsConfig config;
+  const pipeline::PinholeModel camera;
   const TopicNames names;
   dds::Participant participant;
   dds::Topic<PointCloud2> points_topic;
@@ -93,11 +106,17 @@ struct DdsBridge::Impl {
   dds::Topic<Status> status_topic;
   dds::Topic<Request> request_topic;
   dds::Topic<Reply> reply_topic;
+  dds::Topic<Image> depth_topic;
+  dds::Topic<Image> shading_topic;
+  dds::Topic<CameraInfo> info_topic;
   dds::Writer<PointCloud2> points_writer;
   dds::Writer<Maps> maps_writer;
   dds::Writer<Status> status_writer;
   dds::Reader<Request> request_reader;
   dds::Writer<Reply> reply_writer;
+  dds::Writer<Image> depth_writer;
+  dds::Writer<Image> shading_writer;
+  dds::Writer<CameraInfo> info_writer;
   dds::ReadCondition request_condition;
   dds::GuardCondition wake;
   dds::WaitSet waitset;
@@ -109,6 +128,7 @@ struct DdsBridge::Impl {
 
   void publishCloud(const pipeline::PointCloud& cloud);
   void publishMaps(const pipeline::ProjectorMaps& maps, const ScanResult& result);
+  void publishImages(const ScanResult& result);
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
   void answer(ScanEngine& engine, const Request& request);
 };
@@ -173,6 +193,57 @@ void DdsBridge::Impl::publishMaps(const pipeline::ProjectorMaps& maps, const Sca
   borrow(msg.modulation, mod.data(), n);
   borrow(msg.status, status.ptr<std::uint8_t>(), n);
   if (!maps_writer.write(msg)) ++writes_timed_out;
+}
+
+// Depth (32FC1, metres, NaN invalid: the ROS depth image convention) and
+// shading (mono8: the offset A scaled from the camera's bit depth) images of
+// one scan, and the triangulating camera's calibration.
+void DdsBridge::Impl::publishImages(const ScanResult& result) {
+  const pipeline::PointCloud& cloud = *result.cloud;
+  const std::size_t n = cloud.points.size();
+  std::vector<float> depth(n);
+  std::vector<std::uint8_t> shading(n);
+  const int bit_depth = result.images ? result.images->cameras.front().bit_depth : 8;
+  const float to_8bit = 255.0f / float((1 << bit_depth) - 1);
+  for (std::size_t i = 0; i < n; ++i) {
+    depth[i] = cloud.points[i].z * 1e-3f;
+    const float a = cloud.points[i].intensity * to_8bit;
+    shading[i] = std::isfinite(a) ? static_cast<std::uint8_t>(std::clamp(a + 0.5f, 0.0f, 255.0f)) : 0;
+  }
+  std::string frame_id = cloud.frame_id, enc_depth = "32FC1", enc_mono = "mono8";
+  auto image = [&](std::string& encoding, void* data, std::uint32_t bytes_per_pixel) {
+    Image msg{};
+    msg.header.stamp = toTime(cloud.stamp_ns);
+    msg.header.frame_id = frame_id.data();
+    msg.height = static_cast<std::uint32_t>(cloud.height);
+    msg.width = static_cast<std::uint32_t>(cloud.width);
+    msg.encoding = encoding.data();
+    msg.is_bigendian = 0;
+    msg.step = msg.width * bytes_per_pixel;
+    borrow(msg.data, static_cast<std::uint8_t*>(data), n * bytes_per_pixel);
+    return msg;
+  };
+  if (!depth_writer.write(image(enc_depth, depth.data(), 4))) ++writes_timed_out;
+  if (!shading_writer.write(image(enc_mono, shading.data(), 1))) ++writes_timed_out;
+
+  std::string model = "plumb_bob";
+  std::vector<double> d(camera.distortion.begin(), camera.distortion.end());
+  CameraInfo info{};
+  info.header.stamp = toTime(cloud.stamp_ns);
+  info.header.frame_id = frame_id.data();
+  info.height = static_cast<std::uint32_t>(camera.height);
+  info.width = static_cast<std::uint32_t>(camera.width);
+  info.distortion_model = model.data();
+  borrow(info.d, d.data(), d.size());
+  const double k[9] = {camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1};
+  std::copy(std::begin(k), std::end(k), info.k);
+  const double r[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  std::copy(std::begin(r), std::end(r), info.r);
+  const double p[12] = {camera.fx, 0, camera.cx, 0, 0, camera.fy, camera.cy, 0, 0, 0, 1, 0};
+  std::copy(std::begin(p), std::end(p), info.p);
+  info.binning_x = info.binning_y = 0;
+  info.roi = {0, 0, 0, 0, false};
+  info_writer.write(info);
 }
 
 void DdsBridge::Impl::publishStatus(const EngineStatus& s,
@@ -242,12 +313,14 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   reply_writer.write(reply);
 }
 
-DdsBridge::DdsBridge(const DdsConfig& config) : impl_(std::make_unique<Impl>(config)) {}
+DdsBridge::DdsBridge(const DdsConfig& config, const pipeline::PinholeModel& camera)
+    : impl_(std::make_unique<Impl>(config, camera)) {}
 DdsBridge::~DdsBridge() = default;
 
 void DdsBridge::publish(const ScanResult& result) {
   if (result.cloud) impl_->publishCloud(*result.cloud);
   if (impl_->config.publish_projector_maps && result.maps) impl_->publishMaps(*result.maps, result);
+  if (impl_->config.publish_images && result.cloud) impl_->publishImages(result);
 }
 
 void DdsBridge::serve(ScanEngine& engine) {

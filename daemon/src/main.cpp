@@ -27,7 +27,7 @@ constexpr const char* kUsage =
 int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
   const DaemonConfig config = loadConfig(config_path);
-  DdsBridge bridge(config.dds);
+  DdsBridge bridge(config.dds, config.calibration.camera);
   std::shared_ptr<void> device_owner;
   EngineDevices devices = openDevices(config, device_owner);
   ScanEngine engine(config, std::move(devices),

@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "builtin_interfaces/msg/Time.h"
+#include "sensor_msgs/msg/CameraInfo.h"
+#include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl_msgs/msg/CommandReply.h"
@@ -20,6 +22,8 @@ namespace sl::daemon::msg {
 
 using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
 using PointField = sensor_msgs_msg_dds__PointField_;
+using Image = sensor_msgs_msg_dds__Image_;
+using CameraInfo = sensor_msgs_msg_dds__CameraInfo_;
 using Request = sl_msgs_msg_CommandRequest;
 using Reply = sl_msgs_msg_CommandReply;
 using Status = sl_msgs_msg_Status;

@@ -34,6 +34,8 @@
 #include <Eigen/Dense>
 
 #include "daemon_process.h"
+#include "sensor_msgs/msg/CameraInfo.h"
+#include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/client.h"
@@ -511,5 +513,95 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
   INFO("last error: " << status->last_error);
   CHECK((status->last_error.empty() ||
          status->last_error.find("beyond max_shift_px") != std::string::npos));
+  REQUIRE(daemon.terminate(5s) == 0);
+}
+
+// Depth and shading images and camera_info (ROS 2 types) for image tools.
+TEST_CASE("depth and shading images and camera_info accompany each cloud") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("images");
+  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("config/sim.yaml"));
+  root["dds"]["namespace"] = ns;
+  root["dds"]["publish_images"] = true;
+  const std::string path = "/tmp/sl_test_" + ns + ".yaml";
+  std::ofstream(path) << root;
+  const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(path);
+  sl::test::DaemonProcess daemon(path);
+  REQUIRE(daemon.started());
+
+  sl::dds::Participant participant(0);
+  using Image = sensor_msgs_msg_dds__Image_;
+  using Info = sensor_msgs_msg_dds__CameraInfo_;
+  sl::dds::Topic<Image> depth_topic(participant, "rt/" + ns + "/depth/image",
+                                    sensor_msgs_msg_dds__Image__desc);
+  sl::dds::Topic<Image> shading_topic(participant, "rt/" + ns + "/shading/image",
+                                      sensor_msgs_msg_dds__Image__desc);
+  sl::dds::Topic<Info> info_topic(participant, "rt/" + ns + "/camera_info",
+                                  sensor_msgs_msg_dds__CameraInfo__desc);
+  const auto qos = sl::dds::Qos().reliable().keepLast(4);
+  sl::dds::Reader<Image> depth_reader(participant, depth_topic, qos);
+  sl::dds::Reader<Image> shading_reader(participant, shading_topic, qos);
+  sl::dds::Reader<Info> info_reader(participant, info_topic, qos);
+  sl::daemon::ClientOptions options;
+  options.ns = ns;
+  sl::daemon::SensorClient client(options);
+  REQUIRE(client.waitForDaemon(20s));
+  REQUIRE(depth_reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(shading_reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(info_reader.waitForWriters(1, DDS_SECS(10)));
+
+  const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                      std::chrono::system_clock::now().time_since_epoch()).count();
+  REQUIRE(client.request(Command::kStart, "3+3_horizontal", 1, 5s)->accepted);
+  const auto cloud = client.receiveCloud(t0, 10s);
+  REQUIRE(cloud);
+  auto takeOne = [](auto& reader) {
+    for (int i = 0; i < 500; ++i) {
+      auto loan = reader.take(1);
+      if (!loan.empty() && loan.isValid(0)) return loan;
+      std::this_thread::sleep_for(10ms);
+    }
+    return decltype(reader.take(1)){};
+  };
+  auto depth = takeOne(depth_reader);
+  auto shading = takeOne(shading_reader);
+  auto info = takeOne(info_reader);
+  REQUIRE(!depth.empty());
+  REQUIRE(!shading.empty());
+  REQUIRE(!info.empty());
+
+  const Image& d = depth[0];
+  CHECK(std::string(d.encoding) == "32FC1");
+  CHECK(d.width == 1440);
+  CHECK(d.height == 1080);
+  CHECK(d.step == 1440 * 4);
+  CHECK(std::string(d.header.frame_id) == cloud->frame_id);
+  REQUIRE(d.data._length == 1440u * 1080u * 4u);
+  std::size_t mismatches = 0, valid = 0;
+  for (std::size_t i = 0; i < cloud->points.size(); ++i) {
+    float z;
+    std::memcpy(&z, d.data._buffer + 4 * i, 4);
+    const float expected = cloud->points[i].z;  // mm
+    if (std::isnan(expected)) {
+      mismatches += !std::isnan(z);
+    } else {
+      ++valid;
+      mismatches += !(std::abs(z * 1000.0f - expected) < 1e-3f);
+    }
+  }
+  CHECK(mismatches == 0);
+  CHECK(valid > 1'000'000);
+  const Image& s = shading[0];
+  CHECK(std::string(s.encoding) == "mono8");
+  CHECK(s.data._length == 1440u * 1080u);
+  const Info& ci = info[0];
+  CHECK(std::string(ci.distortion_model) == "plumb_bob");
+  REQUIRE(ci.d._length == 5);
+  CHECK(ci.d._buffer[0] == config.calibration.camera.distortion[0]);
+  CHECK(ci.k[0] == config.calibration.camera.fx);
+  CHECK(ci.k[2] == config.calibration.camera.cx);
+  CHECK(ci.k[4] == config.calibration.camera.fy);
+  CHECK(ci.p[10] == 1.0);
+  CHECK(ci.width == 1440);
   REQUIRE(daemon.terminate(5s) == 0);
 }

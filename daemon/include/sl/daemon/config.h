@@ -32,6 +32,8 @@ struct DdsConfig {
   std::string frame_id = "sl_camera_optical_frame";
   bool publish_projector_maps = false;
   bool publish_image_sets = false;
+  // Depth (32FC1, m) and shading (mono8) images and camera_info, ROS 2 types.
+  bool publish_images = false;
   double status_period_s = 1.0;
 };
 

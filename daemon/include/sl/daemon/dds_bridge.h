@@ -5,6 +5,9 @@
 // Topics (ns = DdsConfig::ns, default "sl"):
 //   rt/<ns>/points          sensor_msgs/PointCloud2 (ROS 2 wire format, XCDR1)
 //   rt/<ns>/projector_maps  sl_msgs ProjectorMaps (when enabled)
+//   rt/<ns>/depth/image     sensor_msgs/Image 32FC1, metres (when publish_images)
+//   rt/<ns>/shading/image   sensor_msgs/Image mono8, the fringe offset A (when publish_images)
+//   rt/<ns>/camera_info     sensor_msgs/CameraInfo of the triangulating camera (when publish_images)
 //   rt/<ns>/status          sl_msgs Status (transient-local)
 //   rq/<ns>/commandRequest  sl_msgs CommandRequest (from clients)
 //   rr/<ns>/commandReply    sl_msgs CommandReply (one per request)
@@ -15,11 +18,13 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
+#include "sl/pipeline/camera_model.h"
 
 namespace sl::daemon {
 
 struct TopicNames {
   std::string points, projector_maps, image_sets, status, request, reply;
+  std::string depth_image, shading_image, camera_info;
   static TopicNames forNamespace(const std::string& ns);
 };
 
@@ -29,7 +34,8 @@ class DdsBridge {
  public:
   // Creates the participant, topics, writers and the request reader; throws
   // sl::dds::Error naming the failing call.
-  explicit DdsBridge(const DdsConfig& config);
+  // `camera`: the triangulating camera's model, for camera_info.
+  DdsBridge(const DdsConfig& config, const pipeline::PinholeModel& camera);
   ~DdsBridge();
 
   void publish(const ScanResult& result);
