@@ -121,6 +121,7 @@ struct DdsBridge::Impl {
   dds::GuardCondition wake;
   dds::WaitSet waitset;
   std::atomic<bool> stopping{false};
+  std::atomic<double> status_period_s{config.status_period_s};  // reloadable
   std::atomic<std::uint64_t> writes_timed_out{0};
 
   // Publish-thread scratch buffer (metres), reused between clouds.
@@ -326,8 +327,6 @@ void DdsBridge::publish(const ScanResult& result) {
 void DdsBridge::serve(ScanEngine& engine) {
   Impl& d = *impl_;
   using Clock = std::chrono::steady_clock;
-  const auto period = std::chrono::duration_cast<Clock::duration>(
-      std::chrono::duration<double>(d.config.status_period_s));
   std::uint64_t published_version = ~std::uint64_t{0};
   Clock::time_point next_periodic = Clock::now();
   const std::vector<std::string> patterns = engine.patterns();
@@ -343,10 +342,14 @@ void DdsBridge::serve(ScanEngine& engine) {
     if (status.version != published_version || Clock::now() >= next_periodic) {
       d.publishStatus(status, patterns);
       published_version = status.version;
+      const auto period = std::chrono::duration_cast<Clock::duration>(
+          std::chrono::duration<double>(d.status_period_s.load()));
       next_periodic = Clock::now() + period;
     }
   }
 }
+
+void DdsBridge::setStatusPeriod(double seconds) { impl_->status_period_s = seconds; }
 
 void DdsBridge::stop() {
   impl_->stopping = true;

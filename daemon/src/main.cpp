@@ -22,7 +22,40 @@ constexpr const char* kUsage =
     "  Runs the structured-light sensor daemon in the foreground.\n"
     "  --config FILE   YAML configuration (e.g. config/sim.yaml)\n"
     "  --help          this text\n"
-    "Topics and requests: see README.md. Stops cleanly on SIGINT/SIGTERM.\n";
+    "Topics and requests: see README.md. Stops cleanly on SIGINT/SIGTERM;\n"
+    "SIGHUP reloads the run-time settings (decoder, triangulator, motion_compensation,\n"
+    "dds.status_period_s) from FILE.\n";
+
+// SIGHUP: re-reads the config file and applies what can change at run time
+// (decoder, triangulator, motion_compensation, dds.status_period_s). A file
+// that does not load, or that changes anything else, is rejected as a whole
+// with a message; the daemon keeps running as it was.
+void reload(const std::string& path, const sl::daemon::DaemonConfig& running,
+            sl::daemon::ScanEngine& engine, sl::daemon::DdsBridge& bridge) {
+  using namespace sl::daemon;
+  systemdNotify("RELOADING=1");
+  try {
+    const DaemonConfig loaded = loadConfig(path);
+    const std::vector<std::string> changed = keysNeedingRestart(running, loaded);
+    if (!changed.empty()) {
+      std::string keys;
+      for (const auto& k : changed) keys += (keys.empty() ? "'" : ", '") + k + "'";
+      const std::string message = "config reload rejected: " + keys +
+                                  " changed, which needs a restart; nothing was applied";
+      logWarning(message);
+      engine.reportError(message);
+    } else {
+      engine.applyRuntimeSettings(loaded);
+      bridge.setStatusPeriod(loaded.dds.status_period_s);
+      logInfo("config reloaded from " + path +
+              " (decoder, triangulator, motion_compensation, dds.status_period_s)");
+    }
+  } catch (const std::exception& e) {
+    logWarning(std::string("config reload failed, keeping the running config: ") + e.what());
+    engine.reportError(std::string("config reload failed: ") + e.what());
+  }
+  systemdNotify("READY=1");
+}
 
 int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
@@ -44,7 +77,8 @@ int run(const std::string& config_path, const sigset_t& signals) {
   const auto tick = watchdog ? std::chrono::duration_cast<std::chrono::milliseconds>(*watchdog / 3)
                              : std::chrono::milliseconds(500);
   int signal_number = 0;
-  while (signal_number <= 0) {
+  while (signal_number <= 0 || signal_number == SIGHUP) {
+    if (signal_number == SIGHUP) reload(config_path, config, engine, bridge);
     timespec timeout{static_cast<time_t>(tick.count() / 1000),
                      static_cast<long>((tick.count() % 1000) * 1'000'000)};
     signal_number = sigtimedwait(&signals, nullptr, &timeout);
@@ -85,6 +119,7 @@ int main(int argc, char** argv) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   try {

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <deque>
+#include <optional>
 #include <map>
 #include <variant>
 
@@ -85,7 +86,8 @@ struct ScanEngine::Impl {
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
         triangulator(config.calibration, config.triangulator),
-        motion(config.motion.options) {
+        motion(config.motion.options),
+        motion_enabled(config.motion.enabled) {
     for (const auto& p : config.patterns)
       decoders.emplace(p.name, pipeline::Decoder(p, config.decoder));
     current_pattern = config.runtime.default_pattern;
@@ -111,6 +113,12 @@ struct ScanEngine::Impl {
   std::map<std::string, pipeline::Decoder> decoders;               // processing thread
   pipeline::Triangulator triangulator;                             // processing thread
   pipeline::MotionCompensator motion;                              // processing thread
+  bool motion_enabled = false;                                     // processing thread
+  // Settings from a config reload, applied by the processing thread before
+  // its next image set (guarded by mutex; the flag avoids taking it per set).
+  std::optional<DaemonConfig> pending_settings;
+  std::atomic<bool> settings_pending{false};
+  void applyPendingSettings();
 
   // --- control state ---
   mutable std::mutex mutex;
@@ -220,7 +228,8 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     recorder.record(item->set);  // a no-op unless this request records
     // Motion compensation aligns every frame with the reference frame of its
     // sequence; the cloud is then stamped with the reference frame's time.
-    if (config.motion.enabled) {
+    if (settings_pending) applyPendingSettings();
+    if (motion_enabled) {
       try {
         pipeline::MotionEstimate estimate;
         item->set = motion.compensate(*item->set, &estimate);
@@ -253,6 +262,28 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     } catch (const std::exception& e) {
       recordError("processing sequence " + std::to_string(set.sequence_id) + ": " + e.what());
     }
+  }
+}
+
+// Rebuilds the processing stages from reloaded run-time settings (decoder
+// thresholds, triangulator options, motion compensation). Processing thread.
+void ScanEngine::Impl::applyPendingSettings() {
+  std::optional<DaemonConfig> settings;
+  {
+    std::lock_guard lock(mutex);
+    settings.swap(pending_settings);
+    settings_pending = false;
+  }
+  if (!settings) return;
+  try {
+    std::map<std::string, pipeline::Decoder> rebuilt;
+    for (const auto& p : settings->patterns) rebuilt.emplace(p.name, pipeline::Decoder(p, settings->decoder));
+    triangulator = pipeline::Triangulator(settings->calibration, settings->triangulator);
+    decoders.swap(rebuilt);
+    motion = pipeline::MotionCompensator(settings->motion.options);
+    motion_enabled = settings->motion.enabled;
+  } catch (const std::exception& e) {
+    recordError(std::string("applying reloaded settings: ") + e.what());
   }
 }
 
@@ -466,6 +497,14 @@ std::vector<std::string> ScanEngine::patterns() const {
 }
 
 const DaemonConfig& ScanEngine::config() const { return impl_->config; }
+
+void ScanEngine::applyRuntimeSettings(const DaemonConfig& settings) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->pending_settings = settings;
+  impl_->settings_pending = true;
+}
+
+void ScanEngine::reportError(const std::string& message) { impl_->recordError(message); }
 
 EngineStatus ScanEngine::status() const {
   const Impl& d = *impl_;

@@ -67,6 +67,7 @@ class DaemonProcess {
     }
   }
   bool started() const { return pid_ > 0; }
+  void signal(int number) const { ::kill(pid_, number); }
 
   // Sends SIGTERM and waits up to `timeout`; returns the exit status, or
   // nullopt if the daemon had to be killed.

@@ -605,3 +605,61 @@ TEST_CASE("depth and shading images and camera_info accompany each cloud") {
   CHECK(ci.width == 1440);
   REQUIRE(daemon.terminate(5s) == 0);
 }
+
+// SIGHUP reloads the run-time settings; anything else is refused with a
+// message on the status topic, and the daemon keeps running.
+TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("reload");
+  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("config/sim.yaml"));
+  root["dds"]["namespace"] = ns;
+  const std::string path = "/tmp/sl_test_" + ns + ".yaml";
+  std::ofstream(path) << root;
+  sl::test::DaemonProcess daemon(path);
+  REQUIRE(daemon.started());
+  sl::daemon::ClientOptions options;
+  options.ns = ns;
+  sl::daemon::SensorClient client(options);
+  REQUIRE(client.waitForDaemon(20s));
+  auto scanValid = [&] {
+    const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                        std::chrono::system_clock::now().time_since_epoch()).count();
+    REQUIRE(client.request(Command::kStart, "", 1, 5s)->accepted);
+    const auto cloud = client.receiveCloud(t0, 10s);
+    REQUIRE(cloud);
+    return cloud->validCount();
+  };
+  auto lastError = [&] {
+    std::string error;
+    for (int i = 0; i < 30 && error.empty(); ++i)
+      if (const auto s = client.status(1s)) error = s->last_error;
+    return error;
+  };
+  const std::size_t before = scanValid();
+  CHECK(before > 1'000'000);
+
+  // A decoder threshold no pixel passes: applied without a restart.
+  root["decoder"]["min_modulation"] = 250;
+  std::ofstream(path) << root;
+  daemon.signal(SIGHUP);
+  std::this_thread::sleep_for(500ms);
+  CHECK(scanValid() < before / 100);
+
+  // A change that needs a restart: refused, named, nothing applied.
+  root["decoder"]["min_modulation"] = 8;
+  root["sim"]["seed"] = 2;
+  std::ofstream(path) << root;
+  daemon.signal(SIGHUP);
+  const std::string refused = lastError();
+  CHECK(refused.find("config reload rejected: 'sim'") != std::string::npos);
+  CHECK(scanValid() < before / 100);  // the threshold of the refused file was not applied
+
+  // A file that does not load: refused with the loader's message.
+  std::ofstream(path) << "sensor: [unclosed\n";
+  daemon.signal(SIGHUP);
+  std::string failed;
+  for (int i = 0; i < 30 && failed.find("reload failed") == std::string::npos; ++i)
+    if (const auto s = client.status(1s)) failed = s->last_error;
+  CHECK(failed.find("config reload failed") != std::string::npos);
+  REQUIRE(daemon.terminate(5s) == 0);
+}

@@ -73,6 +73,12 @@ struct DaemonConfig {
   const pipeline::PatternSpec* findPattern(const std::string& name) const;
 };
 
+// The top-level keys (dotted for dds.*) whose values differ between two
+// configs' texts, leaving out the keys a running daemon can take on a reload
+// (SIGHUP): decoder, triangulator, motion_compensation, dds.status_period_s.
+// Empty: `loaded` can be applied to a daemon running `running`.
+std::vector<std::string> keysNeedingRestart(const DaemonConfig& running, const DaemonConfig& loaded);
+
 // Loads and validates a config file. Throws ConfigError on a missing file,
 // malformed YAML, an unknown or unused key, a wrong type or an invalid value.
 DaemonConfig loadConfig(const std::string& path);

@@ -44,6 +44,7 @@ class DdsBridge {
   // status_period_s) until stop(). Blocks.
   void serve(ScanEngine& engine);
   void stop();
+  void setStatusPeriod(double seconds);  // any thread
 
  private:
   struct Impl;

@@ -90,7 +90,12 @@ class ScanEngine {
   // ever mixes two patterns). Busy during a finite request.
   CommandResult selectPattern(const std::string& pattern);
   std::vector<std::string> patterns() const;
-  const DaemonConfig& config() const;
+  const DaemonConfig& config() const;  // as loaded at start-up
+  // Uses the run-time settings of `settings` (decoder, triangulator, motion
+  // compensation) from the next image set on; its other parts are ignored.
+  void applyRuntimeSettings(const DaemonConfig& settings);
+  // Puts a message into the status topic's last_error.
+  void reportError(const std::string& message);
 
   EngineStatus status() const;
   // True while every thread has made progress within the last `max_age`
