@@ -38,15 +38,32 @@ inline std::string uniqueNamespace(const std::string& prefix) {
          std::to_string(std::chrono::steady_clock::now().time_since_epoch().count() % 100000);
 }
 
-// Writes config/sim.yaml with dds.namespace replaced (and projector maps
-// published if asked), and returns its path.
-inline std::string writeTestConfig(const std::string& ns, bool publish_maps = false) {
+inline std::int64_t nowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// config/sim.yaml with dds.namespace set to `ns`, for further edits.
+inline YAML::Node simConfig(const std::string& ns) {
   YAML::Node root = YAML::LoadFile(sourcePath("config/sim.yaml"));
   root["dds"]["namespace"] = ns;
-  root["dds"]["publish_projector_maps"] = publish_maps;
-  const std::string path = "/tmp/sl_test_" + ns + ".yaml";
+  return root;
+}
+
+// Writes `root` to /tmp/sl_test_<name>.yaml and returns the path.
+inline std::string writeConfigFile(const YAML::Node& root, const std::string& name) {
+  const std::string path = "/tmp/sl_test_" + name + ".yaml";
   std::ofstream(path) << root;
   return path;
+}
+
+// config/sim.yaml with dds.namespace replaced (and projector maps published
+// if asked), written to a file; returns its path.
+inline std::string writeTestConfig(const std::string& ns, bool publish_maps = false) {
+  YAML::Node root = simConfig(ns);
+  root["dds"]["publish_projector_maps"] = publish_maps;
+  return writeConfigFile(root, ns);
 }
 
 class DaemonProcess {

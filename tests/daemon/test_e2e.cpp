@@ -144,8 +144,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
   REQUIRE(client.waitForDaemon(20s));
 
   SECTION("three scans match the ground truth") {
-    const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                        std::chrono::system_clock::now().time_since_epoch()).count();
+    const auto t0 = sl::test::nowNs();
     const auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s);
     REQUIRE(reply);
     REQUIRE(reply->accepted);
@@ -211,8 +210,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     reply = client.request(Command::kStart, "3+3_horizontal", 1, 5s);
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kBusy);
-    const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                        std::chrono::system_clock::now().time_since_epoch()).count();
+    const auto t0 = sl::test::nowNs();
     CHECK(client.receiveCloud(t0, 10s));  // the continuous scan delivers
     reply = client.request(Command::kStop, "", 0, 5s);
     REQUIRE(reply);
@@ -387,11 +385,9 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
   std::filesystem::remove_all(root);
 
   // 1. Record three scans on the simulated sensor.
-  YAML::Node live = YAML::LoadFile(sl::test::sourcePath("config/sim.yaml"));
-  live["dds"]["namespace"] = ns;
+  YAML::Node live = sl::test::simConfig(ns);
   live["runtime"]["recording_root"] = root;
-  const std::string live_path = "/tmp/sl_test_" + ns + "_live.yaml";
-  std::ofstream(live_path) << live;
+  const std::string live_path = sl::test::writeConfigFile(live, ns + "_live");
   const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(live_path);
   std::vector<sl::pipeline::PointCloud> recorded;
   {
@@ -401,8 +397,7 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
     options.ns = ns;
     sl::daemon::SensorClient client(options);
     REQUIRE(client.waitForDaemon(20s));
-    const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                        std::chrono::system_clock::now().time_since_epoch()).count();
+    const auto t0 = sl::test::nowNs();
     auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s, "../escape");
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kInvalidCommand);
@@ -435,8 +430,7 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
   replay["calibration"] = calibration_path;
   replay["replay"]["dir"] = root + "/rec1";
   replay["replay"]["loop"] = false;
-  const std::string replay_path = "/tmp/sl_test_" + ns + "_replay.yaml";
-  std::ofstream(replay_path) << replay;
+  const std::string replay_path = sl::test::writeConfigFile(replay, ns + "_replay");
   {
     sl::test::DaemonProcess daemon(replay_path);
     REQUIRE(daemon.started());
@@ -444,8 +438,7 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
     options.ns = ns;
     sl::daemon::SensorClient client(options);
     REQUIRE(client.waitForDaemon(20s));
-    const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                        std::chrono::system_clock::now().time_since_epoch()).count();
+    const auto t0 = sl::test::nowNs();
     const auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s);
     REQUIRE(reply);
     REQUIRE(reply->accepted);
@@ -475,12 +468,10 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
 TEST_CASE("motion compensation on a static scene keeps the accuracy") {
   sl::test::useLoopbackDds();
   const std::string ns = sl::test::uniqueNamespace("motion");
-  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("config/sim.yaml"));
-  root["dds"]["namespace"] = ns;
+  YAML::Node root = sl::test::simConfig(ns);
   root["motion_compensation"]["enabled"] = true;
   root["motion_compensation"]["axis"] = "y";  // along the fringes' direction of no change
-  const std::string path = "/tmp/sl_test_" + ns + ".yaml";
-  std::ofstream(path) << root;
+  const std::string path = sl::test::writeConfigFile(root, ns);
   const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(path);
   REQUIRE(config.motion.enabled);
 
@@ -490,8 +481,7 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
   options.ns = ns;
   sl::daemon::SensorClient client(options);
   REQUIRE(client.waitForDaemon(20s));
-  const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                      std::chrono::system_clock::now().time_since_epoch()).count();
+  const auto t0 = sl::test::nowNs();
   const auto reply = client.request(Command::kStart, "3+3_horizontal", 2, 5s);
   REQUIRE(reply);
   REQUIRE(reply->accepted);
@@ -520,11 +510,9 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
 TEST_CASE("depth and shading images and camera_info accompany each cloud") {
   sl::test::useLoopbackDds();
   const std::string ns = sl::test::uniqueNamespace("images");
-  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("config/sim.yaml"));
-  root["dds"]["namespace"] = ns;
+  YAML::Node root = sl::test::simConfig(ns);
   root["dds"]["publish_images"] = true;
-  const std::string path = "/tmp/sl_test_" + ns + ".yaml";
-  std::ofstream(path) << root;
+  const std::string path = sl::test::writeConfigFile(root, ns);
   const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(path);
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
@@ -550,8 +538,7 @@ TEST_CASE("depth and shading images and camera_info accompany each cloud") {
   REQUIRE(shading_reader.waitForWriters(1, DDS_SECS(10)));
   REQUIRE(info_reader.waitForWriters(1, DDS_SECS(10)));
 
-  const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                      std::chrono::system_clock::now().time_since_epoch()).count();
+  const auto t0 = sl::test::nowNs();
   REQUIRE(client.request(Command::kStart, "3+3_horizontal", 1, 5s)->accepted);
   const auto cloud = client.receiveCloud(t0, 10s);
   REQUIRE(cloud);
@@ -611,10 +598,8 @@ TEST_CASE("depth and shading images and camera_info accompany each cloud") {
 TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   sl::test::useLoopbackDds();
   const std::string ns = sl::test::uniqueNamespace("reload");
-  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("config/sim.yaml"));
-  root["dds"]["namespace"] = ns;
-  const std::string path = "/tmp/sl_test_" + ns + ".yaml";
-  std::ofstream(path) << root;
+  YAML::Node root = sl::test::simConfig(ns);
+  const std::string path = sl::test::writeConfigFile(root, ns);
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
   sl::daemon::ClientOptions options;
@@ -622,8 +607,7 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   sl::daemon::SensorClient client(options);
   REQUIRE(client.waitForDaemon(20s));
   auto scanValid = [&] {
-    const auto t0 = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                        std::chrono::system_clock::now().time_since_epoch()).count();
+    const auto t0 = sl::test::nowNs();
     REQUIRE(client.request(Command::kStart, "", 1, 5s)->accepted);
     const auto cloud = client.receiveCloud(t0, 10s);
     REQUIRE(cloud);
