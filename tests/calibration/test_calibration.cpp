@@ -1,27 +1,25 @@
 // Camera-projector calibration: on SLStudio's real captures against its
 // published calibration, and a round trip on the simulated sensor with a
 // checkerboard-textured plane in known poses.
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <catch2/catch.hpp>
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <algorithm>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <numbers>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/pattern_config.h"
-#include "sl/pipeline/calibration.h"
 #include "sl/drivers/sim.h"
+#include "sl/pipeline/calibration.h"
 #include "sl/pipeline/decoder.h"
 #include "sl_process/process.h"
 
@@ -65,11 +63,40 @@ BoardView observeSlStudioPose(const std::string& pose, const Checkerboard& board
   }
   const PhaseShift33Decoder decoder(slStudioCalibrationPattern(), {});
   const sl::pipeline::ProjectorMaps maps = decoder.decode(frames, 8);
-  const auto result = sl::pipeline::observeBoard(sl::pipeline::meanImage(frames), maps, board,
-                                                 pose, {}, {});
+  const auto result =
+      sl::pipeline::observeBoard(sl::pipeline::meanImage(frames), maps, board, pose, {}, {});
   INFO(result.error);
   REQUIRE(result.view);
   return *result.view;
+}
+
+// Mean distance (mm) between neighbouring corners of `view` triangulated with
+// `c`: the camera ray of each corner cut with the plane of its projector
+// column (projector distortion applied, as the calibration models it).
+double triangulatedSquareMm(const sl::pipeline::CameraProjectorCalibration& c,
+                            const BoardView& view, const Checkerboard& board) {
+  std::vector<Eigen::Vector3d> X(board.cornerCount(), Eigen::Vector3d::Constant(NAN));
+  for (std::size_t k = 0; k < view.corner_ids.size(); ++k) {
+    const Eigen::Vector2d xc =
+        c.camera.pixelToNormalized({view.camera_px[k].x, view.camera_px[k].y});
+    const double up =
+        c.projector.pixelToNormalized({view.projector_px[k].x, view.projector_px[k].y}).x();
+    const Eigen::Vector3d ray(xc.x(), xc.y(), 1.0);
+    // X = s * ray with (R X + t).x = up * (R X + t).z
+    const double s = (up * c.t.z() - c.t.x()) / (c.R.row(0).dot(ray) - up * c.R.row(2).dot(ray));
+    X[view.corner_ids[k]] = s * ray;
+  }
+  double sum = 0;
+  int n = 0;
+  for (int id = 0; id < board.cornerCount(); ++id) {
+    for (int next : {id % board.cols + 1 < board.cols ? id + 1 : -1,
+                     id + board.cols < board.cornerCount() ? id + board.cols : -1}) {
+      if (next < 0 || !std::isfinite(X[id].z()) || !std::isfinite(X[next].z())) continue;
+      sum += (X[next] - X[id]).norm();
+      ++n;
+    }
+  }
+  return n > 0 ? sum / n : NAN;
 }
 
 }  // namespace
@@ -126,6 +153,16 @@ TEST_CASE("real captures: SLStudio calibration poses reproduce calibration.xml",
   CHECK(std::abs(percent(c.projector.fy, ref.projector.fy)) < 1.5);
   CHECK(std::hypot(c.projector.cx - ref.projector.cx, c.projector.cy - ref.projector.cy) < 25.0);
   CHECK((c.t - ref.t).norm() < 3.0);
+
+  // Self-consistency, independent of the published file: the corners
+  // triangulated (camera ray x projector column, both lenses' distortion
+  // applied) lie 10 mm apart. Measured 9.997..10.004 mm per pose; the
+  // published calibration gives 9.945..10.037 mm on the same corners.
+  for (const BoardView& v : views) {
+    const double spacing = triangulatedSquareMm(c, v, board);
+    INFO(v.label << ": triangulated square " << spacing << " mm");
+    CHECK(std::abs(spacing - board.square_mm) < 0.02);
+  }
 }
 
 namespace {
@@ -149,20 +186,19 @@ struct BoardPose {
 
 // A plane carrying `board` centred at pose.centre_mm, facing the camera.
 sl::drivers::SimPlane boardPlane(const Checkerboard& board, const BoardPose& pose) {
-  const Eigen::Matrix3d R =
-      (Eigen::AngleAxisd(radians(pose.tilt_x_deg), Eigen::Vector3d::UnitX()) *
-       Eigen::AngleAxisd(radians(pose.tilt_y_deg), Eigen::Vector3d::UnitY()) *
-       Eigen::AngleAxisd(radians(pose.spin_deg), Eigen::Vector3d::UnitZ()))
-          .toRotationMatrix();
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(radians(pose.tilt_x_deg), Eigen::Vector3d::UnitX()) *
+                             Eigen::AngleAxisd(radians(pose.tilt_y_deg), Eigen::Vector3d::UnitY()) *
+                             Eigen::AngleAxisd(radians(pose.spin_deg), Eigen::Vector3d::UnitZ()))
+                                .toRotationMatrix();
   sl::drivers::SimCheckerboard texture;
   texture.cols = board.cols;
   texture.rows = board.rows;
   texture.square_mm = board.square_mm;
   texture.x_axis = R.col(0);
   texture.y_axis = R.col(1);
-  texture.origin = pose.centre_mm - 0.5 * board.square_mm *
-                                        ((board.cols - 1) * texture.x_axis +
-                                         (board.rows - 1) * texture.y_axis);
+  texture.origin =
+      pose.centre_mm - 0.5 * board.square_mm *
+                           ((board.cols - 1) * texture.x_axis + (board.rows - 1) * texture.y_axis);
   texture.dark_albedo = 0.25;
   texture.light_albedo = 0.85;
   sl::drivers::SimPlane plane;
@@ -175,21 +211,18 @@ sl::drivers::SimPlane boardPlane(const Checkerboard& board, const BoardPose& pos
 
 }  // namespace
 
-TEST_CASE("simulator round trip: calibration recovers the simulated rig",
-          "[calibration][sim]") {
+TEST_CASE("simulator round trip: calibration recovers the simulated rig", "[calibration][sim]") {
   const auto start = std::chrono::steady_clock::now();
   const Checkerboard board{13, 9, 15.0};
   PhaseShift33Pattern pattern;
   pattern.name = "3+3_both";
   pattern.direction = sl::pipeline::Direction::kBoth;
   const std::vector<BoardPose> poses = {
-      {0, 0, 0, {0, 0, 560}},          {25, 0, 0, {0, 0, 560}},
-      {-25, 0, 5, {0, 0, 570}},        {0, 25, 0, {10, 0, 550}},
-      {0, -25, -5, {-10, 0, 570}},     {18, 18, 10, {0, 10, 610}},
-      {-18, 18, -10, {0, -10, 530}},   {18, -18, 0, {15, 0, 520}},
-      {-18, -18, 15, {-15, 0, 630}},   {10, -10, 30, {0, 0, 660}},
-      {35, 10, 0, {0, 0, 600}},   {-35, -10, 0, {0, 0, 600}},
-      {10, 35, 0, {0, 0, 600}},   {-10, -35, 0, {0, 0, 600}},
+      {0, 0, 0, {0, 0, 560}},        {25, 0, 0, {0, 0, 560}},     {-25, 0, 5, {0, 0, 570}},
+      {0, 25, 0, {10, 0, 550}},      {0, -25, -5, {-10, 0, 570}}, {18, 18, 10, {0, 10, 610}},
+      {-18, 18, -10, {0, -10, 530}}, {18, -18, 0, {15, 0, 520}},  {-18, -18, 15, {-15, 0, 630}},
+      {10, -10, 30, {0, 0, 660}},    {35, 10, 0, {0, 0, 600}},    {-35, -10, 0, {0, 0, 600}},
+      {10, 35, 0, {0, 0, 600}},      {-10, -35, 0, {0, 0, 600}},
   };
   const sl::pipeline::CameraProjectorCalibration truth = simulatedRig();
   const PhaseShift33Decoder decoder(pattern, {});
@@ -211,9 +244,9 @@ TEST_CASE("simulator round trip: calibration recovers the simulated rig",
     for (int f = 0; f < pattern.frameCount(); ++f)
       frames.push_back(sensor->render(pattern.name, f, 1000 * i + f));
     const auto maps = decoder.decode(frames, 8);
-    const auto result = sl::pipeline::observeBoard(sl::pipeline::meanImage(frames), maps, board,
-                                                   "pose" + std::to_string(i), corners,
-                                                   homographies);
+    const auto result =
+        sl::pipeline::observeBoard(sl::pipeline::meanImage(frames), maps, board,
+                                   "pose" + std::to_string(i), corners, homographies);
     INFO(result.error);
     REQUIRE(result.view);
     // The observations themselves against the true projections.
@@ -222,8 +255,9 @@ TEST_CASE("simulator round trip: calibration recovers the simulated rig",
     double camera_sum = 0, projector_sum = 0;
     for (std::size_t k = 0; k < view.corner_ids.size(); ++k) {
       const int id = view.corner_ids[k];
-      const Eigen::Vector3d X = texture.origin + board.square_mm * ((id % board.cols) * texture.x_axis +
-                                                                    (id / board.cols) * texture.y_axis);
+      const Eigen::Vector3d X =
+          texture.origin + board.square_mm * ((id % board.cols) * texture.x_axis +
+                                              (id / board.cols) * texture.y_axis);
       const Eigen::Vector2d qc = truth.camera.project(X);
       const Eigen::Vector2d qp = truth.projector.project(truth.R * X + truth.t);
       camera_sum += (Eigen::Vector2d(view.camera_px[k].x, view.camera_px[k].y) - qc).squaredNorm();
@@ -240,7 +274,8 @@ TEST_CASE("simulator round trip: calibration recovers the simulated rig",
   const CalibrationResult r = sl::pipeline::calibrateCameraProjector(
       views, board, cv::Size(1440, 1080), cv::Size(1824, 1140), CalibrationOptions{});
   const auto& c = r.calibration;
-  const double baseline_error = (c.R.transpose() * c.t).norm() - (truth.R.transpose() * truth.t).norm();
+  const double baseline_error =
+      (c.R.transpose() * c.t).norm() - (truth.R.transpose() * truth.t).norm();
   const double rotation_error = degreesBetween(c.R, truth.R);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -254,8 +289,7 @@ TEST_CASE("simulator round trip: calibration recovers the simulated rig",
       percent(c.camera.fy, truth.camera.fy), c.camera.cx - truth.camera.cx,
       c.camera.cy - truth.camera.cy, percent(c.projector.fx, truth.projector.fx),
       percent(c.projector.fy, truth.projector.fy), c.projector.cx - truth.projector.cx,
-      c.projector.cy - truth.projector.cy, baseline_error, (c.t - truth.t).norm(),
-      rotation_error);
+      c.projector.cy - truth.projector.cy, baseline_error, (c.t - truth.t).norm(), rotation_error);
   for (const auto& p : r.report.poses)
     std::printf("  %s: %d corners, camera %.3f projector %.3f stereo %.3f px\n", p.label.c_str(),
                 p.corners, p.camera_rms_px, p.projector_rms_px, p.stereo_rms_px);
@@ -265,8 +299,7 @@ TEST_CASE("simulator round trip: calibration recovers the simulated rig",
   CHECK(std::abs(percent(c.projector.fx, truth.projector.fx)) < 0.2);
   CHECK(std::abs(percent(c.projector.fy, truth.projector.fy)) < 0.2);
   CHECK(std::hypot(c.camera.cx - truth.camera.cx, c.camera.cy - truth.camera.cy) < 1.0);
-  CHECK(std::hypot(c.projector.cx - truth.projector.cx, c.projector.cy - truth.projector.cy) <
-        1.0);
+  CHECK(std::hypot(c.projector.cx - truth.projector.cx, c.projector.cy - truth.projector.cy) < 1.0);
   CHECK(std::abs(baseline_error) < 0.1);
   CHECK(rotation_error < 0.02);
 }
@@ -297,7 +330,8 @@ TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import rou
       CHECK(p.fy == Approx(q.fy).epsilon(tolerance));
       CHECK(p.cx == Approx(q.cx).epsilon(tolerance));
       CHECK(p.cy == Approx(q.cy).epsilon(tolerance));
-      for (int i = 0; i < 5; ++i) CHECK(p.distortion[i] == Approx(q.distortion[i]).margin(tolerance));
+      for (int i = 0; i < 5; ++i)
+        CHECK(p.distortion[i] == Approx(q.distortion[i]).margin(tolerance));
     }
     CHECK((x.R - y.R).norm() < tolerance);
     CHECK((x.t - y.t).norm() < tolerance * 100);
@@ -333,8 +367,8 @@ TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import rou
       out << "intrinsic_mat" << cv::Mat(K(c.camera)) << "lens_distortion" << cv::Mat(d(c.camera))
           << "calibration_error" << 0.11 << "resolution_x" << c.camera.width << "resolution_y"
           << c.camera.height << "extrinsic_rot" << cv::Mat(R) << "extrinsic_trans"
-          << cv::Mat(cv::Vec3f(float(c.t.x()), float(c.t.y()), float(c.t.z())))
-          << "stereo_error" << 0.33;
+          << cv::Mat(cv::Vec3f(float(c.t.x()), float(c.t.y()), float(c.t.z()))) << "stereo_error"
+          << 0.33;
     }
     {
       cv::FileStorage out(projector, cv::FileStorage::WRITE);
@@ -347,9 +381,9 @@ TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import rou
     REQUIRE(imported.errors);
     CHECK(imported.errors->projector_rms_px == Approx(0.22));
     // One file alone is refused with a pointer to the pair import.
-    CHECK_THROWS_WITH(sl::daemon::loadCalibration(camera),
-                      Catch::Contains("sl_sensor camera file") &&
-                          Catch::Contains("--import-sl-sensor"));
+    CHECK_THROWS_WITH(
+        sl::daemon::loadCalibration(camera),
+        Catch::Contains("sl_sensor camera file") && Catch::Contains("--import-sl-sensor"));
     CHECK_THROWS_WITH(sl::daemon::loadSlSensorCalibration(projector, camera),
                       Catch::Contains("swapped"));
   }
@@ -362,15 +396,94 @@ struct ReferencePoint {
   double x, y, z;
 };
 
+struct SkullComparison {
+  std::size_t common = 0;                                   // pixels valid in both
+  double median_dz = 0, median_abs_dz = 0, p95_abs_dz = 0;  // mm
+  double within_1mm = 0;  // fraction of common pixels with |dz| <= 1 mm
+};
+
+// skull_2x3 decoded and triangulated as tests/process does (the data README's
+// mask, images undistorted) with `calibration`, compared in z with SLStudio's
+// reconstruction. projector_iterations: 0 ignores projector distortion.
+SkullComparison compareSkull(const sl::pipeline::CameraProjectorCalibration& calibration,
+                             int projector_iterations) {
+  static const std::vector<ReferencePoint> reference = [] {
+    std::vector<ReferencePoint> points;
+    std::ifstream in(kSkull / "skull_gray" / "reference_points.txt");
+    for (std::string line; std::getline(in, line);) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream s(line);
+      ReferencePoint p{};
+      s >> p.u >> p.v >> p.x >> p.y >> p.z;
+      points.push_back(p);
+    }
+    return points;
+  }();
+  REQUIRE(!reference.empty());
+  const auto pattern =
+      sl::daemon::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/slstudio_2x3.yaml");
+  const auto frames = sl::tools::loadFrames(sl::tools::listImages((kSkull / "skull_2x3").string()));
+  sl::pipeline::DecoderOptions decoder;
+  decoder.min_modulation = 55.0f / 3.0f;  // the data README's mask
+  sl::pipeline::TriangulatorOptions triangulator;
+  triangulator.projector_distortion_iterations = projector_iterations;
+  const auto cloud =
+      sl::tools::processCapture(pattern, calibration, frames, decoder, triangulator, true).cloud;
+  std::vector<double> dz, adz;
+  for (const ReferencePoint& p : reference) {
+    const float z = cloud.points[static_cast<std::size_t>(p.v) * cloud.width + p.u].z;
+    if (!std::isfinite(z)) continue;
+    dz.push_back(z - p.z);
+    adz.push_back(std::abs(z - p.z));
+  }
+  auto percentile = [](std::vector<double> v, double q) {
+    std::sort(v.begin(), v.end());
+    return v[std::min(v.size() - 1, static_cast<std::size_t>(q * v.size()))];
+  };
+  SkullComparison r;
+  r.common = dz.size();
+  if (dz.empty()) return r;
+  r.median_dz = percentile(dz, 0.5);
+  r.median_abs_dz = percentile(adz, 0.5);
+  r.p95_abs_dz = percentile(adz, 0.95);
+  r.within_1mm =
+      double(std::count_if(adz.begin(), adz.end(), [](double d) { return d <= 1.0; })) / adz.size();
+  return r;
+}
+
+void printSkull(const std::string& what, const SkullComparison& s) {
+  std::printf(
+      "%s: %zu common pixels, median dz %+.3f mm, |dz| median %.3f p95 %.3f mm, "
+      "%.2f %% within 1 mm\n",
+      what.c_str(), s.common, s.median_dz, s.median_abs_dz, s.p95_abs_dz, 100 * s.within_1mm);
+}
+
 }  // namespace
 
 // The codec engineer's real-data check (tests/process/test_process.cpp)
 // repeated with this calibration instead of the published one. Hidden ([.]):
-// it does NOT meet those thresholds. The reference points were triangulated
-// with the published calibration, so the comparison measures how far the two
-// calibrations disagree in depth (measured: median dz +1.44 mm, |dz| p95
-// 2.19 mm, 11.7 % within 1 mm), not which one is right. Run it explicitly:
-// test_calibration "[skull]".
+// it does NOT meet those thresholds, and no calibration from these five poses
+// can be expected to. The reference points were triangulated with the
+// published calibration, so the comparison measures how far two calibrations
+// disagree in depth, not which one is right. Findings (issue 5):
+// - Our observations agree with an SLStudio-style re-implementation
+//   (modulation image, cornerSubPix 5 px, 21x21 window, LMEDS homography) to
+//   0.02 px, and OpenCV with SLStudio's own flags (camera: principal point
+//   fixed, fx = fy, k1; projector: fx = fy, k1) on them gives camera fx
+//   +0.41 % off calibration.xml: the published file is not what these images
+//   give (its projector RMS is 0.46 px, ours 0.31-0.35 px).
+// - The published calibration predicts the projector corners from the
+//   camera's board poses with 3.3 px RMS (5.0 px ignoring projector
+//   distortion), ours with 0.77 px; ours triangulates the board squares at
+//   10.000 mm (9.997..10.004 per pose), the published at 9.945..10.037.
+// - Depth at the skull (z ~ 387 mm) follows the camera focal length, which five
+//   poses fix to about +-1 %: leaving out one pose moves the median dz from
+//   -0.3 mm (without seq1) to +5.3 mm (without seq4). A +-0.15 mm agreement
+//   is far inside that spread.
+// The projector's full model is used when triangulating (ignoring its ~4 px of
+// modelled distortion would be inconsistent); with the five poses: median dz
+// +1.30 mm, |dz| p95 2.26 mm, 28.6 % within 1 mm (+1.44 mm ignoring it).
+// Run it explicitly: test_calibration "[skull]".
 TEST_CASE("real captures: skull_2x3 triangulated with our calibration",
           "[.][calibration][real][skull]") {
   if (!fs::exists(kSkull / "skull_2x3")) {
@@ -386,54 +499,24 @@ TEST_CASE("real captures: skull_2x3 triangulated with our calibration",
   options.camera.fix_aspect_ratio = true;
   options.camera.radial_terms = 1;
   options.camera.tangential = false;
-  sl::pipeline::CameraProjectorCalibration calibration =
-      sl::pipeline::calibrateCameraProjector(views, board, cv::Size(1688, 1352),
-                                             cv::Size(1824, 1140), options)
-          .calibration;
-
-  std::vector<ReferencePoint> reference;
-  {
-    std::ifstream in(kSkull / "skull_gray" / "reference_points.txt");
-    REQUIRE(in.good());
-    for (std::string line; std::getline(in, line);) {
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream s(line);
-      ReferencePoint p{};
-      s >> p.u >> p.v >> p.x >> p.y >> p.z;
-      reference.push_back(p);
-    }
-  }
-  const auto pattern = sl::daemon::loadPattern(std::string(SL_SOURCE_DIR) +
-                                               "/config/patterns/slstudio_2x3.yaml");
-  const auto frames =
-      sl::tools::loadFrames(sl::tools::listImages((kSkull / "skull_2x3").string()));
-  sl::pipeline::DecoderOptions decoder;
-  decoder.min_modulation = 55.0f / 3.0f;  // the data README's mask
-  sl::pipeline::TriangulatorOptions triangulator;
-  triangulator.projector_distortion_iterations = 0;  // as the reference
-  const auto cloud =
-      sl::tools::processCapture(pattern, calibration, frames, decoder, triangulator, true).cloud;
-  std::vector<double> dz, adz;
-  for (const ReferencePoint& p : reference) {
-    const float z = cloud.points[static_cast<std::size_t>(p.v) * cloud.width + p.u].z;
-    if (!std::isfinite(z)) continue;
-    dz.push_back(z - p.z);
-    adz.push_back(std::abs(z - p.z));
-  }
-  auto percentile = [](std::vector<double> v, double q) {
-    std::sort(v.begin(), v.end());
-    return v[std::min(v.size() - 1, static_cast<std::size_t>(q * v.size()))];
+  const auto calibrate = [&](const std::vector<BoardView>& subset) {
+    return sl::pipeline::calibrateCameraProjector(subset, board, cv::Size(1688, 1352),
+                                                  cv::Size(1824, 1140), options)
+        .calibration;
   };
-  const double within_1mm =
-      double(std::count_if(adz.begin(), adz.end(), [](double d) { return d <= 1.0; })) /
-      adz.size();
-  std::printf("skull_2x3 with our calibration: %zu common pixels, median dz %.3f mm, |dz| median "
-              "%.3f p95 %.3f mm, %.1f %% within 1 mm\n",
-              dz.size(), percentile(dz, 0.5), percentile(adz, 0.5), percentile(adz, 0.95),
-              100 * within_1mm);
-  CHECK(dz.size() >= 75000);
-  CHECK(std::abs(percentile(dz, 0.5)) <= 0.15);
-  CHECK(percentile(adz, 0.5) < 0.2);
-  CHECK(percentile(adz, 0.95) < 0.8);
-  CHECK(within_1mm >= 0.97);
+  const int kProjectorIterations = 2;  // the projector model as calibrated
+  // How much the answer depends on the choice of poses.
+  for (std::size_t left_out = 0; left_out < views.size(); ++left_out) {
+    std::vector<BoardView> subset = views;
+    subset.erase(subset.begin() + static_cast<std::ptrdiff_t>(left_out));
+    printSkull("  without " + views[left_out].label,
+               compareSkull(calibrate(subset), kProjectorIterations));
+  }
+  const SkullComparison s = compareSkull(calibrate(views), kProjectorIterations);
+  printSkull("skull_2x3 with our calibration", s);
+  CHECK(s.common >= 75000);
+  CHECK(std::abs(s.median_dz) <= 0.15);
+  CHECK(s.median_abs_dz < 0.2);
+  CHECK(s.p95_abs_dz < 0.8);
+  CHECK(s.within_1mm >= 0.97);
 }
