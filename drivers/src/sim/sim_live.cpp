@@ -25,13 +25,16 @@ std::int64_t deadlineAfter(std::chrono::milliseconds timeout) {
 }  // namespace
 
 LiveSchedule::LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps,
-                           int bit_depth, std::uint64_t seed, RenderFunction render)
+                           int bit_depth, std::uint64_t seed, RenderFunction render,
+                           int camera_count)
     : sequences_(std::move(sequences)),
       frame_interval_ns_(1e9 / camera_fps),
       bit_depth_(bit_depth),
       seed_(seed),
-      render_(std::move(render)) {
+      render_(std::move(render)),
+      cameras_(static_cast<std::size_t>(std::max(camera_count, 1))) {
   if (sequences_.empty()) throw std::invalid_argument("LiveSchedule: no sequences");
+  if (camera_count < 1) throw std::invalid_argument("LiveSchedule: camera_count must be >= 1");
 }
 
 // --- schedule arithmetic (mutex_ held) ---
@@ -122,59 +125,65 @@ void LiveSchedule::stopProjector() {
 
 // --- camera ---
 
-void LiveSchedule::armCamera() {
+void LiveSchedule::armCamera(int camera) {
   std::lock_guard lock(mutex_);
-  if (camera_armed_) return;
-  camera_armed_ = true;
-  camera_armed_ns_ = nowNs();
-  camera_generation_ = 0;  // re-join the current schedule at the first frame after arming
+  CameraState& c = cameras_.at(static_cast<std::size_t>(camera));
+  if (c.armed) return;
+  c.armed = true;
+  c.armed_ns = nowNs();
+  c.generation = 0;  // re-join the current schedule at the first frame after arming
 }
 
-void LiveSchedule::disarmCamera() {
+void LiveSchedule::disarmCamera(int camera) {
   {
     std::lock_guard lock(mutex_);
-    camera_armed_ = false;
-    ++camera_stop_epoch_;
+    CameraState& c = cameras_.at(static_cast<std::size_t>(camera));
+    c.armed = false;
+    ++c.stop_epoch;
   }
   cv_.notify_all();
 }
 
-std::optional<pipeline::Frame> LiveSchedule::grab(std::chrono::milliseconds timeout) {
+std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milliseconds timeout) {
   const std::int64_t deadline = deadlineAfter(timeout);
   std::unique_lock lock(mutex_);
-  const std::uint64_t epoch = camera_stop_epoch_;
+  CameraState& c = cameras_.at(static_cast<std::size_t>(camera));
+  const std::uint64_t epoch = c.stop_epoch;
   while (true) {
-    if (!camera_armed_ || camera_stop_epoch_ != epoch) return std::nullopt;
+    if (!c.armed || c.stop_epoch != epoch) return std::nullopt;
     const std::int64_t now = nowNs();
     std::int64_t wake = deadline;
     if (generation_ != 0) {
-      if (camera_generation_ != generation_) {
-        camera_generation_ = generation_;
-        camera_next_ = std::max<std::int64_t>(0, lastStampAtOrBefore(camera_armed_ns_ - 1) + 1);
+      if (c.generation != generation_) {
+        c.generation = generation_;
+        c.next = std::max<std::int64_t>(0, lastStampAtOrBefore(c.armed_ns - 1) + 1);
       }
-      if (frameExists(camera_next_)) {
+      if (frameExists(c.next)) {
         const std::int64_t last_due = lastFrameAtOrBefore(now);
-        if (last_due >= camera_next_) {
-          const std::int64_t behind = last_due - camera_next_ + 1;
+        if (last_due >= c.next) {
+          const std::int64_t behind = last_due - c.next + 1;
           if (behind > kLiveBufferDepth) {  // drop the oldest
             const std::int64_t dropped = behind - kLiveBufferDepth;
-            camera_next_ += dropped;
-            next_frame_id_ += static_cast<std::uint64_t>(dropped);
+            c.next += dropped;
+            c.next_frame_id += static_cast<std::uint64_t>(dropped);
             counters_.frames_dropped += static_cast<std::uint64_t>(dropped);
           }
-          const std::int64_t j = camera_next_++;
+          const std::int64_t j = c.next++;
           pipeline::Frame frame;
-          frame.frame_id = next_frame_id_++;
+          frame.frame_id = c.next_frame_id++;
           frame.stamp_ns = frameStamp(j);
           frame.bit_depth = bit_depth_;
           const std::size_t pattern = running_pattern_;
           const int pattern_frame = static_cast<int>(j % frames_per_sequence_);
           ++counters_.frames_delivered;
           lock.unlock();
-          frame.image = render_(pattern, pattern_frame, mix64(seed_ ^ mix64(frame.frame_id)));
+          // Camera 0 keeps the single-camera seeds; further cameras draw their own noise.
+          std::uint64_t noise_seed = mix64(seed_ ^ mix64(frame.frame_id));
+          if (camera > 0) noise_seed = mix64(noise_seed + static_cast<std::uint64_t>(camera));
+          frame.image = render_(camera, pattern, pattern_frame, noise_seed);
           return frame;
         }
-        wake = std::min(deadline, frameStamp(camera_next_));
+        wake = std::min(deadline, frameStamp(c.next));
       }
     }
     if (now >= deadline) return std::nullopt;
@@ -241,19 +250,25 @@ namespace {
 // Thread-safe (delegates to LiveSchedule).
 class LiveCamera final : public Camera {
  public:
-  LiveCamera(std::shared_ptr<LiveSchedule> schedule, std::string id, int width, int height)
-      : schedule_(std::move(schedule)), id_(std::move(id)), width_(width), height_(height) {}
+  LiveCamera(std::shared_ptr<LiveSchedule> schedule, int camera, std::string id, int width,
+             int height)
+      : schedule_(std::move(schedule)),
+        camera_(camera),
+        id_(std::move(id)),
+        width_(width),
+        height_(height) {}
   std::string id() const override { return id_; }
   int width() const override { return width_; }
   int height() const override { return height_; }
-  void start() override { schedule_->armCamera(); }
-  void stop() override { schedule_->disarmCamera(); }
+  void start() override { schedule_->armCamera(camera_); }
+  void stop() override { schedule_->disarmCamera(camera_); }
   std::optional<pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
-    return schedule_->grab(timeout);
+    return schedule_->grab(camera_, timeout);
   }
 
  private:
   const std::shared_ptr<LiveSchedule> schedule_;
+  const int camera_;
   const std::string id_;
   const int width_, height_;
 };
@@ -290,9 +305,9 @@ class LiveTriggerSource final : public TriggerSource {
 
 }  // namespace
 
-std::shared_ptr<Camera> makeLiveCamera(std::shared_ptr<LiveSchedule> schedule, std::string id,
-                                       int width, int height) {
-  return std::make_shared<LiveCamera>(std::move(schedule), std::move(id), width, height);
+std::shared_ptr<Camera> makeLiveCamera(std::shared_ptr<LiveSchedule> schedule, int camera,
+                                       std::string id, int width, int height) {
+  return std::make_shared<LiveCamera>(std::move(schedule), camera, std::move(id), width, height);
 }
 
 std::shared_ptr<Projector> makeLiveProjector(std::shared_ptr<LiveSchedule> schedule,

@@ -21,10 +21,11 @@
 
 namespace sl::drivers::sim {
 
-// Renders frame `frame` of pattern `pattern_index` with the given noise seed.
-// Must be thread-safe (it is called without the schedule's lock held).
-using RenderFunction =
-    std::function<cv::Mat(std::size_t pattern_index, int frame, std::uint64_t noise_seed)>;
+// Renders, for camera `camera`, frame `frame` of pattern `pattern_index` with
+// the given noise seed. Must be thread-safe (it is called without the
+// schedule's lock held, possibly from several camera threads).
+using RenderFunction = std::function<cv::Mat(int camera, std::size_t pattern_index, int frame,
+                                             std::uint64_t noise_seed)>;
 
 // Frames and triggers a slow consumer may fall behind by before the oldest
 // are dropped (like the buffer pool of a camera driver).
@@ -44,8 +45,9 @@ inline constexpr std::int64_t kStartDelayNs = 20'000'000;
 // replaces the old one: what was not yet taken from the old one is discarded.
 class LiveSchedule {
  public:
+  // camera_count cameras (>= 1) expose on the same schedule.
   LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps, int bit_depth,
-               std::uint64_t seed, RenderFunction render);
+               std::uint64_t seed, RenderFunction render, int camera_count = 1);
 
   const std::vector<ProjectorSequence>& sequences() const { return sequences_; }
 
@@ -54,10 +56,11 @@ class LiveSchedule {
   void startProjector(int count);
   void stopProjector();
 
-  // Camera: frames exposed while armed, in schedule order.
-  void armCamera();
-  void disarmCamera();
-  std::optional<pipeline::Frame> grab(std::chrono::milliseconds timeout);
+  // Camera `camera` (index < camera_count): frames exposed while armed, in
+  // schedule order. Each camera has its own frame ids, counted from 0.
+  void armCamera(int camera);
+  void disarmCamera(int camera);
+  std::optional<pipeline::Frame> grab(int camera, std::chrono::milliseconds timeout);
 
   // Trigger source.
   std::optional<TriggerEvent> nextTrigger(std::chrono::milliseconds timeout);
@@ -101,13 +104,16 @@ class LiveSchedule {
   std::int64_t t0_ns_ = 0;
   std::int64_t stop_ns_ = kNever;
 
-  // Camera, guarded by mutex_.
-  bool camera_armed_ = false;
-  std::int64_t camera_armed_ns_ = 0;
-  std::uint64_t camera_generation_ = 0;  // schedule the camera follows (0: none yet)
-  std::int64_t camera_next_ = 0;         // next frame index of that schedule
-  std::uint64_t next_frame_id_ = 0;
-  std::uint64_t camera_stop_epoch_ = 0;  // bumped by disarmCamera() to wake grab()
+  // Per camera, guarded by mutex_.
+  struct CameraState {
+    bool armed = false;
+    std::int64_t armed_ns = 0;
+    std::uint64_t generation = 0;  // schedule the camera follows (0: none yet)
+    std::int64_t next = 0;         // next frame index of that schedule
+    std::uint64_t next_frame_id = 0;
+    std::uint64_t stop_epoch = 0;  // bumped by disarmCamera() to wake grab()
+  };
+  std::vector<CameraState> cameras_;
 
   // Trigger source, guarded by mutex_.
   std::uint64_t trigger_generation_ = 0;
@@ -119,8 +125,8 @@ class LiveSchedule {
 };
 
 // Thin adapters handing out the schedule under the driver interfaces.
-std::shared_ptr<Camera> makeLiveCamera(std::shared_ptr<LiveSchedule> schedule, std::string id,
-                                       int width, int height);
+std::shared_ptr<Camera> makeLiveCamera(std::shared_ptr<LiveSchedule> schedule, int camera,
+                                       std::string id, int width, int height);
 std::shared_ptr<Projector> makeLiveProjector(std::shared_ptr<LiveSchedule> schedule,
                                              std::string id);
 std::shared_ptr<TriggerSource> makeLiveTriggerSource(std::shared_ptr<LiveSchedule> schedule);

@@ -4,7 +4,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <opencv2/core.hpp>
+
+#include "sim_render.h"
 
 namespace sl::drivers::sim {
 
@@ -14,10 +17,11 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 // Keeps `candidate` in `best` when it lies in (min_s, max_s) and is nearer.
 void keepNearest(std::optional<SurfaceHit>& best, double candidate, double min_s, double max_s,
-                 const Eigen::Vector3d& normal, double albedo, const SimPlane* plane = nullptr) {
+                 const Eigen::Vector3d& normal, double albedo, const void* primitive,
+                 const SimPlane* plane = nullptr) {
   if (!(candidate > min_s && candidate < max_s)) return;
   if (best && best->distance <= candidate) return;
-  best = SurfaceHit{candidate, normal, albedo, plane};
+  best = SurfaceHit{candidate, normal, albedo, plane, primitive};
 }
 
 // In-plane frame of a checkerboard: origin on the plane, orthonormal axes.
@@ -43,15 +47,23 @@ double boardAlbedoAt(const SimCheckerboard& board, double margin_albedo, double 
   return (static_cast<long long>(i + j) & 1) == 0 ? board.dark_albedo : board.light_albedo;
 }
 
+// A checkerboard plane in the camera frame of the current view.
+struct BoardInCamera {
+  Eigen::Vector3d n;      // unit normal
+  double plane_offset;    // n . X on the plane
+  BoardFrame frame;
+};
+
 // The albedo a camera pixel sees on a checkerboard plane: the board averaged
 // over the pixel's footprint (the parallelogram spanned by the plane points
 // of the pixel's edges, 16 x 16 samples), or the point value when no square
-// edge comes near the footprint.
-double footprintAlbedo(const SimPlane& plane, const BoardFrame& frame,
+// edge comes near the footprint. ray and point in the camera frame.
+double footprintAlbedo(const SimPlane& plane, const BoardInCamera& board_cam,
                        const pipeline::PinholeModel& camera, int col, int row,
                        const Eigen::Vector3d& ray, const Eigen::Vector3d& point) {
   const SimCheckerboard& board = *plane.checkerboard;
-  const Eigen::Vector3d n = plane.normal.normalized();
+  const Eigen::Vector3d& n = board_cam.n;
+  const BoardFrame& frame = board_cam.frame;
   const Eigen::Vector3d rel = point - frame.origin;
   const double a = rel.dot(frame.x), b = rel.dot(frame.y);
   const double s = board.square_mm;
@@ -64,11 +76,10 @@ double footprintAlbedo(const SimPlane& plane, const BoardFrame& frame,
   const double to_edge_b = std::abs(b - s * std::round(b / s));
   if (std::min(to_edge_a, to_edge_b) > reach) return boardAlbedoAt(board, plane.albedo, a, b);
 
-  const double plane_offset = n.dot(plane.point);
   auto boardCoordinates = [&](double u, double v) {
     const Eigen::Vector2d xn = camera.pixelToNormalized({u, v});
     const Eigen::Vector3d r{xn.x(), xn.y(), 1.0};
-    const Eigen::Vector3d p = r * (plane_offset / n.dot(r)) - frame.origin;
+    const Eigen::Vector3d p = r * (board_cam.plane_offset / n.dot(r)) - frame.origin;
     return Eigen::Vector2d(p.dot(frame.x), p.dot(frame.y));
   };
   const Eigen::Vector2d centre(a, b);
@@ -101,53 +112,275 @@ double monotonicFieldRadius2(const pipeline::PinholeModel& model) {
   return std::numeric_limits<double>::infinity();
 }
 
+void intersectSphere(const SimSphere& sphere, const Eigen::Vector3d& origin,
+                     const Eigen::Vector3d& direction, double min_s, double max_s,
+                     std::optional<SurfaceHit>& best) {
+  // |origin + s d - c|^2 = r^2  <=>  a s^2 + 2 b s + c0 = 0
+  const Eigen::Vector3d oc = origin - sphere.center;
+  const double a = direction.squaredNorm();
+  const double b = direction.dot(oc);
+  const double c0 = oc.squaredNorm() - sphere.radius * sphere.radius;
+  const double discriminant = b * b - a * c0;
+  if (discriminant < 0.0) return;
+  const double root = std::sqrt(discriminant);
+  for (double s : {(-b - root) / a, (-b + root) / a}) {
+    if (s > min_s && s < max_s) {
+      const Eigen::Vector3d point = origin + s * direction;
+      keepNearest(best, s, min_s, max_s, (point - sphere.center) / sphere.radius, sphere.albedo,
+                  &sphere);
+      return;  // the first root in range is the nearer one
+    }
+  }
+}
+
+void intersectCone(const SimCone& cone, const Eigen::Vector3d& origin,
+                   const Eigen::Vector3d& direction, double min_s, double max_s,
+                   std::optional<SurfaceHit>& best) {
+  const Eigen::Vector3d u = cone.axis.normalized();  // base -> apex
+  const Eigen::Vector3d apex = cone.base_center + cone.height * u;
+  const Eigen::Vector3d v = -u;                      // apex -> base
+  const double cos2 = cone.height * cone.height /
+                      (cone.height * cone.height + cone.radius * cone.radius);
+  // Lateral surface: ((P - apex) . v)^2 = cos^2 |P - apex|^2, 0 <= (P - apex) . v <= height.
+  const Eigen::Vector3d w = origin - apex;
+  const double dv = direction.dot(v), wv = w.dot(v);
+  const double a = dv * dv - cos2 * direction.squaredNorm();
+  const double b = dv * wv - cos2 * direction.dot(w);
+  const double c = wv * wv - cos2 * w.squaredNorm();
+  if (std::abs(a) > 1e-12) {
+    const double discriminant = b * b - a * c;
+    if (discriminant >= 0.0) {
+      const double root = std::sqrt(discriminant);
+      for (double s : {(-b - root) / a, (-b + root) / a}) {
+        const Eigen::Vector3d q = w + s * direction;  // P - apex
+        const double m = q.dot(v);
+        if (m < 0.0 || m > cone.height) continue;  // the mirror cone or beyond the base
+        const Eigen::Vector3d normal = (q - v * (q.squaredNorm() / m)).normalized();
+        keepNearest(best, s, min_s, max_s, normal, cone.albedo, &cone);
+      }
+    }
+  }
+  // Base disk, facing away from the apex.
+  const double along = direction.dot(u);
+  if (along != 0.0) {
+    const double s = (cone.base_center - origin).dot(u) / along;
+    if ((origin + s * direction - cone.base_center).squaredNorm() <= cone.radius * cone.radius)
+      keepNearest(best, s, min_s, max_s, v, cone.albedo, &cone);
+  }
+}
+
+void intersectBox(const SimBox& box, const Eigen::Vector3d& origin,
+                  const Eigen::Vector3d& direction, double min_s, double max_s,
+                  std::optional<SurfaceHit>& best) {
+  const Eigen::Vector3d o = box.rotation.transpose() * (origin - box.center);
+  const Eigen::Vector3d d = box.rotation.transpose() * direction;
+  const Eigen::Vector3d half = 0.5 * box.size_mm;
+  double s_near = -std::numeric_limits<double>::infinity();
+  double s_far = std::numeric_limits<double>::infinity();
+  int axis_near = -1, axis_far = -1;
+  for (int k = 0; k < 3; ++k) {
+    if (d[k] == 0.0) {
+      if (std::abs(o[k]) > half[k]) return;
+      continue;
+    }
+    double s1 = (-half[k] - o[k]) / d[k], s2 = (half[k] - o[k]) / d[k];
+    if (s1 > s2) std::swap(s1, s2);
+    if (s1 > s_near) s_near = s1, axis_near = k;
+    if (s2 < s_far) s_far = s2, axis_far = k;
+  }
+  if (s_near > s_far || axis_near < 0) return;
+  auto faceNormal = [&](int axis, double s) {
+    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+    n[axis] = (o[axis] + s * d[axis]) > 0 ? 1.0 : -1.0;
+    return Eigen::Vector3d(box.rotation * n);
+  };
+  keepNearest(best, s_near, min_s, max_s, faceNormal(axis_near, s_near), box.albedo, &box);
+  keepNearest(best, s_far, min_s, max_s, faceNormal(axis_far, s_far), box.albedo, &box);
+}
+
+// Height at local in-plane coordinates (a, b), bilinear; and its gradient.
+double heightAt(const SceneGeometry::HeightFieldFrame& f, double a, double b,
+                Eigen::Vector2d* gradient = nullptr) {
+  const cv::Mat& h = f.field->heights_mm;
+  const double cell = f.field->cell_mm;
+  const double x = std::clamp((a - f.a0) / cell, 0.0, double(h.cols - 1));
+  const double y = std::clamp((b - f.b0) / cell, 0.0, double(h.rows - 1));
+  const int x0 = std::min(int(x), h.cols - 2), y0 = std::min(int(y), h.rows - 2);
+  const double fx = x - x0, fy = y - y0;
+  const float* r0 = h.ptr<float>(y0);
+  const float* r1 = h.ptr<float>(y0 + 1);
+  const double h00 = r0[x0], h01 = r0[x0 + 1], h10 = r1[x0], h11 = r1[x0 + 1];
+  if (gradient) {
+    *gradient = Eigen::Vector2d(((1 - fy) * (h01 - h00) + fy * (h11 - h10)) / cell,
+                                ((1 - fx) * (h10 - h00) + fx * (h11 - h01)) / cell);
+  }
+  return (1 - fy) * ((1 - fx) * h00 + fx * h01) + fy * ((1 - fx) * h10 + fx * h11);
+}
+
+// Marches the ray through the height field's bounding slab in steps of half
+// a cell and refines the first crossing from above to below by bisection.
+void intersectHeightField(const SceneGeometry::HeightFieldFrame& f,
+                          const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                          double min_s, double max_s, std::optional<SurfaceHit>& best) {
+  const SimHeightField& field = *f.field;
+  const Eigen::Vector3d o = origin - f.origin;
+  const double oa = o.dot(f.x), ob = o.dot(f.y), oh = o.dot(f.n);
+  const double da = direction.dot(f.x), db = direction.dot(f.y), dh = direction.dot(f.n);
+  double s_lo = min_s, s_hi = best ? std::min(max_s, best->distance) : max_s;
+  const double margin = 1e-6;
+  auto clip = [&](double value, double rate, double lo, double hi) {
+    if (std::abs(rate) < 1e-15) {
+      if (value < lo || value > hi) s_lo = s_hi + 1;  // empty
+      return;
+    }
+    double s1 = (lo - value) / rate, s2 = (hi - value) / rate;
+    if (s1 > s2) std::swap(s1, s2);
+    s_lo = std::max(s_lo, s1);
+    s_hi = std::min(s_hi, s2);
+  };
+  clip(oh, dh, f.min_height - margin, f.max_height + margin);
+  clip(oa, da, f.a0, f.a0 + field.width_mm);
+  clip(ob, db, f.b0, f.b0 + field.length_mm);
+  if (!(s_lo <= s_hi)) return;
+  auto above = [&](double s) { return oh + s * dh - heightAt(f, oa + s * da, ob + s * db); };
+  const double speed = std::hypot(da, db);
+  double ds = speed > 0 ? 0.5 * field.cell_mm / speed : s_hi - s_lo;
+  ds = std::max(ds, (s_hi - s_lo) / 1e5);
+  double prev_s = s_lo, prev_f = above(s_lo);
+  while (prev_s < s_hi) {
+    const double s = std::min(prev_s + ds, s_hi);
+    const double fs = above(s);
+    if (prev_f > 0 && fs <= 0) {
+      double lo = prev_s, hi = s;
+      for (int k = 0; k < 40 && hi - lo > 1e-9 * (1 + hi); ++k) {
+        const double mid = 0.5 * (lo + hi);
+        (above(mid) > 0 ? lo : hi) = mid;
+      }
+      const double hit = 0.5 * (lo + hi);
+      Eigen::Vector2d g;
+      heightAt(f, oa + hit * da, ob + hit * db, &g);
+      const Eigen::Vector3d normal = (f.n - g.x() * f.x - g.y() * f.y).normalized();
+      keepNearest(best, hit, min_s, max_s, normal, field.albedo, &field);
+      return;
+    }
+    prev_s = s;
+    prev_f = fs;
+  }
+}
+
 }  // namespace
+
+SceneGeometry::SceneGeometry(const SimScene& scene) : scene_(scene) {
+  for (const SimPlane& plane : scene.planes) plane_normals_.push_back(plane.normal.normalized());
+  for (const SimHeightField& field : scene.height_fields) {
+    HeightFieldFrame f;
+    f.field = &field;
+    f.n = field.normal.normalized();
+    f.x = (field.x_axis - f.n * f.n.dot(field.x_axis)).normalized();
+    f.y = f.n.cross(f.x);
+    f.origin = field.origin;
+    f.a0 = -0.5 * field.width_mm;
+    f.b0 = -0.5 * field.length_mm;
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(field.heights_mm, &lo, &hi);
+    f.min_height = static_cast<float>(lo);
+    f.max_height = static_cast<float>(hi);
+    height_fields_.push_back(f);
+  }
+}
+
+std::optional<SurfaceHit> SceneGeometry::intersect(const Eigen::Vector3d& origin,
+                                                   const Eigen::Vector3d& direction,
+                                                   double min_s, double max_s) const {
+  std::optional<SurfaceHit> best;
+  for (std::size_t i = 0; i < scene_.planes.size(); ++i) {
+    const SimPlane& plane = scene_.planes[i];
+    const Eigen::Vector3d& n = plane_normals_[i];
+    const double along = n.dot(direction);
+    if (along == 0.0) continue;  // ray parallel to the plane
+    const double s = n.dot(plane.point - origin) / along;
+    keepNearest(best, s, min_s, max_s, n, plane.albedo, &plane, &plane);
+  }
+  for (const SimSphere& sphere : scene_.spheres)
+    intersectSphere(sphere, origin, direction, min_s, max_s, best);
+  for (const SimCone& cone : scene_.cones)
+    intersectCone(cone, origin, direction, min_s, max_s, best);
+  for (const SimBox& box : scene_.boxes) intersectBox(box, origin, direction, min_s, max_s, best);
+  for (const HeightFieldFrame& f : height_fields_)
+    intersectHeightField(f, origin, direction, min_s, max_s, best);
+  return best;
+}
 
 std::optional<SurfaceHit> intersectScene(const SimScene& scene, const Eigen::Vector3d& origin,
                                          const Eigen::Vector3d& direction, double min_s,
                                          double max_s) {
-  std::optional<SurfaceHit> best;
-  for (const SimPlane& plane : scene.planes) {
-    const Eigen::Vector3d n = plane.normal.normalized();
-    const double along = n.dot(direction);
-    if (along == 0.0) continue;  // ray parallel to the plane
-    const double s = n.dot(plane.point - origin) / along;
-    keepNearest(best, s, min_s, max_s, n, plane.albedo, &plane);
-  }
-  for (const SimSphere& sphere : scene.spheres) {
-    // |origin + s d - c|^2 = r^2  <=>  a s^2 + 2 b s + c0 = 0
-    const Eigen::Vector3d oc = origin - sphere.center;
-    const double a = direction.squaredNorm();
-    const double b = direction.dot(oc);
-    const double c0 = oc.squaredNorm() - sphere.radius * sphere.radius;
-    const double discriminant = b * b - a * c0;
-    if (discriminant < 0.0) continue;
-    const double root = std::sqrt(discriminant);
-    for (double s : {(-b - root) / a, (-b + root) / a}) {
-      if (s > min_s && s < max_s) {
-        const Eigen::Vector3d point = origin + s * direction;
-        keepNearest(best, s, min_s, max_s, (point - sphere.center) / sphere.radius, sphere.albedo);
-        break;  // the first root in range is the nearer one
-      }
-    }
-  }
-  return best;
+  return SceneGeometry(scene).intersect(origin, direction, min_s, max_s);
 }
 
-SceneView computeSceneView(const SimConfig& config) {
-  const pipeline::CameraProjectorCalibration& rig = config.rig;
+cv::Mat generateRoughHeights(const SimHeightField& field, const SimRoughness& roughness) {
+  const int cols = static_cast<int>(std::lround(field.width_mm / field.cell_mm)) + 1;
+  const int rows = static_cast<int>(std::lround(field.length_mm / field.cell_mm)) + 1;
+  cv::Mat noise(rows, cols, CV_32FC1);
+  NormalSource normals(mix64(roughness.seed ^ 0x5eedf00dull));
+  for (int r = 0; r < rows; ++r) normals.fill(noise.ptr<float>(r), cols);
+  cv::Mat spectrum;
+  cv::dft(noise, spectrum, cv::DFT_COMPLEX_OUTPUT);
+  // Amplitude filter: flat below k0 = 1 / correlation length, k^-(1 + H) above.
+  const double k0 = 1.0 / roughness.correlation_length_mm;
+  for (int r = 0; r < rows; ++r) {
+    const double ky = (r <= rows / 2 ? r : r - rows) / (rows * field.cell_mm);
+    auto* row = spectrum.ptr<cv::Vec2f>(r);
+    for (int c = 0; c < cols; ++c) {
+      const double kx = (c <= cols / 2 ? c : c - cols) / (cols * field.cell_mm);
+      const double k = std::hypot(kx, ky);
+      const double gain = k <= k0 ? 1.0 : std::pow(k / k0, -(1.0 + roughness.hurst));
+      row[c] *= static_cast<float>(gain);
+    }
+  }
+  cv::Mat heights;
+  cv::dft(spectrum, heights, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(heights, mean, stddev);
+  heights -= mean[0];
+  if (stddev[0] > 0) heights *= roughness.rms_mm / stddev[0];
+  return heights;
+}
+
+CameraRays computeCameraRays(const pipeline::PinholeModel& camera) {
+  CameraRays rays;
+  rays.width = camera.width;
+  rays.height = camera.height;
+  rays.xy.resize(static_cast<std::size_t>(camera.width) * camera.height);
+  for (int row = 0; row < camera.height; ++row)
+    for (int col = 0; col < camera.width; ++col)
+      rays.xy[static_cast<std::size_t>(row) * camera.width + col] =
+          camera.pixelToNormalized({double(col), double(row)});
+  return rays;
+}
+
+SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
+                           const pipeline::CameraProjectorCalibration& rig,
+                           const CameraRays& rays, const Eigen::Isometry3d& camera_to_scene,
+                           bool with_ground_truth) {
   const int width = rig.camera.width, height = rig.camera.height;
   const int proj_width = rig.projector.width, proj_height = rig.projector.height;
-  const Eigen::Vector3d projector_center = -rig.R.transpose() * rig.t;  // camera frame, mm
+  const Eigen::Matrix3d rotation = camera_to_scene.linear();
+  const Eigen::Vector3d camera_center = camera_to_scene.translation();  // scene frame
+  // Projector pose relative to the scene: X_p = R_ps * X_scene + t_ps.
+  const Eigen::Matrix3d R_ps = rig.R * rotation.transpose();
+  const Eigen::Vector3d t_ps = rig.t - R_ps * camera_center;
+  const Eigen::Vector3d projector_center = -R_ps.transpose() * t_ps;  // scene frame, mm
   const double projector_field_radius2 = monotonicFieldRadius2(rig.projector);
 
   SceneView view;
   SimGroundTruth& gt = view.ground_truth;
-  gt.depth_mm = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
-  gt.xyz_mm = cv::Mat(height, width, CV_32FC3, cv::Scalar(kNaN, kNaN, kNaN));
-  gt.up = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
-  gt.vp = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
-  gt.lit = cv::Mat(height, width, CV_8UC1, cv::Scalar(0));
+  if (with_ground_truth) {
+    gt.depth_mm = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
+    gt.xyz_mm = cv::Mat(height, width, CV_32FC3, cv::Scalar(kNaN, kNaN, kNaN));
+    gt.up = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
+    gt.vp = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
+    gt.lit = cv::Mat(height, width, CV_8UC1, cv::Scalar(0));
+  }
 
   RenderMaps& maps = view.maps;
   const std::size_t n = static_cast<std::size_t>(width) * height;
@@ -161,70 +394,176 @@ SceneView computeSceneView(const SimConfig& config) {
   maps.weight_y.assign(n, 0.0f);
 
   const double inf = std::numeric_limits<double>::infinity();
-  std::vector<std::optional<BoardFrame>> board_frames;  // per plane
-  for (const SimPlane& plane : config.scene.planes)
-    board_frames.push_back(plane.checkerboard ? std::optional(boardFrame(plane)) : std::nullopt);
-  for (int row = 0; row < height; ++row) {
-    auto* depth_row = gt.depth_mm.ptr<float>(row);
-    auto* xyz_row = gt.xyz_mm.ptr<cv::Vec3f>(row);
-    auto* up_row = gt.up.ptr<float>(row);
-    auto* vp_row = gt.vp.ptr<float>(row);
-    auto* lit_row = gt.lit.ptr<std::uint8_t>(row);
-    for (int col = 0; col < width; ++col) {
-      const std::size_t i = static_cast<std::size_t>(row) * width + col;
-      const Eigen::Vector2d xn = rig.camera.pixelToNormalized({double(col), double(row)});
-      const Eigen::Vector3d ray{xn.x(), xn.y(), 1.0};  // s along it is the depth z (mm)
-      const std::optional<SurfaceHit> hit =
-          intersectScene(config.scene, Eigen::Vector3d::Zero(), ray, 0.0, inf);
-      if (!hit) continue;
-      const Eigen::Vector3d point = hit->distance * ray;
-      depth_row[col] = static_cast<float>(point.z());
-      xyz_row[col] = cv::Vec3f(float(point.x()), float(point.y()), float(point.z()));
-      double albedo = hit->albedo;
-      if (hit->plane && hit->plane->checkerboard) {
-        const auto index = static_cast<std::size_t>(hit->plane - config.scene.planes.data());
-        albedo = footprintAlbedo(*hit->plane, *board_frames[index], rig.camera, col, row, ray,
-                                 point);
+  const SimScene& planes_scene = scene.scene();
+  std::vector<std::optional<BoardInCamera>> boards;  // per plane, in this camera's frame
+  const Eigen::Isometry3d scene_to_camera = camera_to_scene.inverse();
+  for (const SimPlane& plane : planes_scene.planes) {
+    if (!plane.checkerboard) {
+      boards.emplace_back();
+      continue;
+    }
+    const BoardFrame f = boardFrame(plane);
+    BoardInCamera b;
+    b.n = scene_to_camera.linear() * plane.normal.normalized();
+    b.frame = {scene_to_camera * f.origin, scene_to_camera.linear() * f.x,
+               scene_to_camera.linear() * f.y};
+    b.plane_offset = b.n.dot(scene_to_camera * plane.point);
+    boards.push_back(b);
+  }
+  // The exact computation of one pixel; writes the ground truth if asked.
+  struct Sample {
+    const void* primitive = nullptr;  // nullptr: no surface
+    bool textured = false;            // checkerboard: never interpolated
+    bool lit = false;
+    float ambient = 0, per_level = 0;
+    double up = 0, vp = 0;
+  };
+  auto castPixel = [&](int col, int row) {
+    Sample out;
+    const std::size_t i = static_cast<std::size_t>(row) * width + col;
+    const Eigen::Vector2d& xn = rays.xy[i];
+    const Eigen::Vector3d ray{xn.x(), xn.y(), 1.0};  // camera frame; s is the depth z (mm)
+    const Eigen::Vector3d ray_scene = rotation * ray;
+    const std::optional<SurfaceHit> hit = scene.intersect(camera_center, ray_scene, 0.0, inf);
+    if (!hit) return out;
+    out.primitive = hit->primitive;
+    const Eigen::Vector3d point_camera = hit->distance * ray;
+    const Eigen::Vector3d point = camera_center + hit->distance * ray_scene;  // scene frame
+    if (with_ground_truth) {
+      gt.depth_mm.ptr<float>(row)[col] = static_cast<float>(point_camera.z());
+      gt.xyz_mm.ptr<cv::Vec3f>(row)[col] =
+          cv::Vec3f(float(point_camera.x()), float(point_camera.y()), float(point_camera.z()));
+    }
+    double albedo = hit->albedo;
+    if (hit->plane && hit->plane->checkerboard) {
+      const auto index = static_cast<std::size_t>(hit->plane - planes_scene.planes.data());
+      albedo =
+          footprintAlbedo(*hit->plane, *boards[index], rig.camera, col, row, ray, point_camera);
+      out.textured = true;
+    }
+    out.ambient = static_cast<float>(config.ambient_dn * albedo);
+
+    // The side of the surface the camera sees.
+    const Eigen::Vector3d normal = hit->normal.dot(ray_scene) > 0 ? -hit->normal : hit->normal;
+    const Eigen::Vector3d point_in_projector = rig.R * point_camera + rig.t;
+    if (point_in_projector.z() <= 0.0) return out;  // behind the projector
+    // Beyond the lens's field the distortion polynomial folds back into
+    // the image; such points are not lit.
+    const double xp = point_in_projector.x() / point_in_projector.z();
+    const double yp = point_in_projector.y() / point_in_projector.z();
+    if (xp * xp + yp * yp >= projector_field_radius2) return out;
+    const Eigen::Vector2d projector_px = rig.projector.project(point_in_projector);
+    const double up = projector_px.x(), vp = projector_px.y();
+    // A projector pixel covers [c - 0.5, c + 0.5) around its centre c.
+    if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5))
+      return out;
+    const Eigen::Vector3d to_projector = projector_center - point;
+    const double distance = to_projector.norm();
+    const double cos_incidence = normal.dot(to_projector) / distance;
+    if (cos_incidence <= 0.0) return out;  // lit from behind
+    // Shadow: anything between the point and the projector centre (1 um
+    // tolerance at the point itself).
+    if (scene.intersect(point, to_projector, 1e-3 / distance, 1.0)) return out;
+
+    const double falloff = config.reference_distance_mm / distance;
+    const double shading = albedo * cos_incidence * falloff * falloff;
+    out.per_level = static_cast<float>(config.projector_brightness_dn * shading / 255.0);
+    out.lit = true;
+    out.up = up;
+    out.vp = vp;
+    if (with_ground_truth) {
+      gt.up.ptr<float>(row)[col] = static_cast<float>(up);
+      gt.vp.ptr<float>(row)[col] = static_cast<float>(vp);
+      gt.lit.ptr<std::uint8_t>(row)[col] = 255;
+    }
+    return out;
+  };
+  auto store = [&](int col, int row, const Sample& sample) {
+    const std::size_t i = static_cast<std::size_t>(row) * width + col;
+    maps.ambient_dn[i] = sample.ambient;
+    if (!sample.lit) return;
+    maps.projector_dn_per_level[i] = sample.per_level;
+    // Bilinear sampling at the pixel centres, clamped to the image edge.
+    const double u_clamped = std::clamp(sample.up, 0.0, double(proj_width - 1));
+    const double v_clamped = std::clamp(sample.vp, 0.0, double(proj_height - 1));
+    const int x0 = std::min(int(std::floor(u_clamped)), std::max(proj_width - 2, 0));
+    const int y0 = std::min(int(std::floor(v_clamped)), std::max(proj_height - 2, 0));
+    maps.texel_index[i] = y0 * proj_width + x0;
+    maps.weight_x[i] = static_cast<float>(u_clamped - x0);
+    maps.weight_y[i] = static_cast<float>(v_clamped - y0);
+  };
+
+  if (with_ground_truth) {
+    for (int row = 0; row < height; ++row)
+      for (int col = 0; col < width; ++col) store(col, row, castPixel(col, row));
+    return view;
+  }
+
+  // Interpolated fast path (see the header).
+  constexpr int kBlock = 4;
+  auto gridLines = [](int size) {
+    std::vector<int> lines;
+    for (int x = 0; x < size - 1; x += kBlock) lines.push_back(x);
+    lines.push_back(size - 1);
+    return lines;
+  };
+  const std::vector<int> grid_cols = gridLines(width), grid_rows = gridLines(height);
+  const std::size_t gw = grid_cols.size();
+  std::vector<Sample> grid(gw * grid_rows.size());
+  for (std::size_t gy = 0; gy < grid_rows.size(); ++gy)
+    for (std::size_t gx = 0; gx < gw; ++gx)
+      grid[gy * gw + gx] = castPixel(grid_cols[gx], grid_rows[gy]);
+  auto blend = [](const Sample& s00, const Sample& s01, const Sample& s10, const Sample& s11,
+                  double fx, double fy) {
+    auto mix = [&](double a, double b, double c, double d) {
+      return (1 - fy) * ((1 - fx) * a + fx * b) + fy * ((1 - fx) * c + fx * d);
+    };
+    Sample s = s00;
+    s.ambient = static_cast<float>(mix(s00.ambient, s01.ambient, s10.ambient, s11.ambient));
+    s.per_level =
+        static_cast<float>(mix(s00.per_level, s01.per_level, s10.per_level, s11.per_level));
+    s.up = mix(s00.up, s01.up, s10.up, s11.up);
+    s.vp = mix(s00.vp, s01.vp, s10.vp, s11.vp);
+    return s;
+  };
+  for (std::size_t gy = 0; gy + 1 < grid_rows.size(); ++gy) {
+    const int r0 = grid_rows[gy], r1 = grid_rows[gy + 1];
+    const int row_end = gy + 2 == grid_rows.size() ? r1 + 1 : r1;  // last block: its far edge
+    for (std::size_t gx = 0; gx + 1 < gw; ++gx) {
+      const int c0 = grid_cols[gx], c1 = grid_cols[gx + 1];
+      const int col_end = gx + 2 == gw ? c1 + 1 : c1;
+      const Sample& s00 = grid[gy * gw + gx];
+      const Sample& s01 = grid[gy * gw + gx + 1];
+      const Sample& s10 = grid[(gy + 1) * gw + gx];
+      const Sample& s11 = grid[(gy + 1) * gw + gx + 1];
+      bool smooth = s00.primitive && s00.lit && !s00.textured;
+      for (const Sample* s : {&s01, &s10, &s11})
+        smooth = smooth && s->primitive == s00.primitive && s->lit;
+      if (smooth && (c1 - c0 > 1 || r1 - r0 > 1)) {
+        const int cc = (c0 + c1) / 2, rc = (r0 + r1) / 2;
+        const Sample exact = castPixel(cc, rc);
+        const Sample predicted =
+            blend(s00, s01, s10, s11, double(cc - c0) / std::max(c1 - c0, 1),
+                  double(rc - r0) / std::max(r1 - r0, 1));
+        smooth = exact.primitive == s00.primitive && exact.lit &&
+                 std::abs(exact.up - predicted.up) < 0.01 &&
+                 std::abs(exact.vp - predicted.vp) < 0.01 &&
+                 std::abs(exact.per_level - predicted.per_level) <= 1e-3 * exact.per_level &&
+                 std::abs(exact.ambient - predicted.ambient) <= 1e-3 * exact.ambient + 1e-6f;
       }
-      maps.ambient_dn[i] = static_cast<float>(config.ambient_dn * albedo);
-
-      // The side of the surface the camera sees.
-      const Eigen::Vector3d normal = hit->normal.dot(ray) > 0 ? -hit->normal : hit->normal;
-      const Eigen::Vector3d point_in_projector = rig.R * point + rig.t;
-      if (point_in_projector.z() <= 0.0) continue;  // behind the projector
-      // Beyond the lens's field the distortion polynomial folds back into
-      // the image; such points are not lit.
-      const double xp = point_in_projector.x() / point_in_projector.z();
-      const double yp = point_in_projector.y() / point_in_projector.z();
-      if (xp * xp + yp * yp >= projector_field_radius2) continue;
-      const Eigen::Vector2d projector_px = rig.projector.project(point_in_projector);
-      const double up = projector_px.x(), vp = projector_px.y();
-      // A projector pixel covers [c - 0.5, c + 0.5) around its centre c.
-      if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5)) continue;
-      const Eigen::Vector3d to_projector = projector_center - point;
-      const double distance = to_projector.norm();
-      const double cos_incidence = normal.dot(to_projector) / distance;
-      if (cos_incidence <= 0.0) continue;  // lit from behind
-      // Shadow: anything between the point and the projector centre (1 um
-      // tolerance at the point itself).
-      if (intersectScene(config.scene, point, to_projector, 1e-3 / distance, 1.0)) continue;
-
-      const double falloff = config.reference_distance_mm / distance;
-      const double shading = albedo * cos_incidence * falloff * falloff;
-      maps.projector_dn_per_level[i] =
-          static_cast<float>(config.projector_brightness_dn * shading / 255.0);
-      // Bilinear sampling at the pixel centres, clamped to the image edge.
-      const double u_clamped = std::clamp(up, 0.0, double(proj_width - 1));
-      const double v_clamped = std::clamp(vp, 0.0, double(proj_height - 1));
-      const int x0 = std::min(int(std::floor(u_clamped)), std::max(proj_width - 2, 0));
-      const int y0 = std::min(int(std::floor(v_clamped)), std::max(proj_height - 2, 0));
-      maps.texel_index[i] = y0 * proj_width + x0;
-      maps.weight_x[i] = static_cast<float>(u_clamped - x0);
-      maps.weight_y[i] = static_cast<float>(v_clamped - y0);
-
-      up_row[col] = static_cast<float>(up);
-      vp_row[col] = static_cast<float>(vp);
-      lit_row[col] = 255;
+      for (int row = r0; row < row_end; ++row)
+        for (int col = c0; col < col_end; ++col) {
+          const bool on_grid = (col == c0 || col == c1) && (row == r0 || row == r1);
+          if (on_grid) {
+            store(col, row, grid[(gy + (row == r1)) * gw + gx + (col == c1)]);
+          } else if (smooth) {
+            store(col, row,
+                  blend(s00, s01, s10, s11, double(col - c0) / std::max(c1 - c0, 1),
+                        double(row - r0) / std::max(r1 - r0, 1)));
+          } else {
+            store(col, row, castPixel(col, row));
+          }
+        }
     }
   }
   return view;

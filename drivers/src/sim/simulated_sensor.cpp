@@ -1,6 +1,7 @@
 // SimulatedSensor::create: validation of the configuration, the scene view
 // computed once, and the live camera / projector / trigger source.
 #include <Eigen/Dense>
+#include <opencv2/core.hpp>
 #include <cmath>
 #include <set>
 #include <stdexcept>
@@ -93,6 +94,76 @@ void validateConfig(const SimConfig& c) {
     requireAlbedo(s.albedo, name + ".albedo");
   }
 
+  for (std::size_t i = 0; i < c.scene.cones.size(); ++i) {
+    const SimCone& k = c.scene.cones[i];
+    const std::string name = "scene.cones[" + std::to_string(i) + "]";
+    if (!finite(k.base_center)) fail(name + ".base_center", "must be finite");
+    if (!finite(k.axis) || k.axis.norm() == 0) fail(name + ".axis", "must be non-zero");
+    if (!(k.radius > 0 && std::isfinite(k.radius))) fail(name + ".radius", "must be > 0");
+    if (!(k.height > 0 && std::isfinite(k.height))) fail(name + ".height", "must be > 0");
+    requireAlbedo(k.albedo, name + ".albedo");
+  }
+  for (std::size_t i = 0; i < c.scene.boxes.size(); ++i) {
+    const SimBox& b = c.scene.boxes[i];
+    const std::string name = "scene.boxes[" + std::to_string(i) + "]";
+    if (!finite(b.center)) fail(name + ".center", "must be finite");
+    if (!finite(b.size_mm) || (b.size_mm.array() <= 0).any()) fail(name + ".size_mm", "must be > 0");
+    if (!b.rotation.allFinite() ||
+        !(b.rotation.transpose() * b.rotation).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+        b.rotation.determinant() <= 0)
+      fail(name + ".rotation", "must be a rotation matrix");
+    requireAlbedo(b.albedo, name + ".albedo");
+  }
+  for (std::size_t i = 0; i < c.scene.height_fields.size(); ++i) {
+    const SimHeightField& h = c.scene.height_fields[i];
+    const std::string name = "scene.height_fields[" + std::to_string(i) + "]";
+    if (!finite(h.origin)) fail(name + ".origin", "must be finite");
+    if (!finite(h.normal) || h.normal.norm() == 0) fail(name + ".normal", "must be non-zero");
+    const Eigen::Vector3d n = h.normal.normalized();
+    if (!finite(h.x_axis) || (h.x_axis - n * n.dot(h.x_axis)).norm() < 1e-6 * h.x_axis.norm())
+      fail(name + ".x_axis", "must not be (nearly) parallel to the normal");
+    if (!(h.cell_mm > 0 && std::isfinite(h.cell_mm))) fail(name + ".cell_mm", "must be > 0");
+    if (!(h.width_mm >= h.cell_mm && h.length_mm >= h.cell_mm))
+      fail(name + ".width_mm/length_mm", "must be >= cell_mm");
+    const int cols = static_cast<int>(std::lround(h.width_mm / h.cell_mm)) + 1;
+    const int rows = static_cast<int>(std::lround(h.length_mm / h.cell_mm)) + 1;
+    if (h.heights_mm.empty()) {
+      if (!h.roughness) fail(name, "needs heights_mm or roughness");
+      const SimRoughness& r = *h.roughness;
+      requireNonNegative(r.rms_mm, name + ".roughness.rms_mm");
+      if (!(r.correlation_length_mm > 0)) fail(name + ".roughness.correlation_length_mm", "must be > 0");
+      if (!(r.hurst > 0 && r.hurst <= 1)) fail(name + ".roughness.hurst", "must be in (0, 1]");
+    } else if (h.heights_mm.type() != CV_32FC1 || h.heights_mm.rows != rows ||
+               h.heights_mm.cols != cols) {
+      fail(name + ".heights_mm", "must be CV_32FC1 of " + std::to_string(rows) + " x " +
+                                     std::to_string(cols) + " (length/cell + 1 x width/cell + 1)");
+    } else if (!cv::checkRange(h.heights_mm)) {
+      fail(name + ".heights_mm", "must be finite");
+    }
+    requireAlbedo(h.albedo, name + ".albedo");
+  }
+  if (c.second_camera) {
+    const SimCamera& s = *c.second_camera;
+    if (s.camera_id.empty() || s.camera_id == c.camera_id)
+      fail("second_camera.camera_id", "must be non-empty and differ from camera_id");
+    validatePinhole(s.rig.camera, "second_camera.rig.camera");
+    validatePinhole(s.rig.projector, "second_camera.rig.projector");
+    if (s.rig.projector.width != c.rig.projector.width ||
+        s.rig.projector.height != c.rig.projector.height)
+      fail("second_camera.rig.projector", "must have rig.projector's size (same projector)");
+    if (!s.rig.R.allFinite() ||
+        !(s.rig.R.transpose() * s.rig.R).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+        s.rig.R.determinant() <= 0)
+      fail("second_camera.rig.R", "must be a rotation matrix");
+    if (!finite(s.rig.t)) fail("second_camera.rig.t", "must be finite");
+  }
+  if (!finite(c.motion.velocity_mm_s)) fail("motion.velocity_mm_s", "must be finite");
+  for (std::size_t i = 0; i < c.motion.poses.size(); ++i)
+    if (!c.motion.poses[i].matrix().allFinite() ||
+        !(c.motion.poses[i].linear().transpose() * c.motion.poses[i].linear())
+             .isApprox(Eigen::Matrix3d::Identity(), 1e-6))
+      fail("motion.poses[" + std::to_string(i) + "]", "must be a finite rigid transform");
+
   if (c.patterns.empty()) fail("patterns", "must name at least one pattern");
   std::set<std::string> names;
   for (std::size_t i = 0; i < c.patterns.size(); ++i) {
@@ -113,20 +184,37 @@ void validateConfig(const SimConfig& c) {
   }
 }
 
-// Immutable after construction; render() is thread-safe.
+// Camera k's frame in the first camera's frame (the sensor frame): both rigs
+// place the same projector, X_p = R_k X_k + t_k.
+Eigen::Isometry3d cameraToFirst(const pipeline::CameraProjectorCalibration& first,
+                                const pipeline::CameraProjectorCalibration& rig) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = first.R.transpose() * rig.R;
+  pose.translation() = first.R.transpose() * (rig.t - first.t);
+  return pose;
+}
+
+// Immutable after construction; render() is thread-safe. Owns the config the
+// scene geometry refers to.
 class SceneRenderer {
  public:
-  explicit SceneRenderer(const SimConfig& config) : view_(sim::computeSceneView(config)) {
-    response_.gain_dn_per_electron = config.gain_dn_per_electron;
-    response_.read_noise_dn = config.read_noise_dn;
-    response_.bit_depth = config.bit_depth;
-    for (const pipeline::PatternSpec& p : config.patterns) {
+  explicit SceneRenderer(SimConfig config) : config_(std::move(config)), geometry_(config_.scene) {
+    response_.gain_dn_per_electron = config_.gain_dn_per_electron;
+    response_.read_noise_dn = config_.read_noise_dn;
+    response_.bit_depth = config_.bit_depth;
+    for (const pipeline::PatternSpec& p : config_.patterns) {
       names_.push_back(p.name);
       images_.push_back(pipeline::generatePatternImages(p));
     }
+    addCamera(config_.rig);
+    if (config_.second_camera) addCamera(config_.second_camera->rig);
   }
 
-  const SimGroundTruth& groundTruth() const { return view_.ground_truth; }
+  const SimConfig& config() const { return config_; }
+  int cameraCount() const { return static_cast<int>(cameras_.size()); }
+  const SimGroundTruth& groundTruth(int camera) const {
+    return cameras_.at(camera).view.ground_truth;
+  }
   const std::vector<std::string>& names() const { return names_; }
   int frameCount(std::size_t pattern) const { return static_cast<int>(images_[pattern].size()); }
 
@@ -136,16 +224,59 @@ class SceneRenderer {
     throw std::invalid_argument("SimulatedSensor::render: unknown pattern '" + name + "'");
   }
 
-  cv::Mat render(std::size_t pattern, int frame, std::uint64_t noise_seed) const {
+  SimGroundTruth groundTruthAt(int camera, int frame) const {
+    const CameraView& c = checkedCamera(camera);
+    if (frame < 0) throw std::out_of_range("SimulatedSensor::groundTruthAt: frame < 0");
+    if (!config_.motion.moving()) return c.view.ground_truth;
+    return sim::computeSceneView(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame), true)
+        .ground_truth;
+  }
+
+  cv::Mat render(int camera, std::size_t pattern, int frame, std::uint64_t noise_seed) const {
+    const CameraView& c = checkedCamera(camera);
     const std::vector<cv::Mat>& frames = images_.at(pattern);
     if (frame < 0 || frame >= static_cast<int>(frames.size()))
       throw std::out_of_range("SimulatedSensor::render: frame " + std::to_string(frame) +
                               " of pattern '" + names_[pattern] + "' out of range");
-    return sim::renderImage(view_.maps, frames[frame], response_, noise_seed);
+    if (!config_.motion.moving())
+      return sim::renderImage(c.view.maps, frames[frame], response_, noise_seed);
+    // Moving sensor: ray-cast this image's pose (camera rays undistorted once).
+    const sim::SceneView moved = sim::computeSceneView(config_, geometry_, c.rig, c.rays,
+                                                       cameraToScene(c, frame), false);
+    return sim::renderImage(moved.maps, frames[frame], response_, noise_seed);
   }
 
  private:
-  sim::SceneView view_;
+  struct CameraView {
+    pipeline::CameraProjectorCalibration rig;
+    Eigen::Isometry3d to_first;  // X_first = to_first * X_this
+    sim::CameraRays rays;
+    sim::SceneView view;         // at the configured pose (image 0)
+  };
+
+  void addCamera(const pipeline::CameraProjectorCalibration& rig) {
+    CameraView c;
+    c.rig = rig;
+    c.to_first = cameraToFirst(config_.rig, rig);
+    c.rays = sim::computeCameraRays(rig.camera);
+    c.view = sim::computeSceneView(config_, geometry_, rig, c.rays, c.to_first, true);
+    cameras_.push_back(std::move(c));
+  }
+
+  const CameraView& checkedCamera(int camera) const {
+    if (camera < 0 || camera >= cameraCount())
+      throw std::out_of_range("SimulatedSensor: camera index " + std::to_string(camera) +
+                              " out of range (" + std::to_string(cameraCount()) + " cameras)");
+    return cameras_[static_cast<std::size_t>(camera)];
+  }
+
+  Eigen::Isometry3d cameraToScene(const CameraView& c, int frame) const {
+    return config_.motion.poseAt(frame, config_.camera_fps) * c.to_first;
+  }
+
+  const SimConfig config_;
+  const sim::SceneGeometry geometry_;
+  std::vector<CameraView> cameras_;
   sim::SensorResponse response_;
   std::vector<std::string> names_;
   std::vector<std::vector<cv::Mat>> images_;  // per pattern, projector images in order
@@ -155,49 +286,80 @@ class SceneRenderer {
 class SimulatedSensorImpl final : public SimulatedSensor {
  public:
   explicit SimulatedSensorImpl(SimConfig config)
-      : config_(std::move(config)), renderer_(std::make_shared<const SceneRenderer>(config_)) {
+      : renderer_(std::make_shared<const SceneRenderer>(std::move(config))) {
     std::vector<ProjectorSequence> sequences;
     for (std::size_t i = 0; i < renderer_->names().size(); ++i)
       sequences.push_back({renderer_->names()[i], renderer_->frameCount(i)});
+    const SimConfig& c = renderer_->config();
     // The render function holds the renderer, not the sensor: no cycle.
     std::shared_ptr<const SceneRenderer> renderer = renderer_;
     schedule_ = std::make_shared<sim::LiveSchedule>(
-        std::move(sequences), config_.camera_fps, config_.bit_depth, config_.seed,
-        [renderer](std::size_t pattern, int frame, std::uint64_t seed) {
-          return renderer->render(pattern, frame, seed);
-        });
-    camera_ = sim::makeLiveCamera(schedule_, config_.camera_id, config_.rig.camera.width,
-                                  config_.rig.camera.height);
+        std::move(sequences), c.camera_fps, c.bit_depth, c.seed,
+        [renderer](int camera, std::size_t pattern, int frame, std::uint64_t seed) {
+          return renderer->render(camera, pattern, frame, seed);
+        },
+        renderer_->cameraCount());
+    cameras_.push_back(sim::makeLiveCamera(schedule_, 0, c.camera_id, c.rig.camera.width,
+                                           c.rig.camera.height));
+    if (c.second_camera)
+      cameras_.push_back(sim::makeLiveCamera(schedule_, 1, c.second_camera->camera_id,
+                                             c.second_camera->rig.camera.width,
+                                             c.second_camera->rig.camera.height));
     projector_ = sim::makeLiveProjector(schedule_, "sim_projector");
     trigger_source_ = sim::makeLiveTriggerSource(schedule_);
   }
 
-  std::shared_ptr<Camera> camera() override { return camera_; }
+  std::shared_ptr<Camera> camera() override { return cameras_.front(); }
+  std::vector<std::shared_ptr<Camera>> cameras() override { return cameras_; }
   std::shared_ptr<Projector> projector() override { return projector_; }
   std::shared_ptr<TriggerSource> triggerSource() override { return trigger_source_; }
-  const SimGroundTruth& groundTruth() const override { return renderer_->groundTruth(); }
-  const SimConfig& config() const override { return config_; }
+  const SimGroundTruth& groundTruth() const override { return renderer_->groundTruth(0); }
+  SimGroundTruth groundTruthAt(int camera, int frame) const override {
+    return renderer_->groundTruthAt(camera, frame);
+  }
+  const SimConfig& config() const override { return renderer_->config(); }
 
   cv::Mat render(const std::string& pattern_name, int frame,
                  std::uint64_t noise_seed) const override {
-    return renderer_->render(renderer_->patternIndex(pattern_name), frame, noise_seed);
+    return renderer_->render(0, renderer_->patternIndex(pattern_name), frame, noise_seed);
+  }
+  cv::Mat render(int camera, const std::string& pattern_name, int frame,
+                 std::uint64_t noise_seed) const override {
+    return renderer_->render(camera, renderer_->patternIndex(pattern_name), frame, noise_seed);
   }
 
   SimCounters counters() const override { return schedule_->counters(); }
 
  private:
-  const SimConfig config_;
   const std::shared_ptr<const SceneRenderer> renderer_;
   std::shared_ptr<sim::LiveSchedule> schedule_;
-  std::shared_ptr<Camera> camera_;
+  std::vector<std::shared_ptr<Camera>> cameras_;
   std::shared_ptr<Projector> projector_;
   std::shared_ptr<TriggerSource> trigger_source_;
 };
 
 }  // namespace
 
+bool SimMotion::moving() const {
+  if (!poses.empty()) {
+    for (const Eigen::Isometry3d& p : poses)
+      if (p.matrix() != Eigen::Matrix4d::Identity()) return true;
+    return false;
+  }
+  return velocity_mm_s != Eigen::Vector3d::Zero();
+}
+
+Eigen::Isometry3d SimMotion::poseAt(int frame, double camera_fps) const {
+  if (!poses.empty()) return poses[static_cast<std::size_t>(frame) % poses.size()];
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() = velocity_mm_s * (frame / camera_fps);
+  return pose;
+}
+
 std::shared_ptr<SimulatedSensor> SimulatedSensor::create(SimConfig config) {
   validateConfig(config);
+  for (SimHeightField& h : config.scene.height_fields)
+    if (h.heights_mm.empty()) h.heights_mm = sim::generateRoughHeights(h, *h.roughness);
   return std::make_shared<SimulatedSensorImpl>(std::move(config));
 }
 

@@ -1,5 +1,6 @@
-// The simulated sensor: one camera and a projector addressed like the
-// LightCrafter 4500, looking at a scene of planes and spheres. It renders what
+// The simulated sensor: one or two cameras and a projector addressed like the
+// LightCrafter 4500, looking at a scene of planes, spheres, cones, boxes and
+// height fields, optionally while the sensor moves. It renders what
 // the camera would see for each projected pattern (Lambertian shading,
 // projector shadows, ambient light, shot and read noise, quantisation) and
 // plays the trigger schedule of the real sensor in real time: the camera
@@ -7,7 +8,9 @@
 // with a trigger event.
 //
 // Rendering is cheap because the projector coordinate seen by a camera pixel
-// does not depend on the pattern: it is computed once per scene.
+// does not depend on the pattern: it is computed once per sensor pose (once
+// per scene for a static sensor; once per image when the sensor moves, from
+// camera rays undistorted once).
 #pragma once
 
 #include <cstdint>
@@ -17,6 +20,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <opencv2/core/mat.hpp>
 
 #include "sl/drivers/camera.h"
@@ -60,16 +64,97 @@ struct SimSphere {
   double albedo = 0.8;
 };
 
+// A solid right circular cone: lateral surface plus the base disk.
+struct SimCone {
+  Eigen::Vector3d base_center{0, 0, 600};  // mm, camera frame
+  Eigen::Vector3d axis{0, 0, -1};          // base -> apex; need not be unit
+  double radius = 20;                      // mm, base radius
+  double height = 30;                      // mm, base to apex
+  double albedo = 0.8;
+};
+
+// A solid box: size_mm along its own axes, rotation = box axes in the camera
+// frame (columns).
+struct SimBox {
+  Eigen::Vector3d center{0, 0, 600};   // mm, camera frame
+  Eigen::Vector3d size_mm{50, 50, 50};
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  double albedo = 0.8;
+};
+
+// A random rough surface: a Gaussian field whose power spectrum is flat up to
+// 1 / correlation_length_mm and falls as k^-(2 + 2 hurst) above it (a
+// self-affine surface), scaled to rms_mm exactly. Deterministic given seed.
+struct SimRoughness {
+  double rms_mm = 0.1;
+  double correlation_length_mm = 5.0;
+  double hurst = 0.8;
+  std::uint64_t seed = 1;
+};
+
+// A height field over a rectangle: the surface point of cell (i, j) is
+// origin + (-width/2 + i * cell) x + (-length/2 + j * cell) y + H(j, i) n,
+// bilinear between samples (x = x_axis projected into the plane, y = n x x,
+// n = normal, unit). Only the top surface exists (no side walls); heights
+// are along the normal, which faces the sensor.
+struct SimHeightField {
+  Eigen::Vector3d origin{0, 0, 600};  // mm, camera frame: centre of the rectangle at height 0
+  Eigen::Vector3d normal{0, 0, -1};
+  Eigen::Vector3d x_axis{1, 0, 0};
+  double width_mm = 170;              // along x
+  double length_mm = 170;             // along y
+  double cell_mm = 0.5;
+  // CV_32FC1 heights (mm), rows along y, cols along x; must have
+  // round(length/cell) + 1 rows and round(width/cell) + 1 cols. Empty:
+  // generated from `roughness` when the sensor is created.
+  cv::Mat heights_mm;
+  std::optional<SimRoughness> roughness{};
+  double albedo = 0.8;
+};
+
 struct SimScene {
   std::vector<SimPlane> planes;
   std::vector<SimSphere> spheres;
+  std::vector<SimCone> cones;
+  std::vector<SimBox> boxes;
+  std::vector<SimHeightField> height_fields;
+};
+
+// Motion of the sensor during a pattern sequence. The scene is given in the
+// camera frame of the sequence's first image (frame 0); image i of every
+// sequence is rendered with the sensor at its exposure time, i.e. the scene
+// seen through the inverse of the sensor's motion. Each sequence starts again
+// from the configured pose (so a long live run keeps the scene in view).
+struct SimMotion {
+  // Linear motion: sensor velocity in the frame-0 camera frame (mm/s); image i
+  // is exposed i / camera_fps after image 0.
+  Eigen::Vector3d velocity_mm_s = Eigen::Vector3d::Zero();
+  // Or one sensor pose per image (image i uses poses[i % size]): camera frame
+  // of image i in that of image 0 (X_0 = pose * X_i, mm). Non-empty: used
+  // instead of velocity_mm_s.
+  std::vector<Eigen::Isometry3d> poses;
+
+  bool moving() const;
+  // Pose of the sensor for image `frame` of a sequence.
+  Eigen::Isometry3d poseAt(int frame, double camera_fps) const;
+};
+
+// A further camera seeing the same projector, with its own rig calibration
+// (camera model and projector pose relative to that camera).
+struct SimCamera {
+  std::string camera_id = "sim_left";
+  pipeline::CameraProjectorCalibration rig;
 };
 
 struct SimConfig {
   std::string camera_id = "sim_top";
   // True geometry of the rig: camera and projector models, projector pose.
   pipeline::CameraProjectorCalibration rig;
+  // Optional second camera ("left"), rendered on the same projector schedule.
+  // Its rig's projector must have the first rig's projector size.
+  std::optional<SimCamera> second_camera{};
   SimScene scene;
+  SimMotion motion;
   std::vector<pipeline::PatternSpec> patterns;  // sequences the projector knows (any family)
 
   double camera_fps = 30.0;       // dt_img = 1 / fps
@@ -124,11 +209,20 @@ class SimulatedSensor {
   static std::shared_ptr<SimulatedSensor> create(SimConfig config);
   virtual ~SimulatedSensor() = default;
 
+  // The first camera (= cameras()[0]).
   virtual std::shared_ptr<Camera> camera() = 0;
+  // All cameras: the first, then second_camera if configured.
+  virtual std::vector<std::shared_ptr<Camera>> cameras() = 0;
   virtual std::shared_ptr<Projector> projector() = 0;
   virtual std::shared_ptr<TriggerSource> triggerSource() = 0;
 
+  // Ground truth of the first camera with the sensor at its configured pose
+  // (image 0 of a sequence).
   virtual const SimGroundTruth& groundTruth() const = 0;
+  // Ground truth of camera `camera` (index into cameras()) for image `frame`
+  // of a sequence (the sensor moved as SimConfig::motion says); points in that
+  // camera's frame at that time. Computed on each call (tens of ms).
+  virtual SimGroundTruth groundTruthAt(int camera, int frame) const = 0;
   virtual const SimConfig& config() const = 0;
 
   // Renders frame `frame` of pattern `pattern_name` with noise drawn from
@@ -136,6 +230,9 @@ class SimulatedSensor {
   // Throws std::invalid_argument on an unknown pattern, std::out_of_range on
   // a frame outside [0, frame count).
   virtual cv::Mat render(const std::string& pattern_name, int frame,
+                         std::uint64_t noise_seed) const = 0;
+  // The same for camera `camera` (index into cameras()).
+  virtual cv::Mat render(int camera, const std::string& pattern_name, int frame,
                          std::uint64_t noise_seed) const = 0;
 
   virtual SimCounters counters() const = 0;
