@@ -1,0 +1,49 @@
+// sl_eval: the paper's experiments (section 4) rerun on the simulated sensor
+// with ground truth, through the daemon's pipeline (pipeline::Decoder,
+// MotionCompensator, Triangulator; no DDS). Each experiment returns its
+// numbers and a Markdown table, and writes PNG plots when given a folder.
+// Synchronous, no threads; thread-compatible.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace sl::eval {
+
+struct EvalOptions {
+  int scans = 10;        // scans per condition
+  std::string out_dir;   // PNG plots go here (created); empty: no plots
+};
+
+struct EvalResult {
+  std::string markdown;                   // table(s) for a report
+  std::map<std::string, double> metrics;  // named numbers (mm unless named otherwise)
+  std::vector<std::string> plots;         // paths of the PNG files written
+};
+
+// 4.1 precision: consecutive scans of a flat matte wall at 500 mm; per-pixel
+// depth standard deviation over the pixels valid in every scan (mean, max,
+// RMS) next to the phase-noise floor sigma_phi = sqrt(2/N) sigma_I / B
+// propagated per pixel through the triangulation (dz/du_p). Metrics:
+// std_mean_mm, std_max_mm, std_rms_mm, theory_mean_mm, theory_max_mm,
+// theory_rms_mm, ratio_rms (measured / theory), valid_pixels. Plot:
+// precision_std.png (heat map).
+EvalResult runPrecision(const EvalOptions& options);
+
+// 4.3 motion: a relief (spheres and cones on a plate) at ~500 mm, the sensor
+// moving 2 mm per image to the right, vertical 3+3 pattern on a rig with a
+// vertical camera-projector baseline ("top" camera). Depth against the ground
+// truth at the compensation's reference image, without and with
+// MotionCompensator (axis x). Metrics per condition (prefix "static_",
+// "moving_", "compensated_"): rms_mm, ripple_mm (half the 1..99 % spread of
+// the error along the cross-section), valid_fraction; and
+// ripple_reduction, rms_reduction. Plot: motion_cross_section.png.
+EvalResult runMotion(const EvalOptions& options);
+
+// Names accepted by runExperiment ("precision", "motion").
+std::vector<std::string> experimentNames();
+// Throws std::invalid_argument on an unknown name.
+EvalResult runExperiment(const std::string& name, const EvalOptions& options);
+
+}  // namespace sl::eval
