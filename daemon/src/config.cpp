@@ -78,13 +78,44 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
 }
 
 void parsePatterns(const YamlMap& root, const pipeline::PinholeModel& projector,
-                   const std::filesystem::path& base_dir,
-                   std::vector<pipeline::PatternSpec>& patterns) {
+                   const std::filesystem::path& base_dir, DaemonConfig& config) {
   std::set<std::string> names;
   for (const YamlMap& m : root.listOfMaps("patterns")) {
+    // `cameras`: which cameras triangulate this pattern (a daemon setting, so
+    // read here, before the pattern description itself).
+    std::vector<std::string> cameras;
+    if (m.has("cameras")) {
+      const YAML::Node list = m.raw("cameras");
+      if (!list.IsSequence() || list.size() == 0)
+        m.fail("cameras", "expected a non-empty list of camera ids");
+      for (const auto& id : list) {
+        if (!id.IsScalar() || id.Scalar().empty()) m.fail("cameras", "camera ids must be names");
+        cameras.push_back(id.Scalar());
+      }
+    }
     pipeline::PatternSpec p = parsePattern(m, "", &projector, base_dir.string());
     if (!names.insert(p.name).second) m.fail("name", "duplicate pattern name '" + p.name + "'");
-    patterns.push_back(p);
+    if (!cameras.empty()) config.pattern_cameras[p.name] = cameras;
+    config.patterns.push_back(p);
+  }
+}
+
+// `calibrations:` {camera_id: path, ...} for cameras after the first.
+void parseExtraCalibrations(const YamlMap& root, const std::filesystem::path& base_dir,
+                            DaemonConfig& config) {
+  if (!root.has("calibrations")) return;
+  const YAML::Node node = root.raw("calibrations");
+  if (!node.IsMap()) root.fail("calibrations", "expected a map of camera id: calibration file");
+  for (const auto& entry : node) {
+    const std::string id = entry.first.as<std::string>();
+    if (!entry.second.IsScalar())
+      root.fail("calibrations", "the calibration of camera '" + id + "' must be a file path");
+    std::filesystem::path path(entry.second.Scalar());
+    if (path.is_relative()) path = base_dir / path;
+    if (!std::filesystem::exists(path))
+      root.fail("calibrations", "cannot read calibration file '" + path.string() + "' of camera '" +
+                                    id + "'");
+    config.extra_calibrations[id] = loadCalibration(path.string()).calibration;
   }
 }
 
@@ -229,7 +260,8 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
        config.calibration.camera.height != config.sim.rig.camera.height))
     root.fail("calibration", "camera size differs from the sensor's camera");
 
-  parsePatterns(root, config.calibration.projector, base_dir, config.patterns);
+  parsePatterns(root, config.calibration.projector, base_dir, config);
+  parseExtraCalibrations(root, base_dir, config);
   config.sim.patterns = config.patterns;
   if (config.sensor == "hardware") parseHardware(root, config);
   if (config.sensor == "hardware" || config.sensor == "fake_gige") parseAravisSection(root, config);

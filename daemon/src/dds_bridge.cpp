@@ -226,6 +226,9 @@ void DdsBridge::Impl::publishImages(const ScanResult& result) {
   };
   if (!depth_writer.write(image(enc_depth, depth.data(), 4))) ++writes_timed_out;
   if (!shading_writer.write(image(enc_mono, shading.data(), 1))) ++writes_timed_out;
+  // camera_info describes the first camera (whose frame is dds.frame_id);
+  // images of other cameras carry their own frame_id and no camera_info yet.
+  if (cloud.frame_id != config.frame_id) return;
 
   std::string model = "plumb_bob";
   std::vector<double> d(camera.distortion.begin(), camera.distortion.end());

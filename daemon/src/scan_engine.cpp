@@ -1,5 +1,6 @@
 #include "sl/daemon/scan_engine.h"
 
+#include <algorithm>
 #include <chrono>
 #include <deque>
 #include <optional>
@@ -57,7 +58,7 @@ struct SetItem {
 
 struct ResultItem {
   std::uint64_t generation = 0;
-  ScanResult result;
+  std::vector<ScanResult> results;  // one per triangulating camera, same scan
 };
 
 // Queue sizes between stages. Frames: enough for a few sequences of the
@@ -85,11 +86,26 @@ struct ScanEngine::Impl {
         events(kEventQueueCapacity),
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
-        triangulator(config.calibration, config.triangulator),
         motion(config.motion.options),
         motion_enabled(config.motion.enabled) {
     for (const auto& p : config.patterns)
       decoders.emplace(p.name, pipeline::Decoder(p, config.decoder));
+    buildTriangulators(config);
+    // Which cameras triangulate which pattern; every one must exist and be calibrated.
+    for (const auto& p : config.patterns) {
+      const auto listed = config.pattern_cameras.find(p.name);
+      const std::vector<std::string> ids =
+          listed != config.pattern_cameras.end()
+              ? listed->second
+              : std::vector<std::string>{this->devices.cameras.front()->id()};
+      for (const auto& id : ids) {
+        if (!triangulators.count(id))
+          throw std::runtime_error(config.source_path + ": pattern '" + p.name + "' names camera '" +
+                                   id + "', which the sensor lacks or which has no calibration "
+                                   "(calibration: for the first camera, calibrations: for others)");
+      }
+      pattern_cameras[p.name] = ids;
+    }
     current_pattern = config.runtime.default_pattern;
     this->devices.projector->select(current_pattern);
     for (auto& camera : this->devices.cameras) camera->start();
@@ -111,7 +127,15 @@ struct ScanEngine::Impl {
 
   // --- stages, each used by one thread only ---
   std::map<std::string, pipeline::Decoder> decoders;               // processing thread
-  pipeline::Triangulator triangulator;                             // processing thread
+  // Per camera id (processing thread); built from the calibrations.
+  std::map<std::string, pipeline::Triangulator> triangulators;
+  std::map<std::string, std::vector<std::string>> pattern_cameras;  // immutable after construction
+  void buildTriangulators(const DaemonConfig& settings);
+  // dds.frame_id for the first camera, "<id>_optical_frame" for the others.
+  std::string frameIdOf(const std::string& camera_id) const {
+    return camera_id == devices.cameras.front()->id() ? config.dds.frame_id
+                                                      : camera_id + "_optical_frame";
+  }
   pipeline::MotionCompensator motion;                              // processing thread
   bool motion_enabled = false;                                     // processing thread
   // Settings from a config reload, applied by the processing thread before
@@ -245,24 +269,49 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
       const auto decoder = decoders.find(set.pattern_name);
       if (decoder == decoders.end())
         throw std::runtime_error("no decoder for pattern '" + set.pattern_name + "'");
-      const pipeline::CameraImages& images = set.cameras.front();
-      auto maps = std::make_shared<pipeline::ProjectorMaps>(
-          decoder->second.decode(images.frames, images.bit_depth));
-      maps->camera_id = images.camera_id;
-      maps->stamp_ns = set.trigger_stamp_ns;
-      auto cloud = std::make_shared<pipeline::PointCloud>(triangulator.triangulate(*maps));
-      cloud->frame_id = config.dds.frame_id;
-      cloud->stamp_ns = set.trigger_stamp_ns;
       ResultItem result{item->generation, {}};
-      result.result.pattern = set.pattern_name;
-      result.result.images = item->set;
-      result.result.maps = std::move(maps);
-      result.result.cloud = std::move(cloud);
+      for (const std::string& camera_id : pattern_cameras.at(set.pattern_name)) {
+        const auto images = std::find_if(set.cameras.begin(), set.cameras.end(),
+                                          [&](const auto& c) { return c.camera_id == camera_id; });
+        if (images == set.cameras.end())
+          throw std::runtime_error("no images of camera '" + camera_id + "' in the set");
+        auto maps = std::make_shared<pipeline::ProjectorMaps>(
+            decoder->second.decode(images->frames, images->bit_depth));
+        maps->camera_id = camera_id;
+        maps->stamp_ns = set.trigger_stamp_ns;
+        auto cloud = std::make_shared<pipeline::PointCloud>(
+            triangulators.at(camera_id).triangulate(*maps));
+        cloud->frame_id = frameIdOf(camera_id);
+        cloud->stamp_ns = set.trigger_stamp_ns;
+        ScanResult r;
+        r.pattern = set.pattern_name;
+        r.camera_id = camera_id;
+        r.images = item->set;
+        r.maps = std::move(maps);
+        r.cloud = std::move(cloud);
+        result.results.push_back(std::move(r));
+      }
       results.push(std::move(result));
     } catch (const std::exception& e) {
       recordError("processing sequence " + std::to_string(set.sequence_id) + ": " + e.what());
     }
   }
+}
+
+// One triangulator per camera that has a calibration: the first camera uses
+// `calibration`, the others `extra_calibrations` (by id).
+void ScanEngine::Impl::buildTriangulators(const DaemonConfig& settings) {
+  std::map<std::string, pipeline::Triangulator> built;
+  for (std::size_t i = 0; i < devices.cameras.size(); ++i) {
+    const std::string id = devices.cameras[i]->id();
+    if (i == 0) {
+      built.emplace(id, pipeline::Triangulator(settings.calibration, settings.triangulator));
+    } else if (const auto c = settings.extra_calibrations.find(id);
+               c != settings.extra_calibrations.end()) {
+      built.emplace(id, pipeline::Triangulator(c->second, settings.triangulator));
+    }
+  }
+  triangulators.swap(built);
 }
 
 // Rebuilds the processing stages from reloaded run-time settings (decoder
@@ -278,7 +327,7 @@ void ScanEngine::Impl::applyPendingSettings() {
   try {
     std::map<std::string, pipeline::Decoder> rebuilt;
     for (const auto& p : settings->patterns) rebuilt.emplace(p.name, pipeline::Decoder(p, settings->decoder));
-    triangulator = pipeline::Triangulator(settings->calibration, settings->triangulator);
+    buildTriangulators(*settings);
     decoders.swap(rebuilt);
     motion = pipeline::MotionCompensator(settings->motion.options);
     motion_enabled = settings->motion.enabled;
@@ -302,7 +351,8 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
     {
       std::lock_guard lock(mutex);
       if (item->generation != generation.load() || state != ScanState::kScanning) continue;
-      item->result.scan_index = ++scans_done;
+      ++scans_done;
+      for (auto& r : item->results) r.scan_index = scans_done;
       // Rate over the last (up to) 10 scans: stable, and quick to follow a switch.
       recent_scans.push_back(Clock::now());
       if (recent_scans.size() > 10) recent_scans.pop_front();
@@ -312,10 +362,12 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
                            .count();
       ++status_version;
     }
-    try {
-      output(item->result);
-    } catch (const std::exception& e) {
-      recordError(std::string("publishing: ") + e.what());
+    for (const ScanResult& r : item->results) {
+      try {
+        output(r);
+      } catch (const std::exception& e) {
+        recordError(std::string("publishing: ") + e.what());
+      }
     }
     std::lock_guard lock(mutex);
     if (item->generation == generation.load() && scans_requested != 0 &&

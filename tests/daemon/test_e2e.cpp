@@ -32,6 +32,7 @@
 #include <sys/un.h>
 
 #include <Eigen/Dense>
+#include <Eigen/Geometry>
 
 #include "daemon_process.h"
 #include "sensor_msgs/msg/CameraInfo.h"
@@ -62,12 +63,13 @@ struct PlaneStats {
 };
 
 PlaneStats comparePlane(const sl::pipeline::PointCloud& cloud, const sl::daemon::DaemonConfig& config,
-                        const sl::drivers::SimGroundTruth& gt) {
+                        const sl::drivers::SimGroundTruth& gt, bool rows = false) {
   const auto& sim = config.sim;
   const sl::drivers::SimPlane& plane = sim.scene.planes.at(0);
   const Eigen::Vector3d n = plane.normal.normalized();
   const auto& rig = sim.rig;
-  const double lambda = config.patterns.at(0).finestPeriod(rig.projector.width);
+  const double lambda =
+      config.patterns.at(0).finestPeriod(rows ? rig.projector.height : rig.projector.width);
   const double read2 = sim.read_noise_dn * sim.read_noise_dn;
 
   PlaneStats s;
@@ -89,7 +91,11 @@ PlaneStats comparePlane(const sl::pipeline::PointCloud& cloud, const sl::daemon:
       const double sigma_p = lambda / (2 * M_PI) * sigma_phi;
       const double dz = 0.5;
       const Eigen::Vector3d ray = x_gt / x_gt.z();
-      auto projectorColumn = [&](double z) { return rig.projector.project(rig.R * (z * ray) + rig.t).x(); };
+      // The projector coordinate the pattern encodes: column (or row).
+      auto projectorColumn = [&](double z) {
+        const Eigen::Vector2d p = rig.projector.project(rig.R * (z * ray) + rig.t);
+        return rows ? p.y() : p.x();
+      };
       const double dp_dz = (projectorColumn(x_gt.z() + dz) - projectorColumn(x_gt.z() - dz)) / (2 * dz);
       const double sigma_3d = sigma_p / std::abs(dp_dz) * ray.norm();
       const Eigen::Vector3d x(p.x, p.y, p.z);
@@ -646,4 +652,105 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
     if (const auto s = client.status(1s)) failed = s->last_error;
   CHECK(failed.find("config reload failed") != std::string::npos);
   REQUIRE(daemon.terminate(5s) == 0);
+}
+
+// Two cameras (issue 7): the horizontal pattern is triangulated by the camera
+// beside the projector, the vertical one by the camera above it, switched
+// with the pattern during a continuous scan. The image sets come from a
+// recording of two simulated rigs (each camera with its own projector pose
+// and the scene placed alike in front of it), played back with
+// `sensor: replay`, so every cloud can be checked against its camera's
+// ground truth.
+TEST_CASE("two cameras: each pattern is triangulated by its camera, switched with the pattern") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("twocam");
+  const std::string dir = "/tmp/sl_test_" + ns + "_recording";
+  std::filesystem::remove_all(dir);
+
+  YAML::Node root = sl::test::simConfig(ns);
+  YAML::Node patterns = YAML::Load(
+      "[{name: 3+3_horizontal, family: phase_shift_3+3, direction: horizontal, fringes: 16,"
+      "  cameras: [sim_top]},"
+      " {name: 3+3_vertical, family: phase_shift_3+3, direction: vertical, fringes: 16,"
+      "  cameras: [left]}]");
+  root["patterns"] = patterns;
+  const sl::daemon::DaemonConfig top = sl::daemon::loadConfig(sl::test::writeConfigFile(root, ns + "_top"));
+  // The "left" rig: projector 150 mm below the camera, turned up by 15.25 deg.
+  sl::daemon::DaemonConfig left = top;
+  left.sim.camera_id = "left";
+  left.sim.rig.R = Eigen::AngleAxisd(-15.25 * M_PI / 180, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  left.sim.rig.t = -left.sim.rig.R * Eigen::Vector3d(0, 150, 0);
+  left.calibration = left.sim.rig;
+  left.patterns = {top.patterns.at(1)};  // comparePlane reads the encoded pattern from [0]
+  const auto sim_top = sl::drivers::SimulatedSensor::create(top.sim);
+  const auto sim_left = sl::drivers::SimulatedSensor::create(left.sim);
+
+  // Record sets h, v, h, v with both cameras' frames.
+  sl::drivers::createRecording(dir, "two simulated rigs");
+  const std::int64_t base = sl::test::nowNs();
+  const char* order[] = {"3+3_horizontal", "3+3_vertical", "3+3_horizontal", "3+3_vertical"};
+  for (int k = 0; k < 4; ++k) {
+    sl::pipeline::ImageSet set;
+    set.sequence_id = k;
+    set.pattern_name = order[k];
+    set.trigger_stamp_ns = base + k * 200'000'000LL;
+    for (const auto* sim : {sim_top.get(), sim_left.get()}) {
+      sl::pipeline::CameraImages images;
+      images.camera_id = sim->config().camera_id;
+      for (int i = 0; i < 6; ++i) {
+        images.frames.push_back(sim->render(order[k], i, 1000 + 10 * k + i));
+        images.stamps_ns.push_back(set.trigger_stamp_ns + i * 33'333'333LL);
+      }
+      set.cameras.push_back(images);
+    }
+    sl::drivers::writeRecordedSet(dir, k + 1, set);
+  }
+  const std::string calibration_top = "/tmp/sl_test_" + ns + "_top_calibration.yaml";
+  const std::string calibration_left = "/tmp/sl_test_" + ns + "_left_calibration.yaml";
+  sl::daemon::CalibrationFile file;
+  file.calibration = top.sim.rig;
+  sl::daemon::saveCalibration(file, calibration_top);
+  file.calibration = left.sim.rig;
+  sl::daemon::saveCalibration(file, calibration_left);
+
+  YAML::Node replay = YAML::Clone(root);
+  replay.remove("sim");
+  replay["sensor"] = "replay";
+  replay["replay"]["dir"] = dir;
+  replay["calibration"] = calibration_top;
+  replay["calibrations"]["left"] = calibration_left;
+  sl::test::DaemonProcess daemon(sl::test::writeConfigFile(replay, ns + "_replay"));
+  REQUIRE(daemon.started());
+  sl::daemon::ClientOptions options;
+  options.ns = ns;
+  sl::daemon::SensorClient client(options);
+  REQUIRE(client.waitForDaemon(20s));
+
+  // Two clouds per phase, each checked against the ground truth of the camera
+  // that must have triangulated it.
+  auto phase = [&](const std::string& pattern, bool switch_pattern) {
+    const std::int64_t since = sl::test::nowNs();
+    const auto reply = switch_pattern ? client.request(Command::kSetPattern, pattern, 0, 5s)
+                                      : client.request(Command::kStart, pattern, 0, 5s);
+    REQUIRE(reply);
+    REQUIRE(reply->accepted);
+    const bool vertical = pattern == "3+3_vertical";
+    for (int i = 0; i < 2; ++i) {
+      const auto cloud = client.receiveCloud(since, 10s);
+      REQUIRE(cloud);
+      INFO(pattern << " cloud " << i + 1 << " frame " << cloud->frame_id);
+      CHECK(cloud->frame_id == (vertical ? "left_optical_frame" : top.dds.frame_id));
+      const PlaneStats s = vertical ? comparePlane(*cloud, left, sim_left->groundTruth(), true)
+                                    : comparePlane(*cloud, top, sim_top->groundTruth());
+      INFO("rms " << s.rms_error_mm << " mm, predicted " << s.predicted_rms_mm);
+      CHECK(s.rms_error_mm < 1.1 * s.predicted_rms_mm);
+      CHECK(std::abs(s.mean_error_mm) < 0.05);
+    }
+  };
+  phase("3+3_horizontal", false);
+  phase("3+3_vertical", true);
+  phase("3+3_horizontal", true);
+  REQUIRE(client.request(Command::kStop, "", 0, 5s)->accepted);
+  REQUIRE(daemon.terminate(5s) == 0);
+  std::filesystem::remove_all(dir);
 }

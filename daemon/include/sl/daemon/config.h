@@ -2,6 +2,7 @@
 // YAML in one place (config.cpp). Components never see YAML.
 #pragma once
 
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -62,7 +63,13 @@ struct DaemonConfig {
   // Calibration used by the triangulator. For the simulated sensor it
   // defaults to the simulated rig (perfect calibration).
   pipeline::CameraProjectorCalibration calibration;
+  // Further cameras' calibrations against the projector, by camera id
+  // (`calibrations:`); `calibration` above is the first camera's.
+  std::map<std::string, pipeline::CameraProjectorCalibration> extra_calibrations;
   std::vector<pipeline::PatternSpec> patterns;
+  // Cameras that triangulate each pattern (`patterns[].cameras`), by pattern
+  // name; a pattern without an entry is triangulated by the first camera.
+  std::map<std::string, std::vector<std::string>> pattern_cameras;
   pipeline::DecoderOptions decoder;
   pipeline::TriangulatorOptions triangulator;
   pipeline::SynchroniserOptions synchroniser;

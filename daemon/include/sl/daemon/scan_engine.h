@@ -54,16 +54,21 @@ struct EngineStatus {
 };
 
 // One scan's results, shared with the output callback.
+// One camera's result of one scan (a pattern triangulated by two cameras
+// gives two results with the same scan_index).
 struct ScanResult {
   std::uint64_t scan_index = 0;  // 1-based within the current request
   std::string pattern;
+  std::string camera_id;         // the triangulating camera
   std::shared_ptr<const pipeline::ImageSet> images;
   std::shared_ptr<const pipeline::ProjectorMaps> maps;
   std::shared_ptr<const pipeline::PointCloud> cloud;
 };
 
 struct EngineDevices {
-  std::vector<std::shared_ptr<drivers::Camera>> cameras;  // camera 0 triangulates
+  // All cameras of the sensor, in synchroniser order. Camera 0 uses
+  // DaemonConfig::calibration, the others DaemonConfig::extra_calibrations.
+  std::vector<std::shared_ptr<drivers::Camera>> cameras;
   std::shared_ptr<drivers::Projector> projector;
   std::shared_ptr<drivers::TriggerSource> trigger;
 };
@@ -75,6 +80,8 @@ class ScanEngine {
  public:
   using OutputCallback = std::function<void(const ScanResult&)>;
 
+  // Throws std::runtime_error when a pattern names a camera the devices lack
+  // or one without a calibration.
   ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output);
   ~ScanEngine();  // stops the projector and joins every thread
   ScanEngine(const ScanEngine&) = delete;
