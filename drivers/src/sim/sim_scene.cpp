@@ -362,6 +362,15 @@ SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
                            const pipeline::CameraProjectorCalibration& rig,
                            const CameraRays& rays, const Eigen::Isometry3d& camera_to_scene,
                            bool with_ground_truth) {
+  SceneView view;
+  computeSceneViewInto(config, scene, rig, rays, camera_to_scene, with_ground_truth, view);
+  return view;
+}
+
+void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
+                          const pipeline::CameraProjectorCalibration& rig, const CameraRays& rays,
+                          const Eigen::Isometry3d& camera_to_scene, bool with_ground_truth,
+                          SceneView& view) {
   const int width = rig.camera.width, height = rig.camera.height;
   const int proj_width = rig.projector.width, proj_height = rig.projector.height;
   const Eigen::Matrix3d rotation = camera_to_scene.linear();
@@ -372,8 +381,8 @@ SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
   const Eigen::Vector3d projector_center = -R_ps.transpose() * t_ps;  // scene frame, mm
   const double projector_field_radius2 = monotonicFieldRadius2(rig.projector);
 
-  SceneView view;
   SimGroundTruth& gt = view.ground_truth;
+  gt = {};
   if (with_ground_truth) {
     gt.depth_mm = cv::Mat(height, width, CV_32FC1, cv::Scalar(kNaN));
     gt.xyz_mm = cv::Mat(height, width, CV_32FC3, cv::Scalar(kNaN, kNaN, kNaN));
@@ -496,11 +505,11 @@ SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
   if (with_ground_truth) {
     for (int row = 0; row < height; ++row)
       for (int col = 0; col < width; ++col) store(col, row, castPixel(col, row));
-    return view;
+    return;
   }
 
   // Interpolated fast path (see the header).
-  constexpr int kBlock = 4;
+  constexpr int kBlock = 8;
   auto gridLines = [](int size) {
     std::vector<int> lines;
     for (int x = 0; x < size - 1; x += kBlock) lines.push_back(x);
@@ -551,22 +560,44 @@ SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
                  std::abs(exact.per_level - predicted.per_level) <= 1e-3 * exact.per_level &&
                  std::abs(exact.ambient - predicted.ambient) <= 1e-3 * exact.ambient + 1e-6f;
       }
+      if (smooth) {
+        // Bilinear fill: per row, the values at the block's left and right
+        // edges, then linear steps along the row (the corners included).
+        const float inv_w = 1.0f / float(std::max(c1 - c0, 1));
+        const float u_max = float(proj_width - 1), v_max = float(proj_height - 1);
+        for (int row = r0; row < row_end; ++row) {
+          const double fy = double(row - r0) / std::max(r1 - r0, 1);
+          const Sample left = blend(s00, s01, s10, s11, 0.0, fy);
+          const Sample right = blend(s00, s01, s10, s11, 1.0, fy);
+          const float a0 = left.ambient, da = (right.ambient - left.ambient) * inv_w;
+          const float p0 = left.per_level, dp = (right.per_level - left.per_level) * inv_w;
+          const float u0 = float(left.up), du = float(right.up - left.up) * inv_w;
+          const float v0 = float(left.vp), dv = float(right.vp - left.vp) * inv_w;
+          const std::size_t base = static_cast<std::size_t>(row) * width;
+          for (int col = c0; col < col_end; ++col) {
+            const float k = float(col - c0);
+            const std::size_t i = base + col;
+            maps.ambient_dn[i] = a0 + k * da;
+            maps.projector_dn_per_level[i] = p0 + k * dp;
+            const float u = std::clamp(u0 + k * du, 0.0f, u_max);
+            const float v = std::clamp(v0 + k * dv, 0.0f, v_max);
+            const int x0 = std::min(int(u), std::max(proj_width - 2, 0));
+            const int y0 = std::min(int(v), std::max(proj_height - 2, 0));
+            maps.texel_index[i] = y0 * proj_width + x0;
+            maps.weight_x[i] = u - float(x0);
+            maps.weight_y[i] = v - float(y0);
+          }
+        }
+        continue;
+      }
       for (int row = r0; row < row_end; ++row)
         for (int col = c0; col < col_end; ++col) {
           const bool on_grid = (col == c0 || col == c1) && (row == r0 || row == r1);
-          if (on_grid) {
-            store(col, row, grid[(gy + (row == r1)) * gw + gx + (col == c1)]);
-          } else if (smooth) {
-            store(col, row,
-                  blend(s00, s01, s10, s11, double(col - c0) / std::max(c1 - c0, 1),
-                        double(row - r0) / std::max(r1 - r0, 1)));
-          } else {
-            store(col, row, castPixel(col, row));
-          }
+          store(col, row,
+                on_grid ? grid[(gy + (row == r1)) * gw + gx + (col == c1)] : castPixel(col, row));
         }
     }
   }
-  return view;
 }
 
 }  // namespace sl::drivers::sim

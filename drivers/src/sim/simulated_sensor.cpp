@@ -240,9 +240,11 @@ class SceneRenderer {
                               " of pattern '" + names_[pattern] + "' out of range");
     if (!config_.motion.moving())
       return sim::renderImage(c.view.maps, frames[frame], response_, noise_seed);
-    // Moving sensor: ray-cast this image's pose (camera rays undistorted once).
-    const sim::SceneView moved = sim::computeSceneView(config_, geometry_, c.rig, c.rays,
-                                                       cameraToScene(c, frame), false);
+    // Moving sensor: ray-cast this image's pose (camera rays undistorted once),
+    // into per-thread buffers reused from image to image.
+    thread_local sim::SceneView moved;
+    sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame), false,
+                              moved);
     return sim::renderImage(moved.maps, frames[frame], response_, noise_seed);
   }
 
