@@ -21,35 +21,112 @@ namespace sl::daemon {
 
 namespace {
 
+double albedo(const YamlMap& m, double fallback) {
+  const double a = m.get<double>("albedo", fallback);
+  if (a < 0 || a > 1) m.fail("albedo", "must be in [0, 1]");
+  return a;
+}
+
+// R = Rz * Ry * Rx from rotation_deg [rx, ry, rz] (as projector_pose).
+Eigen::Matrix3d rotationDeg(const YamlMap& m, const std::string& key) {
+  const Eigen::Vector3d a = vec3(m, key, Eigen::Vector3d::Zero()) * std::numbers::pi / 180.0;
+  return (Eigen::AngleAxisd(a.z(), Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(a.y(), Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(a.x(), Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
 drivers::SimScene parseScene(const YamlMap& sim) {
   drivers::SimScene scene;
+  static const std::vector<std::string> kKinds = {"plane", "sphere", "cone", "box", "height_field"};
   for (const YamlMap& item : sim.listOfMaps("scene")) {
-    const bool plane = item.has("plane"), sphere = item.has("sphere");
-    if (plane == sphere) item.fail(plane ? "plane" : "sphere",
-                                   "each scene item is exactly one of 'plane' or 'sphere'");
-    if (plane) {
-      const YamlMap p = item.map("plane");
+    std::string kind;
+    for (const std::string& k : kKinds)
+      if (item.has(k)) kind = kind.empty() ? k : "";
+    if (kind.empty())
+      item.fail("plane", "each scene item is exactly one of 'plane' or 'sphere' "
+                         "(or 'cone', 'box', 'height_field')");
+    const YamlMap p = item.map(kind);
+    if (kind == "plane") {
       drivers::SimPlane s;
       s.point = vec3(p, "point_mm");
       s.normal = vec3(p, "normal", s.normal);
       if (s.normal.norm() == 0) p.fail("normal", "must not be zero");
-      s.albedo = p.get<double>("albedo", s.albedo);
-      if (s.albedo < 0 || s.albedo > 1) p.fail("albedo", "must be in [0, 1]");
-      p.done();
+      s.albedo = albedo(p, s.albedo);
       scene.planes.push_back(s);
-    } else {
-      const YamlMap p = item.map("sphere");
+    } else if (kind == "sphere") {
       drivers::SimSphere s;
       s.center = vec3(p, "center_mm");
       s.radius = positive(p, "radius_mm", 0);
-      s.albedo = p.get<double>("albedo", s.albedo);
-      if (s.albedo < 0 || s.albedo > 1) p.fail("albedo", "must be in [0, 1]");
-      p.done();
+      s.albedo = albedo(p, s.albedo);
       scene.spheres.push_back(s);
+    } else if (kind == "cone") {
+      drivers::SimCone s;
+      s.base_center = vec3(p, "base_center_mm");
+      s.axis = vec3(p, "axis", s.axis);
+      if (s.axis.norm() == 0) p.fail("axis", "must not be zero");
+      s.radius = positive(p, "radius_mm", 0);
+      s.height = positive(p, "height_mm", 0);
+      s.albedo = albedo(p, s.albedo);
+      scene.cones.push_back(s);
+    } else if (kind == "box") {
+      drivers::SimBox s;
+      s.center = vec3(p, "center_mm");
+      s.size_mm = vec3(p, "size_mm");
+      if ((s.size_mm.array() <= 0).any()) p.fail("size_mm", "must be > 0");
+      s.rotation = rotationDeg(p, "rotation_deg");
+      s.albedo = albedo(p, s.albedo);
+      scene.boxes.push_back(s);
+    } else {
+      drivers::SimHeightField s;
+      s.origin = vec3(p, "origin_mm");
+      s.normal = vec3(p, "normal", s.normal);
+      s.x_axis = vec3(p, "x_axis", s.x_axis);
+      s.width_mm = positive(p, "width_mm", s.width_mm);
+      s.length_mm = positive(p, "length_mm", s.length_mm);
+      s.cell_mm = positive(p, "cell_mm", s.cell_mm);
+      s.albedo = albedo(p, s.albedo);
+      const YamlMap r = p.map("roughness");
+      drivers::SimRoughness rough;
+      rough.rms_mm = nonNegative(r, "rms_mm", rough.rms_mm);
+      rough.correlation_length_mm = positive(r, "correlation_length_mm", rough.correlation_length_mm);
+      rough.hurst = positive(r, "hurst", rough.hurst);
+      rough.seed = r.get<std::uint64_t>("seed", rough.seed);
+      r.done();
+      s.roughness = rough;
+      scene.height_fields.push_back(s);
     }
+    p.done();
     item.done();
   }
   return scene;
+}
+
+// sim.motion (velocity_mm_s, or poses: [{rotation_deg, translation_mm}, ...])
+// and sim.second_camera ({camera_id, calibration}).
+void parseSimMotionAndCameras(const YamlMap& m, drivers::SimConfig& sim) {
+  const YamlMap motion = m.optionalMap("motion");
+  sim.motion.velocity_mm_s = vec3(motion, "velocity_mm_s", sim.motion.velocity_mm_s);
+  if (motion.has("poses"))
+    for (const YamlMap& pose : motion.listOfMaps("poses")) {
+      Eigen::Isometry3d x = Eigen::Isometry3d::Identity();
+      x.linear() = rotationDeg(pose, "rotation_deg");
+      x.translation() = vec3(pose, "translation_mm", Eigen::Vector3d::Zero());
+      pose.done();
+      sim.motion.poses.push_back(x);
+    }
+  motion.done();
+  if (m.has("second_camera")) {
+    const YamlMap camera = m.map("second_camera");
+    drivers::SimCamera second;
+    second.camera_id = camera.get<std::string>("camera_id", second.camera_id);
+    const YamlMap calibration(camera.raw("calibration"), camera.origin(),
+                              camera.keyPath("calibration"));
+    second.rig = parseCalibrationKeys(calibration);
+    calibration.done();
+    camera.done();
+    sim.second_camera = second;
+  }
 }
 
 void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
@@ -74,6 +151,7 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
   calibration.done();
   rig.done();
   sim.scene = parseScene(m);
+  parseSimMotionAndCameras(m, sim);
   m.done();
 }
 
