@@ -57,56 +57,65 @@ struct Triangulator::Impl {
   // leave < 1e-3 mm where plain shifting leaves ~1e-2 mm). A pixel whose
   // point is not in front of both devices, or NaN, keeps its p.
   //
-  // Branch-free over the row so that it vectorizes (needs
-  // -fno-trapping-math, set for this file in CMakeLists.txt).
-  void correctRow(int n_pixels, const float* __restrict a_row,
-                  const float* __restrict b_col_row, const float* __restrict b_row_row,
-                  const std::uint8_t* __restrict is_column, const double* __restrict decoded,
-                  double* __restrict p, double* __restrict p_prev,
-                  double* __restrict g_prev) const {
-    const double m_col = m_t[kColumn], m_row = m_t[kRow], m3 = m3_t;
-    const double cx = proj_c[0], cy = proj_c[1], ifx = inv_proj_f[0], ify = inv_proj_f[1];
-    const double fx = proj_f[0], fy = proj_f[1];
-    const double k1 = proj_dist[0], k2 = proj_dist[1], p1 = proj_dist[2], p2 = proj_dist[3],
-                 k3 = proj_dist[4];
-    auto step = [&]<bool kSecant>() {
-      for (int x = 0; x < n_pixels; ++x) {
-        const bool col = is_column[x] != 0;
-        const double ai = a_row[x];
-        const double bc = b_col_row[x], br = b_row_row[x];
-        const double pi = p[x];
-        const double n = (col ? m_col : m_row) - pi * m3;
-        const double d = pi * ai - (col ? bc : br);
-        const double w = n * ai + m3 * d;  // projector-frame depth times d
-        const bool in_front = (n * d > 0.0) & (w * d > 0.0);
-        const double inv_w = 1.0 / w;
-        const double xn = ((n * bc + m_col * d) * inv_w - cx) * ifx;
-        const double yn = ((n * br + m_row * d) * inv_w - cy) * ify;
-        // Brown-Conrady, as PinholeModel::normalizedToPixel.
-        const double r2 = xn * xn + yn * yn;
-        const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        const double xd = xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn);
-        const double yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn;
-        const double shift = col ? fx * (xd - xn) : fy * (yd - yn);
-        const double g = pi + shift - decoded[x];
-        double delta_p = g;  // plain shift: slope 1
-        if constexpr (kSecant) {
-          const double dg = g - g_prev[x], dp = pi - p_prev[x];
-          // Secant slope dg / dp, used only where it is sane (0.5 .. 2).
-          const bool sane = (dg * dp > 0.0) & (std::abs(dg) > 0.5 * std::abs(dp)) &
-                            (std::abs(dg) < 2.0 * std::abs(dp));
-          delta_p = sane ? g * dp / dg : g;
-        }
-        p_prev[x] = pi;
-        g_prev[x] = g;
-        p[x] = in_front ? pi - delta_p : pi;
+  // Single precision (the maps and the cloud are float; the triangulator
+  // tests bound the error), branch-free over the row so that it vectorizes
+  // (needs -fno-trapping-math, set for this file in CMakeLists.txt).
+  // is_column: 1 where the pixel's coordinate is a column, else 0.
+  template <bool kSecant>
+  void correctionStep(int n_pixels, const float* __restrict a_row,
+                      const float* __restrict b_col_row, const float* __restrict b_row_row,
+                      const float* __restrict is_column, const float* __restrict decoded,
+                      float* __restrict p, float* __restrict p_prev,
+                      float* __restrict g_prev) const {
+    const float m_col = float(m_t[kColumn]), m_row = float(m_t[kRow]), m3 = float(m3_t);
+    const float cx = float(proj_c[0]), cy = float(proj_c[1]);
+    const float ifx = float(inv_proj_f[0]), ify = float(inv_proj_f[1]);
+    const float fx = float(proj_f[0]), fy = float(proj_f[1]);
+    const float k1 = float(proj_dist[0]), k2 = float(proj_dist[1]), p1 = float(proj_dist[2]),
+                p2 = float(proj_dist[3]), k3 = float(proj_dist[4]);
+    for (int x = 0; x < n_pixels; ++x) {
+      const bool col = is_column[x] != 0.0f;
+      const float ai = a_row[x];
+      const float bc = b_col_row[x], br = b_row_row[x];
+      const float pi = p[x];
+      const float n = (col ? m_col : m_row) - pi * m3;
+      const float d = pi * ai - (col ? bc : br);
+      const float w = n * ai + m3 * d;  // projector-frame depth times d
+      const bool in_front = (n * d > 0.0f) & (w * d > 0.0f);
+      const float inv_w = 1.0f / w;
+      const float xn = ((n * bc + m_col * d) * inv_w - cx) * ifx;
+      const float yn = ((n * br + m_row * d) * inv_w - cy) * ify;
+      // Brown-Conrady, as PinholeModel::normalizedToPixel; the shift only.
+      const float r2 = xn * xn + yn * yn;
+      const float radial = r2 * (k1 + r2 * (k2 + r2 * k3));
+      const float dx = xn * radial + 2.0f * p1 * xn * yn + p2 * (r2 + 2.0f * xn * xn);
+      const float dy = yn * radial + p1 * (r2 + 2.0f * yn * yn) + 2.0f * p2 * xn * yn;
+      const float shift = col ? fx * dx : fy * dy;
+      const float g = pi + shift - decoded[x];
+      float delta_p = g;  // plain shift: slope 1
+      if constexpr (kSecant) {
+        const float dg = g - g_prev[x], dp = pi - p_prev[x];
+        // Secant slope dg / dp, used only where it is sane (0.5 .. 2).
+        const bool sane = (dg * dp > 0.0f) & (std::abs(dg) > 0.5f * std::abs(dp)) &
+                          (std::abs(dg) < 2.0f * std::abs(dp));
+        delta_p = sane ? g * dp / dg : g;
       }
-    };
+      p_prev[x] = pi;
+      g_prev[x] = g;
+      p[x] = in_front ? pi - delta_p : pi;
+    }
+  }
+
+  void correctRow(int n_pixels, const float* a_row, const float* b_col_row,
+                  const float* b_row_row, const float* is_column, const float* decoded, float* p,
+                  float* p_prev, float* g_prev) const {
     for (int it = 0; it < options.projector_distortion_iterations; ++it) {
       if (it == 0) {
-        step.template operator()<false>();
+        correctionStep<false>(n_pixels, a_row, b_col_row, b_row_row, is_column, decoded, p,
+                              p_prev, g_prev);
       } else {
-        step.template operator()<true>();
+        correctionStep<true>(n_pixels, a_row, b_col_row, b_row_row, is_column, decoded, p,
+                             p_prev, g_prev);
       }
     }
   }
@@ -238,45 +247,66 @@ void Triangulator::triangulateRows(const ProjectorMaps& maps, int row_begin, int
   const Impl& im = *impl_;
   const auto [first, second] = axesFor(maps);
   const cv::Mat* coord_maps[2] = {&maps.up, &maps.vp};
-  const double min_z = im.options.min_depth_mm;
-  const double max_z = im.options.max_depth_mm;
-  const double m3 = im.m3_t;
-  // Row scratch: chosen coordinate and axis per pixel, correction state.
-  std::vector<double> p(im.width), decoded(im.width), p_prev(im.width), g_prev(im.width);
-  std::vector<std::uint8_t> is_column(im.width);
+  const float min_z = im.options.min_depth_mm;
+  const float max_z = im.options.max_depth_mm;
+  const float m3 = float(im.m3_t);
+  const float m_col = float(im.m_t[kColumn]), m_row = float(im.m_t[kRow]);
+  const int width = im.width;
+  // Row scratch: chosen coordinate, axis (1 = column), correction state, depth.
+  std::vector<float> scratch(6 * static_cast<std::size_t>(width));
+  float* __restrict decoded = scratch.data();
+  float* __restrict p = decoded + width;
+  float* __restrict is_column = p + width;
+  float* __restrict p_prev = is_column + width;
+  float* __restrict g_prev = p_prev + width;
+  float* __restrict z_row = g_prev + width;
+  const float first_is_column = first == kColumn ? 1.0f : 0.0f;
+  const float second_is_column = second == kColumn ? 1.0f : 0.0f;
   for (int v = row_begin; v < row_end; ++v) {
-    const float* first_row = coord_maps[first]->ptr<float>(v);
-    const float* second_row = second >= 0 ? coord_maps[second]->ptr<float>(v) : nullptr;
-    const float* offset_row = maps.offset.empty() ? nullptr : maps.offset.ptr<float>(v);
-    const std::size_t row_start = static_cast<std::size_t>(v) * im.width;
-    for (int u = 0; u < im.width; ++u) {
-      const bool use_second = second_row && !std::isfinite(first_row[u]);
-      decoded[u] = use_second ? second_row[u] : first_row[u];
-      is_column[u] = (use_second ? second : first) == kColumn;
+    const float* __restrict first_row = coord_maps[first]->ptr<float>(v);
+    const float* __restrict offset_row = maps.offset.empty() ? nullptr : maps.offset.ptr<float>(v);
+    const std::size_t row_start = static_cast<std::size_t>(v) * width;
+    if (second >= 0) {
+      const float* __restrict second_row = coord_maps[second]->ptr<float>(v);
+      for (int u = 0; u < width; ++u) {
+        // f - f is 0 for finite f, NaN for NaN or +-inf: then the second map.
+        const float f = first_row[u], s = second_row[u];
+        const bool use_first = (f - f) == 0.0f;
+        decoded[u] = use_first ? f : s;
+        is_column[u] = use_first ? first_is_column : second_is_column;
+      }
+    } else {
+      for (int u = 0; u < width; ++u) {
+        decoded[u] = first_row[u];
+        is_column[u] = first_is_column;
+      }
     }
-    p = decoded;
+    for (int u = 0; u < width; ++u) p[u] = decoded[u];
+    const float* __restrict a_row = im.a.data() + row_start;
+    const float* __restrict b_col_row = im.b[kColumn].data() + row_start;
+    const float* __restrict b_row_row = im.b[kRow].data() + row_start;
     if (im.correct_projector) {
-      im.correctRow(im.width, im.a.data() + row_start, im.b[kColumn].data() + row_start,
-                    im.b[kRow].data() + row_start, is_column.data(), decoded.data(), p.data(),
-                    p_prev.data(), g_prev.data());
+      im.correctRow(width, a_row, b_col_row, b_row_row, is_column, decoded, p, p_prev, g_prev);
     }
-    PointXYZI* out = cloud.points.data() + row_start;
-    for (int u = 0; u < im.width; ++u) {
-      const std::size_t i = row_start + u;
-      const bool col = is_column[u] != 0;
-      const double den = p[u] * im.a[i] - (col ? im.b[kColumn][i] : im.b[kRow][i]);
-      const double z = ((col ? im.m_t[kColumn] : im.m_t[kRow]) - p[u] * m3) / den;
-      PointXYZI& point = out[u];
-      point.intensity = offset_row ? offset_row[u] : 0.0f;
+    for (int u = 0; u < width; ++u) {
+      const bool col = is_column[u] != 0.0f;
+      const float bc = b_col_row[u], br = b_row_row[u];
+      const float den = p[u] * a_row[u] - (col ? bc : br);
+      const float z = ((col ? m_col : m_row) - p[u] * m3) / den;
       // NaN input, a ray parallel to the projector plane (den ~ 0 gives an
       // infinite or huge z) and out-of-range depths all fail this test.
-      if (std::abs(den) > 1e-12 && z >= min_z && z <= max_z) {
-        point.x = static_cast<float>(z * im.rx[i]);
-        point.y = static_cast<float>(z * im.ry[i]);
-        point.z = static_cast<float>(z);
-      } else {
-        point.x = point.y = point.z = kNaN;
-      }
+      const bool valid = (std::abs(den) > 1e-12f) & (z >= min_z) & (z <= max_z);
+      z_row[u] = valid ? z : kNaN;
+    }
+    PointXYZI* __restrict out = cloud.points.data() + row_start;
+    const float* __restrict rx = im.rx.data() + row_start;
+    const float* __restrict ry = im.ry.data() + row_start;
+    for (int u = 0; u < width; ++u) {
+      const float z = z_row[u];
+      out[u].x = z * rx[u];
+      out[u].y = z * ry[u];
+      out[u].z = z;
+      out[u].intensity = offset_row ? offset_row[u] : 0.0f;
     }
   }
 }
