@@ -42,29 +42,34 @@ Codec::Codec(PatternSpec spec, DecoderOptions options)
   }
 }
 
-void Codec::prepare(const std::vector<cv::Mat>& frames, int bit_depth, ProjectorMaps& out) const {
-  const std::string who = "Codec '" + spec_.name + "'";
+void Codec::checkFrames(const std::vector<cv::Mat>& frames, int bit_depth) const {
+  auto who = [&] { return "Codec '" + spec_.name + "'"; };
   if (static_cast<int>(frames.size()) != frameCount()) {
-    throw std::invalid_argument(who + ": expected " + std::to_string(frameCount()) +
+    throw std::invalid_argument(who() + ": expected " + std::to_string(frameCount()) +
                                 " frames, got " + std::to_string(frames.size()));
   }
   const cv::Mat& first = frames.front();
-  if (first.empty()) throw std::invalid_argument(who + ": frame 0 is empty");
+  if (first.empty()) throw std::invalid_argument(who() + ": frame 0 is empty");
   if (first.type() != CV_8UC1 && first.type() != CV_16UC1)
-    throw std::invalid_argument(who + ": frames must be CV_8UC1 or CV_16UC1");
+    throw std::invalid_argument(who() + ": frames must be CV_8UC1 or CV_16UC1");
   for (std::size_t i = 1; i < frames.size(); ++i) {
     if (frames[i].size() != first.size())
-      throw std::invalid_argument(who + ": frame " + std::to_string(i) +
+      throw std::invalid_argument(who() + ": frame " + std::to_string(i) +
                                   " differs in size from frame 0");
     if (frames[i].type() != first.type())
-      throw std::invalid_argument(who + ": frame " + std::to_string(i) +
+      throw std::invalid_argument(who() + ": frame " + std::to_string(i) +
                                   " differs in type from frame 0");
   }
   const int max_bits = first.type() == CV_8UC1 ? 8 : 16;
   if (bit_depth < 1 || bit_depth > max_bits)
-    throw std::invalid_argument(who + ": bit_depth " + std::to_string(bit_depth) +
+    throw std::invalid_argument(who() + ": bit_depth " + std::to_string(bit_depth) +
                                 " is outside 1.." + std::to_string(max_bits) +
                                 " for this image type");
+}
+
+void Codec::prepare(const std::vector<cv::Mat>& frames, int bit_depth, ProjectorMaps& out) const {
+  checkFrames(frames, bit_depth);
+  const cv::Mat& first = frames.front();
   const cv::Size size = first.size();
   bool up_new = false, vp_new = false;
   ensureMap(out.up, size, CV_32FC1, &up_new);
@@ -91,8 +96,37 @@ ProjectorMaps Codec::decode(const std::vector<cv::Mat>& frames, int bit_depth) c
   return maps;
 }
 
+void Codec::decodeBand(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin,
+                       int row_end, ProjectorMaps& band) const {
+  checkFrames(frames, bit_depth);
+  const int width = frames.front().cols;
+  if (row_begin < 0 || row_end > frames.front().rows || row_begin > row_end)
+    throw std::invalid_argument("Codec '" + spec_.name + "': decodeBand rows [" +
+                                std::to_string(row_begin) + ", " + std::to_string(row_end) +
+                                ") outside the frames");
+  const int rows = std::max(row_end - row_begin, 1);
+  auto ensureBand = [&](cv::Mat& m, int type) {
+    const bool fits = m.cols == width && m.rows >= rows && m.type() == type && m.isContinuous();
+    if (!fits) m.create(std::max(rows, m.cols == width ? m.rows : 0), width, type);
+    return !fits;
+  };
+  const bool up_new = ensureBand(band.up, CV_32FC1);
+  const bool vp_new = ensureBand(band.vp, CV_32FC1);
+  ensureBand(band.modulation, CV_32FC1);
+  ensureBand(band.offset, CV_32FC1);
+  ensureBand(band.status, CV_8UC1);
+  if (spec_.direction == Direction::kVertical && up_new) band.up.setTo(kNaN);
+  if (spec_.direction == Direction::kHorizontal && vp_new) band.vp.setTo(kNaN);
+  decodeRowsTo(frames, bit_depth, row_begin, row_end, band, 0);
+}
+
 void Codec::decodeRows(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin,
                        int row_end, ProjectorMaps& out) const {
+  decodeRowsTo(frames, bit_depth, row_begin, row_end, out, row_begin);
+}
+
+void Codec::decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin,
+                         int row_end, ProjectorMaps& out, int out_row) const {
   const int width = frames.front().cols;
   const bool eight = frames.front().type() == CV_8UC1;
   const int per_direction = spec_.framesPerDirection();
@@ -124,17 +158,18 @@ void Codec::decodeRows(const std::vector<cv::Mat>& frames, int bit_depth, int ro
   const RowContext first_ctx = context(first_columns);
   const RowContext second_ctx = context(false);
   for (int y = row_begin; y < row_end; ++y) {
-    float* coord = (first_columns ? out.up : out.vp).ptr<float>(y);
-    float* modulation = out.modulation.ptr<float>(y);
-    float* offset = out.offset.ptr<float>(y);
-    std::uint8_t* status = out.status.ptr<std::uint8_t>(y);
+    const int yo = y - row_begin + out_row;
+    float* coord = (first_columns ? out.up : out.vp).ptr<float>(yo);
+    float* modulation = out.modulation.ptr<float>(yo);
+    float* offset = out.offset.ptr<float>(yo);
+    std::uint8_t* status = out.status.ptr<std::uint8_t>(yo);
     runRow(0, y, first_ctx, RowOutput{coord, modulation, offset, status});
     if (!both) {
       for (int x = 0; x < width; ++x) coord[x] = status[x] == 0 ? coord[x] : kNaN;
       continue;
     }
     runRow(1, y, second_ctx, RowOutput{coord2.data(), mod2.data(), off2.data(), status2.data()});
-    float* vp = out.vp.ptr<float>(y);
+    float* vp = out.vp.ptr<float>(yo);
     for (int x = 0; x < width; ++x) {
       const std::uint8_t s = status[x] != 0 ? status[x] : status2[x];
       status[x] = s;

@@ -15,6 +15,14 @@ namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
+// The row loops read and write distinct buffers (maps, rays, scratch, cloud);
+// GCC does not always prove it (too many pointers for its alias checks).
+#if defined(__GNUC__) && !defined(__clang__)
+#define SL_ROW_LOOP _Pragma("GCC ivdep")
+#else
+#define SL_ROW_LOOP
+#endif
+
 // Which projector coordinate constrains a pixel.
 enum Axis { kColumn = 0, kRow = 1 };
 
@@ -27,10 +35,12 @@ struct Triangulator::Impl {
   Axis preferred = kColumn;  // for Use::kBest
 
   // Per camera pixel (row-major): undistorted normalized ray r = (rx, ry, 1)
-  // in the camera frame, a = M3[0:3].r and b[axis] = M1[0:3].r (columns) or
-  // M2[0:3].r (rows), with M = K_p [R | t] in projector px.
-  std::vector<float> rx, ry, a;
-  std::vector<float> b[2];
+  // in the camera frame. With M = K_p [R | t] in projector px, the terms
+  // a = M3[0:3].r and b[axis] = M1[0:3].r (columns) or M2[0:3].r (rows) are
+  // formed per row from the ray (two multiply-adds each: cheaper than
+  // reading them from memory).
+  std::vector<float> rx, ry;
+  float m_rows[3][3] = {};  // M[0:3][0:3]
   double m_t[2] = {0, 0};  // M1[3], M2[3]
   double m3_t = 0;         // M3[3] = t.z (mm)
 
@@ -106,6 +116,10 @@ struct Triangulator::Impl {
     }
   }
 
+  // Rows [map_begin, map_end) of the maps into cloud rows from cloud_begin.
+  void triangulate(const ProjectorMaps& maps, int first, int second, int map_begin, int map_end,
+                   int cloud_begin, PointCloud& cloud) const;
+
   void correctRow(int n_pixels, const float* a_row, const float* b_col_row,
                   const float* b_row_row, const float* is_column, const float* decoded, float* p,
                   float* p_prev, float* g_prev) const {
@@ -156,22 +170,14 @@ Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
   const std::size_t n = static_cast<std::size_t>(cam.width) * cam.height;
   impl->rx.resize(n);
   impl->ry.resize(n);
-  impl->a.resize(n);
-  impl->b[kColumn].resize(n);
-  impl->b[kRow].resize(n);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) impl->m_rows[r][c] = static_cast<float>(m(r, c));
   for (int v = 0; v < cam.height; ++v) {
     for (int u = 0; u < cam.width; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * cam.width + u;
       const Eigen::Vector2d xn = cam.pixelToNormalized({double(u), double(v)});
-      const Eigen::Vector3d r(xn.x(), xn.y(), 1.0);
       impl->rx[i] = static_cast<float>(xn.x());
       impl->ry[i] = static_cast<float>(xn.y());
-      // a and b from the float-rounded ray, so that X = z * r is exactly the
-      // point whose projection the depth equation solves for.
-      const Eigen::Vector3d rf(impl->rx[i], impl->ry[i], 1.0);
-      impl->a[i] = static_cast<float>(m.block<1, 3>(2, 0).dot(rf));
-      impl->b[kColumn][i] = static_cast<float>(m.block<1, 3>(0, 0).dot(rf));
-      impl->b[kRow][i] = static_cast<float>(m.block<1, 3>(1, 0).dot(rf));
     }
   }
 
@@ -186,12 +192,19 @@ Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
   impl_ = std::move(impl);
 }
 
-std::pair<int, int> Triangulator::axesFor(const ProjectorMaps& maps) const {
+std::pair<int, int> Triangulator::axesFor(const ProjectorMaps& maps, int band_rows) const {
   const Impl& im = *impl_;
   const cv::Size size(im.width, im.height);
   auto check = [&](const cv::Mat& map, const char* name) {
     if (map.empty()) return;
-    if (map.type() != CV_32FC1 || map.size() != size) {
+    const bool size_ok = band_rows < 0 ? map.size() == size
+                                        : map.cols == im.width && map.rows >= band_rows;
+    if (band_rows >= 0 && map.type() == CV_32FC1 && !size_ok) {
+      throw std::invalid_argument(std::string("Triangulator: band.") + name + " must be " +
+                                  std::to_string(im.width) + " wide with at least " +
+                                  std::to_string(band_rows) + " rows");
+    }
+    if (map.type() != CV_32FC1 || !size_ok) {
       throw std::invalid_argument(std::string("Triangulator: maps.") + name +
                                   " must be CV_32FC1 of the camera size " +
                                   std::to_string(im.width) + "x" + std::to_string(im.height));
@@ -226,13 +239,8 @@ std::pair<int, int> Triangulator::axesFor(const ProjectorMaps& maps) const {
 }
 
 void Triangulator::prepare(const ProjectorMaps& maps, PointCloud& cloud) const {
-  const Impl& im = *impl_;
   axesFor(maps);
-  cloud.frame_id = maps.camera_id;
-  cloud.stamp_ns = maps.stamp_ns;
-  cloud.width = im.width;
-  cloud.height = im.height;
-  cloud.points.resize(static_cast<std::size_t>(im.width) * im.height);
+  prepareCloud(maps.camera_id, maps.stamp_ns, cloud);
 }
 
 PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
@@ -244,50 +252,93 @@ PointCloud Triangulator::triangulate(const ProjectorMaps& maps) const {
 
 void Triangulator::triangulateRows(const ProjectorMaps& maps, int row_begin, int row_end,
                                    PointCloud& cloud) const {
-  const Impl& im = *impl_;
   const auto [first, second] = axesFor(maps);
+  impl_->triangulate(maps, first, second, row_begin, row_end, row_begin, cloud);
+}
+
+void Triangulator::triangulateBand(const ProjectorMaps& band, int row_begin, int row_end,
+                                   PointCloud& cloud) const {
+  const Impl& im = *impl_;
+  if (row_begin < 0 || row_end > im.height || row_begin > row_end)
+    throw std::invalid_argument("Triangulator: band rows outside the camera image");
+  if (cloud.width != im.width || cloud.height != im.height ||
+      cloud.points.size() != static_cast<std::size_t>(im.width) * im.height)
+    throw std::invalid_argument("Triangulator: cloud not prepared (prepareCloud())");
+  const auto [first, second] = axesFor(band, row_end - row_begin);
+  im.triangulate(band, first, second, 0, row_end - row_begin, row_begin, cloud);
+}
+
+void Triangulator::prepareCloud(const std::string& frame_id, TimestampNs stamp_ns,
+                                PointCloud& cloud) const {
+  cloud.frame_id = frame_id;
+  cloud.stamp_ns = stamp_ns;
+  cloud.width = impl_->width;
+  cloud.height = impl_->height;
+  cloud.points.resize(static_cast<std::size_t>(impl_->width) * impl_->height);
+}
+
+void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int second,
+                                     int map_begin, int map_end, int cloud_begin,
+                                     PointCloud& cloud) const {
   const cv::Mat* coord_maps[2] = {&maps.up, &maps.vp};
-  const float min_z = im.options.min_depth_mm;
-  const float max_z = im.options.max_depth_mm;
-  const float m3 = float(im.m3_t);
-  const float m_col = float(im.m_t[kColumn]), m_row = float(im.m_t[kRow]);
-  const int width = im.width;
-  // Row scratch: chosen coordinate, axis (1 = column), correction state, depth.
-  std::vector<float> scratch(6 * static_cast<std::size_t>(width));
+  const float min_z = options.min_depth_mm;
+  const float max_z = options.max_depth_mm;
+  const float m3 = float(m3_t);
+  const float m_col = float(m_t[kColumn]), m_row = float(m_t[kRow]);
+  const float a0 = m_rows[2][0], a1 = m_rows[2][1], a2 = m_rows[2][2];
+  const float bc0 = m_rows[0][0], bc1 = m_rows[0][1], bc2 = m_rows[0][2];
+  const float br0 = m_rows[1][0], br1 = m_rows[1][1], br2 = m_rows[1][2];
+  // Row scratch: chosen coordinate, axis (1 = column), correction state,
+  // per-pixel terms a, b_col, b_row, depth.
+  std::vector<float> scratch(9 * static_cast<std::size_t>(width));
   float* __restrict decoded = scratch.data();
   float* __restrict p = decoded + width;
   float* __restrict is_column = p + width;
   float* __restrict p_prev = is_column + width;
   float* __restrict g_prev = p_prev + width;
-  float* __restrict z_row = g_prev + width;
+  float* __restrict a_row = g_prev + width;
+  float* __restrict b_col_row = a_row + width;
+  float* __restrict b_row_row = b_col_row + width;
+  float* __restrict z_row = b_row_row + width;
   const float first_is_column = first == kColumn ? 1.0f : 0.0f;
   const float second_is_column = second == kColumn ? 1.0f : 0.0f;
-  for (int v = row_begin; v < row_end; ++v) {
-    const float* __restrict first_row = coord_maps[first]->ptr<float>(v);
-    const float* __restrict offset_row = maps.offset.empty() ? nullptr : maps.offset.ptr<float>(v);
+  for (int row = map_begin; row < map_end; ++row) {
+    const int v = row - map_begin + cloud_begin;
+    const float* __restrict first_row = coord_maps[first]->ptr<float>(row);
+    const float* __restrict offset_row =
+        maps.offset.empty() ? nullptr : maps.offset.ptr<float>(row);
     const std::size_t row_start = static_cast<std::size_t>(v) * width;
+    const float* __restrict rx = this->rx.data() + row_start;
+    const float* __restrict ry = this->ry.data() + row_start;
     if (second >= 0) {
-      const float* __restrict second_row = coord_maps[second]->ptr<float>(v);
+      const float* __restrict second_row = coord_maps[second]->ptr<float>(row);
+      SL_ROW_LOOP
       for (int u = 0; u < width; ++u) {
         // f - f is 0 for finite f, NaN for NaN or +-inf: then the second map.
         const float f = first_row[u], s = second_row[u];
-        const bool use_first = (f - f) == 0.0f;
-        decoded[u] = use_first ? f : s;
-        is_column[u] = use_first ? first_is_column : second_is_column;
+        const float use_first = (f - f) == 0.0f ? 1.0f : 0.0f;
+        decoded[u] = use_first != 0.0f ? f : s;
+        is_column[u] = second_is_column + use_first * (first_is_column - second_is_column);
       }
     } else {
+      SL_ROW_LOOP
       for (int u = 0; u < width; ++u) {
         decoded[u] = first_row[u];
         is_column[u] = first_is_column;
       }
     }
-    for (int u = 0; u < width; ++u) p[u] = decoded[u];
-    const float* __restrict a_row = im.a.data() + row_start;
-    const float* __restrict b_col_row = im.b[kColumn].data() + row_start;
-    const float* __restrict b_row_row = im.b[kRow].data() + row_start;
-    if (im.correct_projector) {
-      im.correctRow(width, a_row, b_col_row, b_row_row, is_column, decoded, p, p_prev, g_prev);
+    SL_ROW_LOOP
+    for (int u = 0; u < width; ++u) {
+      p[u] = decoded[u];
+      const float x = rx[u], y = ry[u];
+      a_row[u] = a0 * x + a1 * y + a2;
+      b_col_row[u] = bc0 * x + bc1 * y + bc2;
+      b_row_row[u] = br0 * x + br1 * y + br2;
     }
+    if (correct_projector) {
+      correctRow(width, a_row, b_col_row, b_row_row, is_column, decoded, p, p_prev, g_prev);
+    }
+    SL_ROW_LOOP
     for (int u = 0; u < width; ++u) {
       const bool col = is_column[u] != 0.0f;
       const float bc = b_col_row[u], br = b_row_row[u];
@@ -299,14 +350,18 @@ void Triangulator::triangulateRows(const ProjectorMaps& maps, int row_begin, int
       z_row[u] = valid ? z : kNaN;
     }
     PointXYZI* __restrict out = cloud.points.data() + row_start;
-    const float* __restrict rx = im.rx.data() + row_start;
-    const float* __restrict ry = im.ry.data() + row_start;
-    for (int u = 0; u < width; ++u) {
-      const float z = z_row[u];
-      out[u].x = z * rx[u];
-      out[u].y = z * ry[u];
-      out[u].z = z;
-      out[u].intensity = offset_row ? offset_row[u] : 0.0f;
+    if (offset_row) {
+      SL_ROW_LOOP
+      for (int u = 0; u < width; ++u) {
+        const float z = z_row[u];
+        out[u] = PointXYZI{z * rx[u], z * ry[u], z, offset_row[u]};
+      }
+    } else {
+      SL_ROW_LOOP
+      for (int u = 0; u < width; ++u) {
+        const float z = z_row[u];
+        out[u] = PointXYZI{z * rx[u], z * ry[u], z, 0.0f};
+      }
     }
   }
 }

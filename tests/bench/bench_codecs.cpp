@@ -1,7 +1,8 @@
 // Codec throughput on 1440 x 1080 8-bit scans of a tilted plane, in scans/s:
 // decode only, decode + triangulate fused per block of rows (buffers reused),
 // single-threaded and split over 2 threads (rows halves; the benchmark owns
-// the thread, the stages start none), and a baseline written the
+// the thread, the stages start none), the fused band form (decode +
+// triangulate, no camera-sized maps), and a baseline written the
 // straightforward OpenCV way (cv::phase / cv::magnitude / matrix
 // expressions, determinant-tensor triangulation as matrix expressions).
 //
@@ -163,6 +164,41 @@ void BM_DecodeTriangulate(benchmark::State& state) {
   reportScans(state);
 }
 
+// Args: pattern, projector distortion iterations, threads. The fused form
+// for callers that need only the cloud: each thread decodes blocks of rows
+// into its own small band (Codec::decodeBand) and triangulates them
+// (Triangulator::triangulateBand); no camera-sized maps.
+void BM_DecodeTriangulateBand(benchmark::State& state) {
+  const auto& f = frames(int(state.range(0)));
+  const auto codec = makeCodec(patternNumber(int(state.range(0))), {});
+  const Triangulator triangulator(scene().calibration, withIterations(int(state.range(1))));
+  const int threads = int(state.range(2));
+  ProjectorMaps bands[2];
+  PointCloud cloud;
+  const int rows = f[0].rows;
+  auto work = [&](int begin, int end, ProjectorMaps& band) {
+    constexpr int kBlock = 16;
+    for (int y = begin; y < end; y += kBlock) {
+      const int y1 = std::min(y + kBlock, end);
+      codec->decodeBand(f, 8, y, y1, band);
+      triangulator.triangulateBand(band, y, y1, cloud);
+    }
+  };
+  for (auto _ : state) {
+    triangulator.prepareCloud("cam", 0, cloud);
+    if (threads == 1) {
+      work(0, rows, bands[0]);
+    } else {
+      std::thread helper([&] { work(rows / 2, rows, bands[1]); });
+      work(0, rows / 2, bands[0]);
+      helper.join();
+    }
+    benchmark::DoNotOptimize(cloud.points.data());
+  }
+  state.counters["valid_points"] = double(cloud.validCount());
+  reportScans(state);
+}
+
 // The straightforward OpenCV way, 3+3 horizontal only (as sl_sensor and
 // SLStudio do it): float conversion, cv::phase / cv::magnitude on matrix
 // expressions, unwrapping by expressions, then z = (c0 - up c1) / (up a - b)
@@ -240,6 +276,12 @@ BENCHMARK(BM_Decode)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_DecodeTriangulate)
+    ->ArgsProduct({{0, 1, 2}, {0, 2}, {1, 2}})
+    ->ArgNames({"pattern", "proj_iter", "threads"})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+BENCHMARK(BM_DecodeTriangulateBand)
     ->ArgsProduct({{0, 1, 2}, {0, 2}, {1, 2}})
     ->ArgNames({"pattern", "proj_iter", "threads"})
     ->Unit(benchmark::kMillisecond)

@@ -72,6 +72,15 @@ class Codec {
   void decodeRows(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin, int row_end,
                   ProjectorMaps& out) const;
 
+  // Band form for callers that keep only what they derive from the maps
+  // (Triangulator::triangulateBand()): checks the frames as prepare() does,
+  // then decodes camera rows [row_begin, row_end) into rows 0 .. (row_end -
+  // row_begin) of `band`, whose maps are (re)allocated only when their width
+  // or type differ or they have fewer rows (so one band is reused for all
+  // blocks of a scan). Same map contract as decode() otherwise.
+  void decodeBand(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin, int row_end,
+                  ProjectorMaps& band) const;
+
  protected:
   Codec(PatternSpec spec, DecoderOptions options);
 
@@ -99,6 +108,11 @@ class Codec {
                            const RowOutput& out) const = 0;
 
  private:
+  void checkFrames(const std::vector<cv::Mat>& frames, int bit_depth) const;
+  // Rows [row_begin, row_end) of the frames into rows from out_row of `out`.
+  void decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin,
+                    int row_end, ProjectorMaps& out, int out_row) const;
+
   PatternSpec spec_;
   DecoderOptions options_;
   std::vector<int> position_;  // canonical frame -> index in the projected sequence

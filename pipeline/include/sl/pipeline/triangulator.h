@@ -6,6 +6,7 @@
 // point costs a few multiply-adds and one division.
 #pragma once
 
+#include <string>
 #include <utility>
 
 #include <opencv2/core/mat.hpp>
@@ -32,8 +33,9 @@ struct TriangulatorOptions {
 };
 
 // Thread-compatible (triangulate() is const and keeps no state, so concurrent
-// calls on one instance are safe too). Construction precomputes
-// O(width*height) maps (~20 bytes per camera pixel).
+// calls on one instance are safe too). Construction precomputes the camera
+// rays (8 bytes per camera pixel). Arithmetic is single precision (the maps
+// and the cloud are float); test_triangulator.cpp bounds the error.
 class Triangulator {
  public:
   Triangulator(const CameraProjectorCalibration& calibration, TriangulatorOptions options);
@@ -57,9 +59,23 @@ class Triangulator {
   void triangulateRows(const ProjectorMaps& maps, int row_begin, int row_end,
                        PointCloud& cloud) const;
 
+  // Fused form for callers that need only the cloud, with no camera-sized
+  // maps: `band` holds camera rows [row_begin, row_end) in its rows 0 ..
+  // (row_end - row_begin) (Codec::decodeBand()); its maps must be the
+  // camera's width and CV_32FC1 (or empty as above). prepareCloud() sizes the
+  // cloud once per scan; triangulateBand() fills the band's rows and throws
+  // std::invalid_argument on a bad band or an unprepared cloud. Concurrent
+  // calls on disjoint row ranges of one cloud (each with its own band) are
+  // safe. Results equal triangulateRows() on full maps.
+  void prepareCloud(const std::string& frame_id, TimestampNs stamp_ns, PointCloud& cloud) const;
+  void triangulateBand(const ProjectorMaps& band, int row_begin, int row_end,
+                       PointCloud& cloud) const;
+
  private:
-  // Checks the maps; the axes tried per pixel in order (second = -1: none).
-  std::pair<int, int> axesFor(const ProjectorMaps& maps) const;
+  // Checks the maps (camera-sized, or a band of the camera's width with at
+  // least band_rows rows when band_rows >= 0); the axes tried per pixel in
+  // order (second = -1: none).
+  std::pair<int, int> axesFor(const ProjectorMaps& maps, int band_rows = -1) const;
   struct Impl;
   std::shared_ptr<const Impl> impl_;
 };
