@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <numeric>
 #include <vector>
@@ -44,6 +45,38 @@ void phaseAndModulation(int n, const float* __restrict s, const float* __restric
     phase[x] = fastAtan2Positive(sv, cv);
     b2_min[x] = std::min(b2_min[x], (sv * sv + cv * cv) * scale2);
   }
+}
+
+// 8-bit 3-step sets: with sum_n w_n = 0, S and C (and so the wrapped phase
+// and B^2) depend only on e1 = I0 - I2 and e2 = I1 - I2, each in [-255, 255].
+// One entry per (e1, e2), computed in double: exact atan2 instead of
+// fastAtan2Positive (within kFastAtan2MaxError of it), B^2 rounded once.
+struct ThreeStepEntry {
+  float phase;  // [0, 2*pi)
+  float b2;     // B^2, camera DN^2
+};
+constexpr int kThreeStepSide = 511;
+inline int threeStepIndex(int e1, int e2) { return (e1 + 255) * kThreeStepSide + (e2 + 255); }
+
+template <typename SetT>
+std::shared_ptr<const std::vector<ThreeStepEntry>> makeThreeStepTable(const SetT& s) {
+  auto table = std::make_shared<std::vector<ThreeStepEntry>>(kThreeStepSide * kThreeStepSide);
+  // The weights are sin / cos of the deltas rounded to float, as in the row
+  // kernels; the third frame's weight is taken as -(w0 + w1) (exact sums vanish).
+  const double ws0 = s.ws[0], ws1 = s.ws[1], wc0 = s.wc[0], wc1 = s.wc[1];
+  const double scale2 = double(s.b_scale) * s.b_scale;
+  for (int e1 = -255; e1 <= 255; ++e1) {
+    for (int e2 = -255; e2 <= 255; ++e2) {
+      const double sv = ws0 * e1 + ws1 * e2, cv = wc0 * e1 + wc1 * e2;
+      double phase = std::atan2(sv, cv);
+      if (phase < 0) phase += 2.0 * std::numbers::pi;
+      float phase_f = static_cast<float>(phase);
+      if (phase_f >= kTwoPi) phase_f = 0.0f;
+      (*table)[threeStepIndex(e1, e2)] =
+          ThreeStepEntry{phase_f, static_cast<float>((sv * sv + cv * cv) * scale2)};
+    }
+  }
+  return table;
 }
 
 class PhaseShiftCodec final : public Codec {
@@ -102,6 +135,17 @@ class PhaseShiftCodec final : public Codec {
     }
     two_three_step_ = !heterodyne && flat_ < 0 && sets_.size() == 2 &&
                       sets_[0].frames.size() == 3 && sets_[1].frames.size() == 3;
+    if (two_three_step_) {
+      for (int j = 0; j < 2; ++j) {
+        const Set& s = sets_[order_[j]];
+        const Set& other = sets_[order_[1 - j]];
+        if (j == 1 && s.ws == other.ws && s.wc == other.wc && s.b_scale == other.b_scale) {
+          lut_[1] = lut_[0];
+        } else {
+          lut_[j] = makeThreeStepTable(s);
+        }
+      }
+    }
   }
 
   int scratchRows() const override { return 6 + 3 * static_cast<int>(sets_.size()); }
@@ -109,6 +153,10 @@ class PhaseShiftCodec final : public Codec {
  protected:
   void decodeRow8(const RowContext& c, const std::uint8_t* const* frames, int width,
                   const RowOutput& out) const override {
+    if (two_three_step_) {
+      rowTwoThreeStepTable(c, frames, width, out);
+      return;
+    }
     row(c, frames, width, out);
   }
   void decodeRow16(const RowContext& c, const std::uint16_t* const* frames, int width,
@@ -124,10 +172,46 @@ class PhaseShiftCodec final : public Codec {
     float sum_ws = 0, sum_wc = 0, b_scale = 1;
   };
 
+  // Per-row constants of the two-set kernels.
+  struct TwoSetConstants {
+    float ratio, to_px, period, inv_period, max_coord, min_b2, max_err, saturation;
+  };
+  TwoSetConstants twoSetConstants(const RowContext& c) const {
+    const Set& fine = sets_[order_[1]];
+    const Set& coarse = sets_[order_[0]];
+    TwoSetConstants k;
+    k.ratio = static_cast<float>(fine.frequency / coarse.frequency);
+    k.to_px = static_cast<float>(c.axis_length /
+                                 (2.0 * std::numbers::pi * sets_[finest_].frequency));
+    k.period = static_cast<float>(c.axis_length / unit_frequency_);
+    k.inv_period = 1.0f / k.period;
+    k.max_coord = c.axis_length - 0.5f;
+    const float min_b = options().min_modulation * c.dn_scale;
+    k.min_b2 = min_b * min_b;
+    k.max_err = options().max_unwrap_error;
+    k.saturation = c.saturation;
+    return k;
+  }
+  // Unwrapping, coordinate and status of one pixel, as the general row does
+  // (status as a float code: the loops then vectorize in one width).
+  static void twoSetPixel(const TwoSetConstants& k, float phase_fine, float phase_coarse,
+                          float b2_min, float peak, float& coord, float& status_code) {
+    const float cycles = (k.ratio * phase_coarse - phase_fine) * kInvTwoPi;
+    const float n = roundUp1024(cycles);
+    const float err = std::fabs(cycles - n);
+    float p = (phase_fine + kTwoPi * n) * k.to_px;
+    p -= k.period * floor1024(p * k.inv_period);
+    float st = p >= -0.5f && p <= k.max_coord ? 0.0f : 4.0f;
+    st = err > k.max_err ? 3.0f : st;
+    st = b2_min >= k.min_b2 ? st : 1.0f;
+    st = peak >= k.saturation ? 2.0f : st;
+    status_code = st;
+    coord = p;
+  }
+
   // Two 3-step sets, hierarchical (the 3+3 patterns): the general row below
   // fused into one pass per pixel, same operations in the same order, so the
-  // results are bit-identical (test_codecs checks it) at a fraction of the
-  // memory traffic.
+  // results are bit-identical at a fraction of the memory traffic.
   template <typename Pixel>
   void rowTwoThreeStep(const RowContext& c, const Pixel* const* frames, int width,
                        const RowOutput& out) const {
@@ -149,21 +233,11 @@ class PhaseShiftCodec final : public Codec {
     const float gc0 = coarse.wc[0], gc1 = coarse.wc[1], gc2 = coarse.wc[2];
     const float fine_scale2 = fine.b_scale * fine.b_scale;
     const float coarse_scale2 = coarse.b_scale * coarse.b_scale;
-    const float ratio = static_cast<float>(fine.frequency / coarse.frequency);
     const float inv_count = 1.0f / 3.0f;
-    const float to_px = static_cast<float>(c.axis_length /
-                                           (2.0 * std::numbers::pi * sets_[finest_].frequency));
-    const float period = static_cast<float>(c.axis_length / unit_frequency_);
-    const float inv_period = 1.0f / period;
-    const float max_coord = c.axis_length - 0.5f;
-    const float min_b = options().min_modulation * c.dn_scale;
-    const float min_b2 = min_b * min_b;
-    const float max_err = options().max_unwrap_error;
-    const float saturation = c.saturation;
+    const TwoSetConstants k = twoSetConstants(c);
     float* __restrict coord = out.coord;
     float* __restrict modulation = out.modulation;
     float* __restrict offset = out.offset;
-    std::uint8_t* __restrict status = out.status;
     float* __restrict status_code = c.scratch;
     // Nine inputs and five outputs exceed GCC's alias-check budget; the rows
     // are distinct buffers (frames vs. maps vs. scratch).
@@ -180,25 +254,69 @@ class PhaseShiftCodec final : public Codec {
       const float cf = fc0 * a0 + fc1 * a1 + fc2 * a2;
       const float sg = gs0 * b0 + gs1 * b1 + gs2 * b2;
       const float cg = gc0 * b0 + gc1 * b1 + gc2 * b2;
-      const float phase_fine = fastAtan2Positive(sf, cf);
-      const float phase_coarse = fastAtan2Positive(sg, cg);
       const float b2_fine = (sf * sf + cf * cf) * fine_scale2;
       const float b2_coarse = (sg * sg + cg * cg) * coarse_scale2;
-      const float b2_min = std::min(b2_fine, b2_coarse);
       modulation[x] = std::sqrt(b2_fine);
-      const float cycles = (ratio * phase_coarse - phase_fine) * kInvTwoPi;
-      const float k = roundUp1024(cycles);
-      const float err = std::fabs(cycles - k);
-      float p = (phase_fine + kTwoPi * k) * to_px;
-      p -= period * floor1024(p * inv_period);
-      float st = p >= -0.5f && p <= max_coord ? 0.0f : 4.0f;
-      st = err > max_err ? 3.0f : st;
-      st = b2_min >= min_b2 ? st : 1.0f;
-      st = peak >= saturation ? 2.0f : st;
-      status_code[x] = st;
-      coord[x] = p;
+      twoSetPixel(k, fastAtan2Positive(sf, cf), fastAtan2Positive(sg, cg),
+                  std::min(b2_fine, b2_coarse), peak, coord[x], status_code[x]);
     }
     // Separate from the float loop, which then vectorizes in one vector width.
+    std::uint8_t* __restrict status = out.status;
+    for (int x = 0; x < width; ++x) status[x] = static_cast<std::uint8_t>(status_code[x]);
+  }
+
+  // rowTwoThreeStep() for 8-bit frames with the phase and B^2 of each set
+  // read from its ThreeStepEntry table: a scalar gather pass, then the rest
+  // vectorized. Differs from the general row by the atan2 approximation
+  // (< kFastAtan2MaxError) and B^2's rounding (test_codecs compares them).
+  void rowTwoThreeStepTable(const RowContext& c, const std::uint8_t* const* frames, int width,
+                            const RowOutput& out) const {
+    const Set& fine = sets_[order_[1]];
+    const Set& coarse = sets_[order_[0]];
+    const Set& first = sets_[0];
+    const std::uint8_t* __restrict f0 = frames[fine.frames[0]];
+    const std::uint8_t* __restrict f1 = frames[fine.frames[1]];
+    const std::uint8_t* __restrict f2 = frames[fine.frames[2]];
+    const std::uint8_t* __restrict g0 = frames[coarse.frames[0]];
+    const std::uint8_t* __restrict g1 = frames[coarse.frames[1]];
+    const std::uint8_t* __restrict g2 = frames[coarse.frames[2]];
+    const std::uint8_t* __restrict o0 = frames[first.frames[0]];
+    const std::uint8_t* __restrict o1 = frames[first.frames[1]];
+    const std::uint8_t* __restrict o2 = frames[first.frames[2]];
+    const ThreeStepEntry* __restrict table_fine = lut_[1]->data();
+    const ThreeStepEntry* __restrict table_coarse = lut_[0]->data();
+    float* __restrict status_code = c.scratch;
+    float* __restrict phase_fine = status_code + width;
+    float* __restrict b2_fine = phase_fine + width;
+    float* __restrict phase_coarse = b2_fine + width;
+    float* __restrict b2_coarse = phase_coarse + width;
+    for (int x = 0; x < width; ++x) {
+      const ThreeStepEntry ef = table_fine[threeStepIndex(f0[x] - f2[x], f1[x] - f2[x])];
+      const ThreeStepEntry eg = table_coarse[threeStepIndex(g0[x] - g2[x], g1[x] - g2[x])];
+      phase_fine[x] = ef.phase;
+      b2_fine[x] = ef.b2;
+      phase_coarse[x] = eg.phase;
+      b2_coarse[x] = eg.b2;
+    }
+    const float inv_count = 1.0f / 3.0f;
+    const TwoSetConstants k = twoSetConstants(c);
+    float* __restrict coord = out.coord;
+    float* __restrict modulation = out.modulation;
+    float* __restrict offset = out.offset;
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC ivdep
+#endif
+    for (int x = 0; x < width; ++x) {
+      const float peak = std::max(
+          std::max(std::max(static_cast<float>(f0[x]), static_cast<float>(f1[x])),
+                   std::max(static_cast<float>(f2[x]), static_cast<float>(g0[x]))),
+          std::max(static_cast<float>(g1[x]), static_cast<float>(g2[x])));
+      offset[x] = ((static_cast<float>(o0[x]) + o1[x]) + o2[x]) * inv_count;
+      modulation[x] = std::sqrt(b2_fine[x]);
+      twoSetPixel(k, phase_fine[x], phase_coarse[x], std::min(b2_fine[x], b2_coarse[x]), peak,
+                  coord[x], status_code[x]);
+    }
+    std::uint8_t* __restrict status = out.status;
     for (int x = 0; x < width; ++x) status[x] = static_cast<std::uint8_t>(status_code[x]);
   }
 
@@ -360,6 +478,9 @@ class PhaseShiftCodec final : public Codec {
   int finest_ = 0;
   int flat_ = -1;                // 2+1: index of the flat frame
   bool two_three_step_ = false;  // rowTwoThreeStep() applies
+  // rowTwoThreeStep() on 8-bit frames: tables of the coarse [0] and fine [1]
+  // set (one shared table when their weights agree).
+  std::shared_ptr<const std::vector<ThreeStepEntry>> lut_[2];
   double unit_frequency_ = 1.0;  // frequency of the coarsest (beat) phase
 };
 

@@ -330,3 +330,69 @@ TEST_CASE("LightCrafter 4500 forms: diamond downsampling and 24-bit packing", "[
   pipeline::PinholeModel ideal{1824, 1140, 2200, 2200, 911.5, 569.5, {0, 0, 0, 0, 0}};
   CHECK(cv::norm(pipeline::predistort(images[0], ideal), images[0], cv::NORM_INF) <= 1);
 }
+
+TEST_CASE("8-bit 3+3 decoding by table agrees with the computed kernel", "[codecs]") {
+  // The 8-bit 3+3 path reads phase and B^2 from a table over the frame
+  // differences; the same frames as 16-bit images with bit_depth 8 take the
+  // computed path (fast atan2). Fringe contrast falls to 0 down the image, so
+  // the modulation threshold is crossed, and a band is saturated.
+  const auto patterns = allFamilies();
+  for (int i : {0, 1}) {
+    const PatternSpec& p = patterns[i];
+    REQUIRE(p.family == PatternFamily::kPhaseShift);
+    REQUIRE(p.steps == 3);
+    const auto codec = pipeline::makeCodec(p, {});
+    const cv::Size size(600, 200);
+    std::vector<cv::Mat> frames8, frames16;
+    for (int f = 0; f < codec->frameCount(); ++f) {
+      cv::Mat image(size, CV_8UC1);
+      for (int y = 0; y < size.height; ++y) {
+        const double amplitude = 230.0 * (size.height - 1 - y) / (size.height - 1);
+        for (int x = 0; x < size.width; ++x) {
+          const double u = 1.0 + 3.03 * x + 0.11 * y, v = 1.0 + 5.6 * y + 0.2 * x;
+          const double value = 12 + amplitude * pipeline::patternIntensity(p, f, u, v);
+          image.at<std::uint8_t>(y, x) = x >= 580 ? 255 : std::uint8_t(std::lround(value));
+        }
+      }
+      frames8.push_back(image);
+      cv::Mat wide;
+      image.convertTo(wide, CV_16UC1);
+      frames16.push_back(wide);
+    }
+    const auto table = codec->decode(frames8, 8);
+    const auto computed = codec->decode(frames16, 8);
+    int status_differs = 0, valid = 0, low = 0, saturated = 0;
+    double max_coord = 0, max_modulation = 0;
+    for (int y = 0; y < size.height; ++y) {
+      for (int x = 0; x < size.width; ++x) {
+        const int s = table.status.at<std::uint8_t>(y, x);
+        if (s != computed.status.at<std::uint8_t>(y, x)) {
+          ++status_differs;
+          continue;
+        }
+        low += s == 1;
+        saturated += s == 2;
+        const float b = computed.modulation.at<float>(y, x);
+        max_modulation = std::max(
+            max_modulation, double(std::abs(table.modulation.at<float>(y, x) - b)) / std::max(b, 1.0f));
+        if (s != 0) continue;
+        ++valid;
+        for (const cv::Mat* m : {&table.up, &table.vp}) {
+          const cv::Mat& other = m == &table.up ? computed.up : computed.vp;
+          if (p.direction == Direction::kHorizontal && m == &table.vp) continue;
+          max_coord = std::max(max_coord, double(std::abs(m->at<float>(y, x) - other.at<float>(y, x))));
+        }
+      }
+    }
+    CAPTURE(p.name, status_differs, valid, low, saturated, max_coord, max_modulation);
+    CHECK(cv::norm(table.offset, computed.offset, cv::NORM_INF) == 0);
+    CHECK(valid > 40000);
+    CHECK(low > 5000);
+    CHECK(saturated >= 20 * size.height);
+    // Threshold ties may flip a handful of pixels; the coordinates differ by
+    // the fast atan2's error (1e-6 rad, ~1e-4 px here).
+    CHECK(status_differs <= 10);
+    CHECK(max_coord < 1e-3);
+    CHECK(max_modulation < 1e-5);
+  }
+}
