@@ -210,8 +210,8 @@ class PhaseShiftCodec final : public Codec {
   }
 
   // Two 3-step sets, hierarchical (the 3+3 patterns): the general row below
-  // fused into one pass per pixel, same operations in the same order, so the
-  // results are bit-identical at a fraction of the memory traffic.
+  // fused into one pass per pixel (same operations in the same order) at a
+  // fraction of the memory traffic; 16-bit frames and 8-bit without tables.
   template <typename Pixel>
   void rowTwoThreeStep(const RowContext& c, const Pixel* const* frames, int width,
                        const RowOutput& out) const {
