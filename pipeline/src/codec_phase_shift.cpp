@@ -211,7 +211,8 @@ class PhaseShiftCodec final : public Codec {
 
   // Two 3-step sets, hierarchical (the 3+3 patterns): the general row below
   // fused into one pass per pixel (same operations in the same order) at a
-  // fraction of the memory traffic; 16-bit frames and 8-bit without tables.
+  // fraction of the memory traffic; used for 16-bit frames (8-bit frames
+  // take rowTwoThreeStepTable()).
   template <typename Pixel>
   void rowTwoThreeStep(const RowContext& c, const Pixel* const* frames, int width,
                        const RowOutput& out) const {

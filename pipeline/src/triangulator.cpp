@@ -90,10 +90,12 @@ struct Triangulator::Impl {
   // One correction step for one pixel (col: 1 column, 0 row; a, b_col, b_row
   // its terms; decoded its coordinate), updating p and the secant state.
   // Branch-free so that the row loops calling it vectorize.
-  template <bool kSecant>
+  // kAxis: kColumn or kRow when every pixel of the row uses that axis (the
+  // other axis' terms then fold away), kMixedAxes to read col_flag.
+  template <bool kSecant, int kAxis = 2>
   static void correctionStep(const Correction& k, float col_flag, float ai, float bc, float br,
                              float decoded, float& p, float& p_prev, float& g_prev) {
-    const bool col = col_flag != 0.0f;
+    const bool col = kAxis == 2 ? col_flag != 0.0f : kAxis == kColumn;
     const float pi = p;
     const float n = (col ? k.m_col : k.m_row) - pi * k.m3;
     const float d = pi * ai - (col ? bc : br);
@@ -340,18 +342,34 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
       b_col_row[u] = bc0 * x + bc1 * y + bc2;
       b_row_row[u] = br0 * x + br1 * y + br2;
     }
-    for (int it = 0; it < options.projector_distortion_iterations; ++it) {
-      if (it == 0) {
-        SL_ROW_LOOP
-        for (int u = 0; u < width; ++u)
-          correctionStep<false>(k, is_column[u], a_row[u], b_col_row[u], b_row_row[u],
-                                decoded[u], p[u], p_prev[u], g_prev[u]);
-      } else {
-        SL_ROW_LOOP
-        for (int u = 0; u < width; ++u)
-          correctionStep<true>(k, is_column[u], a_row[u], b_col_row[u], b_row_row[u],
-                               decoded[u], p[u], p_prev[u], g_prev[u]);
+    // Pixels with a finite coordinate on the second axis (NaN pixels stay NaN
+    // whatever their axis).
+    float on_second = 0.0f;
+    SL_ROW_LOOP
+    for (int u = 0; u < width; ++u)
+      on_second += (is_column[u] != first_is_column) & ((decoded[u] - decoded[u]) == 0.0f) ? 1.0f
+                                                                                           : 0.0f;
+    auto passes = [&]<int kAxis>() {
+      for (int it = 0; it < options.projector_distortion_iterations; ++it) {
+        if (it == 0) {
+          SL_ROW_LOOP
+          for (int u = 0; u < width; ++u)
+            correctionStep<false, kAxis>(k, is_column[u], a_row[u], b_col_row[u], b_row_row[u],
+                                         decoded[u], p[u], p_prev[u], g_prev[u]);
+        } else {
+          SL_ROW_LOOP
+          for (int u = 0; u < width; ++u)
+            correctionStep<true, kAxis>(k, is_column[u], a_row[u], b_col_row[u], b_row_row[u],
+                                        decoded[u], p[u], p_prev[u], g_prev[u]);
+        }
       }
+    };
+    if (on_second != 0.0f) {
+      passes.template operator()<2>();
+    } else if (first_is_column != 0.0f) {
+      passes.template operator()<kColumn>();
+    } else {
+      passes.template operator()<kRow>();
     }
     SL_ROW_LOOP
     for (int u = 0; u < width; ++u)
