@@ -18,6 +18,7 @@
 #include "codec_families.h"
 #include "fast_atan2.h"
 #include "frame_layout.h"
+#include "multiversion.h"
 
 namespace sl::pipeline::detail {
 
@@ -38,8 +39,8 @@ inline float floor1024(float x) {
 
 // Wrapped phase atan2(S, C) in [0, 2*pi) and the running minimum of B^2.
 // Branch-free so that it vectorizes.
-void phaseAndModulation(int n, const float* __restrict s, const float* __restrict c,
-                        float scale2, float* __restrict phase, float* __restrict b2_min) {
+void phaseAndModulation(int n, const float* __restrict s, const float* __restrict c, float scale2,
+                        float* __restrict phase, float* __restrict b2_min) {
   for (int x = 0; x < n; ++x) {
     const float sv = s[x], cv = c[x];
     phase[x] = fastAtan2Positive(sv, cv);
@@ -81,8 +82,7 @@ std::shared_ptr<const std::vector<ThreeStepEntry>> makeThreeStepTable(const SetT
 
 class PhaseShiftCodec final : public Codec {
  public:
-  PhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options)
-      : Codec(spec, options) {
+  PhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options) : Codec(spec, options) {
     const auto all = canonicalFrames(spec);
     const int per_direction = spec.framesPerDirection();
     // Sets from the first direction's frames (both directions share the layout).
@@ -181,8 +181,8 @@ class PhaseShiftCodec final : public Codec {
     const Set& coarse = sets_[order_[0]];
     TwoSetConstants k;
     k.ratio = static_cast<float>(fine.frequency / coarse.frequency);
-    k.to_px = static_cast<float>(c.axis_length /
-                                 (2.0 * std::numbers::pi * sets_[finest_].frequency));
+    k.to_px =
+        static_cast<float>(c.axis_length / (2.0 * std::numbers::pi * sets_[finest_].frequency));
     k.period = static_cast<float>(c.axis_length / unit_frequency_);
     k.inv_period = 1.0f / k.period;
     k.max_coord = c.axis_length - 0.5f;
@@ -214,8 +214,8 @@ class PhaseShiftCodec final : public Codec {
   // fraction of the memory traffic; used for 16-bit frames (8-bit frames
   // take rowTwoThreeStepTable()).
   template <typename Pixel>
-  void rowTwoThreeStep(const RowContext& c, const Pixel* const* frames, int width,
-                       const RowOutput& out) const {
+  SL_MULTIVERSION void rowTwoThreeStep(const RowContext& c, const Pixel* const* frames, int width,
+                                       const RowOutput& out) const {
     const Set& fine = sets_[order_[1]];
     const Set& coarse = sets_[order_[0]];
     const Set& first = sets_[0];  // offset A: mean of the first listed set
@@ -248,8 +248,7 @@ class PhaseShiftCodec final : public Codec {
     for (int x = 0; x < width; ++x) {
       const float a0 = f0[x], a1 = f1[x], a2 = f2[x];
       const float b0 = g0[x], b1 = g1[x], b2 = g2[x];
-      const float peak = std::max(std::max(std::max(a0, a1), std::max(a2, b0)),
-                                  std::max(b1, b2));
+      const float peak = std::max(std::max(std::max(a0, a1), std::max(a2, b0)), std::max(b1, b2));
       offset[x] = ((static_cast<float>(o0[x]) + o1[x]) + o2[x]) * inv_count;
       const float sf = fs0 * a0 + fs1 * a1 + fs2 * a2;
       const float cf = fc0 * a0 + fc1 * a1 + fc2 * a2;
@@ -270,8 +269,8 @@ class PhaseShiftCodec final : public Codec {
   // read from its ThreeStepEntry table: a scalar gather pass, then the rest
   // vectorized. Differs from the general row by the atan2 approximation
   // (< kFastAtan2MaxError) and B^2's rounding (test_codecs compares them).
-  void rowTwoThreeStepTable(const RowContext& c, const std::uint8_t* const* frames, int width,
-                            const RowOutput& out) const {
+  SL_MULTIVERSION void rowTwoThreeStepTable(const RowContext& c, const std::uint8_t* const* frames,
+                                            int width, const RowOutput& out) const {
     const Set& fine = sets_[order_[1]];
     const Set& coarse = sets_[order_[0]];
     const Set& first = sets_[0];
@@ -308,10 +307,10 @@ class PhaseShiftCodec final : public Codec {
 #pragma GCC ivdep
 #endif
     for (int x = 0; x < width; ++x) {
-      const float peak = std::max(
-          std::max(std::max(static_cast<float>(f0[x]), static_cast<float>(f1[x])),
-                   std::max(static_cast<float>(f2[x]), static_cast<float>(g0[x]))),
-          std::max(static_cast<float>(g1[x]), static_cast<float>(g2[x])));
+      const float peak =
+          std::max(std::max(std::max(static_cast<float>(f0[x]), static_cast<float>(f1[x])),
+                            std::max(static_cast<float>(f2[x]), static_cast<float>(g0[x]))),
+                   std::max(static_cast<float>(g1[x]), static_cast<float>(g2[x])));
       offset[x] = ((static_cast<float>(o0[x]) + o1[x]) + o2[x]) * inv_count;
       modulation[x] = std::sqrt(b2_fine[x]);
       twoSetPixel(k, phase_fine[x], phase_coarse[x], std::min(b2_fine[x], b2_coarse[x]), peak,
@@ -322,7 +321,8 @@ class PhaseShiftCodec final : public Codec {
   }
 
   template <typename Pixel>
-  void row(const RowContext& c, const Pixel* const* frames, int width, const RowOutput& out) const {
+  SL_MULTIVERSION void row(const RowContext& c, const Pixel* const* frames, int width,
+                           const RowOutput& out) const {
     if (two_three_step_) {
       rowTwoThreeStep(c, frames, width, out);
       return;
@@ -450,8 +450,8 @@ class PhaseShiftCodec final : public Codec {
     }
 
     // Coordinate, wrapped into one code period [0, P), and status.
-    const float to_px = static_cast<float>(c.axis_length / (2.0 * std::numbers::pi *
-                                                             sets_[finest_].frequency));
+    const float to_px =
+        static_cast<float>(c.axis_length / (2.0 * std::numbers::pi * sets_[finest_].frequency));
     const float period = static_cast<float>(c.axis_length / unit_frequency_);
     const float inv_period = 1.0f / period;
     const float max_coord = c.axis_length - 0.5f;
@@ -473,8 +473,8 @@ class PhaseShiftCodec final : public Codec {
     }
   }
 
-  std::vector<Set> sets_;        // in listed order
-  std::vector<int> order_;       // unwrapping order (see constructor)
+  std::vector<Set> sets_;                // in listed order
+  std::vector<int> order_;               // unwrapping order (see constructor)
   std::vector<double> chain_frequency_;  // heterodyne: item-0 frequency per level
   int finest_ = 0;
   int flat_ = -1;                // 2+1: index of the flat frame

@@ -1,5 +1,6 @@
 #include "sl/pipeline/triangulator.h"
 
+#include <Eigen/Core>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -7,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Core>
+#include "multiversion.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -45,8 +46,8 @@ struct Triangulator::Impl {
   // reading them from memory).
   std::vector<float> rx, ry;
   float m_rows[3][3] = {};  // M[0:3][0:3]
-  double m_t[2] = {0, 0};  // M1[3], M2[3]
-  double m3_t = 0;         // M3[3] = t.z (mm)
+  double m_t[2] = {0, 0};   // M1[3], M2[3]
+  double m3_t = 0;          // M3[3] = t.z (mm)
 
   // Projector model for the distortion correction.
   bool correct_projector = false;
@@ -80,11 +81,11 @@ struct Triangulator::Impl {
     float m_col, m_row, m3, cx, cy, ifx, ify, fx, fy, k1, k2, p1, p2, k3;
   };
   Correction correction() const {
-    return Correction{float(m_t[kColumn]), float(m_t[kRow]), float(m3_t),
-                      float(proj_c[0]),    float(proj_c[1]), float(inv_proj_f[0]),
-                      float(inv_proj_f[1]), float(proj_f[0]), float(proj_f[1]),
-                      float(proj_dist[0]), float(proj_dist[1]), float(proj_dist[2]),
-                      float(proj_dist[3]), float(proj_dist[4])};
+    return Correction{float(m_t[kColumn]),  float(m_t[kRow]),    float(m3_t),
+                      float(proj_c[0]),     float(proj_c[1]),    float(inv_proj_f[0]),
+                      float(inv_proj_f[1]), float(proj_f[0]),    float(proj_f[1]),
+                      float(proj_dist[0]),  float(proj_dist[1]), float(proj_dist[2]),
+                      float(proj_dist[3]),  float(proj_dist[4])};
   }
 
   // One correction step for one pixel (col: 1 column, 0 row; a, b_col, b_row
@@ -132,9 +133,9 @@ struct Triangulator::Impl {
   // loop; -1 runs options.projector_distortion_iterations as row passes
   // (scratch: 8 rows of width floats).
   template <int kIterations>
-  void depthRow(const float* first_row, const float* second_row, float first_is_column,
-                float second_is_column, const float* rx, const float* ry, float* scratch,
-                float* z_row) const;
+  SL_MULTIVERSION void depthRow(const float* first_row, const float* second_row,
+                                float first_is_column, float second_is_column, const float* rx,
+                                const float* ry, float* scratch, float* z_row) const;
 };
 
 Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
@@ -199,8 +200,8 @@ std::pair<int, int> Triangulator::axesFor(const ProjectorMaps& maps, int band_ro
   const cv::Size size(im.width, im.height);
   auto check = [&](const cv::Mat& map, const char* name) {
     if (map.empty()) return;
-    const bool size_ok = band_rows < 0 ? map.size() == size
-                                        : map.cols == im.width && map.rows >= band_rows;
+    const bool size_ok =
+        band_rows < 0 ? map.size() == size : map.cols == im.width && map.rows >= band_rows;
     if (band_rows >= 0 && map.type() == CV_32FC1 && !size_ok) {
       throw std::invalid_argument(std::string("Triangulator: band.") + name + " must be " +
                                   std::to_string(im.width) + " wide with at least " +
@@ -347,8 +348,8 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
     float on_second = 0.0f;
     SL_ROW_LOOP
     for (int u = 0; u < width; ++u)
-      on_second += (is_column[u] != first_is_column) & ((decoded[u] - decoded[u]) == 0.0f) ? 1.0f
-                                                                                           : 0.0f;
+      on_second +=
+          (is_column[u] != first_is_column) & ((decoded[u] - decoded[u]) == 0.0f) ? 1.0f : 0.0f;
     auto passes = [&]<int kAxis>() {
       for (int it = 0; it < options.projector_distortion_iterations; ++it) {
         if (it == 0) {
@@ -400,11 +401,10 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
     // The fused loop wins without correction; with it, its register pressure
     // makes row passes faster (measured: 2 iterations 22.4 vs 18.9 ms/scan).
     if (iterations == 0) {
-      depthRow<0>(first_row, second_row, first_is_column, second_is_column, rx, ry, nullptr,
-                  z_row);
+      depthRow<0>(first_row, second_row, first_is_column, second_is_column, rx, ry, nullptr, z_row);
     } else {
-      depthRow<-1>(first_row, second_row, first_is_column, second_is_column, rx, ry,
-                   z_row + width, z_row);
+      depthRow<-1>(first_row, second_row, first_is_column, second_is_column, rx, ry, z_row + width,
+                   z_row);
     }
     PointXYZI* __restrict out = cloud.points.data() + row_start;
     int u0 = 0;
