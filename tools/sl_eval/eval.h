@@ -41,7 +41,14 @@ EvalResult runPrecision(const EvalOptions& options);
 // ripple_reduction, rms_reduction. Plot: motion_cross_section.png.
 EvalResult runMotion(const EvalOptions& options);
 
-// Names accepted by runExperiment ("precision", "motion").
+// 4.1 accuracy: 6 cones on a plate at ~500 mm seen by the "top" camera
+// (vertical baseline, vertical 3+3) and the "left" camera (horizontal
+// baseline, horizontal 3+3) of one simulated sensor; each cone fitted per
+// scan, apex distances 1 -> 2..6 against the truth (RMSE and std over scans,
+// as the paper's Table 1). Metrics: <camera>_rmse_1_<k>_mm, worst_rmse_mm.
+EvalResult runCones(const EvalOptions& options);
+
+// Names accepted by runExperiment ("precision", "motion", "cones").
 std::vector<std::string> experimentNames();
 // Throws std::invalid_argument on an unknown name.
 EvalResult runExperiment(const std::string& name, const EvalOptions& options);
