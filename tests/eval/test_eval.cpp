@@ -1,6 +1,6 @@
 // sl_eval's experiments with few scans and the thresholds: precision
 // at the phase-noise floor, motion compensation removing the motion ripple,
-// cone distances from both cameras.
+// cone distances from both cameras, roughness above the noise.
 // Each runs in a few seconds (Release).
 #include <catch2/catch.hpp>
 #include <filesystem>
@@ -70,4 +70,16 @@ TEST_CASE("cones: apex distances from both cameras match the truth", "[eval]") {
   // from the real calibration).
   CHECK(r.metrics.at("worst_rmse_mm") < 0.2);
   CHECK(r.metrics.count("left_rmse_1_6_mm") == 1);
+}
+
+TEST_CASE("roughness: the sensor's ESD follows the samples' roughness above its noise",
+          "[eval]") {
+  const sl::eval::EvalResult r = sl::eval::runRoughness(options(1));
+  INFO(r.markdown);
+  const auto& m = r.metrics;
+  CHECK(m.at("S4_esd_truth_mm") > 0.1);
+  CHECK(m.at("S4_esd_truth_mm") < 0.16);
+  for (const char* s : {"S1", "S2", "S3", "S4"})
+    CHECK(m.at(std::string(s) + "_esd_mm") > m.at(std::string(s) + "_esd_truth_mm"));
+  CHECK(m.at("S4_esd_mm") > m.at("S1_esd_mm") + 0.02);
 }

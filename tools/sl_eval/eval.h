@@ -48,7 +48,13 @@ EvalResult runMotion(const EvalOptions& options);
 // as the paper's Table 1). Metrics: <camera>_rmse_1_<k>_mm, worst_rmse_mm.
 EvalResult runCones(const EvalOptions& options);
 
-// Names accepted by runExperiment ("precision", "motion", "cones").
+// 4.2 roughness: four rough height fields (seeded, RMS 0.008..0.146 mm as the
+// paper's reference ESDs) at 500 mm; ESD (std of the distances to the
+// best-fit plane) over a 30 cm^2 patch, ground truth vs the sensor. Metrics:
+// S<i>_esd_truth_mm, S<i>_esd_mm.
+EvalResult runRoughness(const EvalOptions& options);
+
+// Names accepted by runExperiment ("precision", "motion", "cones", "roughness").
 std::vector<std::string> experimentNames();
 // Throws std::invalid_argument on an unknown name.
 EvalResult runExperiment(const std::string& name, const EvalOptions& options);
