@@ -47,7 +47,7 @@ void writeHeatMap(const std::string& path, const cv::Mat& values, double max_val
   // Half size, white margin with title and colour bar.
   cv::Mat small;
   cv::resize(heat, small, cv::Size(values.cols / 2, values.rows / 2), 0, 0, cv::INTER_AREA);
-  const int bar = 120, top = 40;
+  const int bar = 170, top = 40;
   cv::Mat canvas(small.rows + top + 20, small.cols + bar, CV_8UC3, cv::Scalar(255, 255, 255));
   small.copyTo(canvas(cv::Rect(0, top, small.cols, small.rows)));
   text(canvas, title, {10, 25}, 0.6);
