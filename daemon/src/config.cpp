@@ -326,6 +326,9 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
     if (!simulated)
       root.fail("calibration", "a " + config.sensor + " sensor needs a calibration file");
     config.calibration = config.sim.rig;
+    // The simulated second camera triangulates with its true rig too.
+    if (config.sim.second_camera)
+      config.extra_calibrations[config.sim.second_camera->camera_id] = config.sim.second_camera->rig;
   } else {
     std::filesystem::path path(calibration);
     if (path.is_relative()) path = base_dir / path;

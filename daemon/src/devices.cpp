@@ -23,7 +23,7 @@ EngineDevices openSimulated(const DaemonConfig& config, std::shared_ptr<void>& k
   }
   keep_alive = sim;
   EngineDevices devices;
-  devices.cameras.push_back(sim->camera());
+  devices.cameras = sim->cameras();  // the first, then the optional second camera
   devices.projector = sim->projector();
   devices.trigger = sim->triggerSource();
   return devices;

@@ -29,7 +29,7 @@ struct MotionCompensationOptions {
   int reference_frame = -1;    // index in the sequence; -1 = the middle frame
   int subsample = 2;           // register on images downsampled by this factor (1, 2, 4)
   bool window = true;          // Hann window against edge effects
-  double max_shift_px = 200;   // larger estimates are rejected (treated as 0, flagged)
+  double max_shift_px = 200;   // the shift is searched within +-max_shift_px
 };
 
 struct MotionEstimate {
