@@ -15,6 +15,7 @@ packages=(
   libaravis-dev
   libusb-1.0-0-dev   # aravis-0.8.pc requires it (Requires.private), Debian does not pull it in
   libhidapi-dev
+  pcl-tools
   systemd
   # ROS 2 interop test (tests/interop): Fast DDS, its IDL code generator
   # (Java: pulls default-jre-headless) and the sensor_msgs/std_msgs .msg

@@ -67,6 +67,16 @@ head -c 400 "$pcd" | grep -q "^DATA binary$" || fail "pcd: not binary"
 header_bytes=$(grep -a -b -m1 "^DATA binary$" "$pcd" | cut -d: -f1)
 expected=$((header_bytes + 12 + 1440 * 1080 * 16))
 [ "$(stat -c %s "$pcd")" -eq "$expected" ] || fail "pcd: size $(stat -c %s "$pcd"), expected $expected"
+# The Point Cloud Library itself reads it (pcl-tools, installed by install-deps.sh).
+if command -v pcl_convert_pcd_ascii_binary >/dev/null; then
+  pcl_convert_pcd_ascii_binary "$pcd" "$work/pcd/ascii.pcd" 0 > "$work/pcl.log" 2>&1 \
+    || { cat "$work/pcl.log"; fail "PCL cannot read the PCD"; }
+  grep -q "Loaded a point cloud with 1555200 points" "$work/pcl.log" || fail "PCL: $(cat "$work/pcl.log")"
+  grep -q "^WIDTH 1440$" "$work/pcd/ascii.pcd" || fail "PCL: organized width lost"
+  echo "ok: PCL reads the PCD ($(grep -c . "$work/pcd/ascii.pcd") lines as ASCII)"
+else
+  echo "note: pcl-tools not installed; PCD not checked with PCL"
+fi
 
 "$bin/tools/slctl" --ns "$ns" status | tee "$work/status.log"
 grep -q "scans: *1 of 1" "$work/status.log" || fail "status does not show 1 of 1 scans"
