@@ -17,6 +17,7 @@ packages=(
   libhidapi-dev
   pcl-tools
   systemd
+  iproute2   # ss: the interop test checks Fast DDS binds only 127.0.0.1
   # ROS 2 interop test (tests/interop): Fast DDS, its IDL code generator
   # (Java: pulls default-jre-headless) and the sensor_msgs/std_msgs .msg
   # definitions the test checks its IDL against.
