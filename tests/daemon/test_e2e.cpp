@@ -133,6 +133,26 @@ PlaneStats comparePlane(const sl::pipeline::PointCloud& cloud, const sl::daemon:
   return s;
 }
 
+// A client of the daemon on namespace `ns`, once the daemon answers (bounded).
+std::unique_ptr<sl::daemon::SensorClient> connect(const std::string& ns, bool points = true) {
+  sl::daemon::ClientOptions options;
+  options.ns = ns;
+  options.subscribe_points = points;
+  auto client = std::make_unique<sl::daemon::SensorClient>(options);
+  REQUIRE(client->waitForDaemon(20s));
+  return client;
+}
+
+// Requests `count` scans of `pattern`; returns the time before the request:
+// clouds stamped after it belong to this request.
+std::int64_t startScans(sl::daemon::SensorClient& client, const std::string& pattern, int count) {
+  const std::int64_t t0 = sl::test::nowNs();
+  const auto reply = client.request(Command::kStart, pattern, count, 5s);
+  REQUIRE(reply);
+  REQUIRE(reply->accepted);
+  return t0;
+}
+
 }  // namespace
 
 TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model bounds") {
@@ -144,16 +164,11 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
   sl::test::DaemonProcess daemon(config_path);
   REQUIRE(daemon.started());
 
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(20s));
+  const auto client_owner = connect(ns);
+  sl::daemon::SensorClient& client = *client_owner;
 
   SECTION("three scans match the ground truth") {
-    const auto t0 = sl::test::nowNs();
-    const auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s);
-    REQUIRE(reply);
-    REQUIRE(reply->accepted);
+    const auto t0 = startScans(client, "3+3_horizontal", 3);
 
     const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
     const auto& gt = sim->groundTruth();
@@ -271,11 +286,8 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   CHECK(pings == 5);
   CHECK(watch_elapsed < 1500ms);  // 5 pings at 0.1 s intervals
   // The daemon answers requests once it said it is ready.
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  options.subscribe_points = false;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(10s));
+  const auto client_owner = connect(ns, /*points=*/false);
+  sl::daemon::SensorClient& client = *client_owner;
   const auto status = client.status(5s);
   REQUIRE(status);
   CHECK(status->state == sl::daemon::ScanState::kIdle);
@@ -308,11 +320,8 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
                                                   sl_msgs_msg_ProjectorMaps_desc);
   sl::dds::Reader<sl_msgs_msg_ProjectorMaps> reader(participant, topic,
                                                     sl::dds::Qos().reliable().keepLast(8));
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  options.subscribe_points = false;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(20s));
+  const auto client_owner = connect(ns, /*points=*/false);
+  sl::daemon::SensorClient& client = *client_owner;
   REQUIRE(reader.waitForWriters(1, DDS_SECS(10)));
 
   struct Sample {
@@ -399,10 +408,8 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
   {
     sl::test::DaemonProcess daemon(live_path);
     REQUIRE(daemon.started());
-    sl::daemon::ClientOptions options;
-    options.ns = ns;
-    sl::daemon::SensorClient client(options);
-    REQUIRE(client.waitForDaemon(20s));
+    const auto client_owner = connect(ns);
+    sl::daemon::SensorClient& client = *client_owner;
     const auto t0 = sl::test::nowNs();
     auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s, "../escape");
     REQUIRE(reply);
@@ -440,14 +447,9 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
   {
     sl::test::DaemonProcess daemon(replay_path);
     REQUIRE(daemon.started());
-    sl::daemon::ClientOptions options;
-    options.ns = ns;
-    sl::daemon::SensorClient client(options);
-    REQUIRE(client.waitForDaemon(20s));
-    const auto t0 = sl::test::nowNs();
-    const auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s);
-    REQUIRE(reply);
-    REQUIRE(reply->accepted);
+    const auto client_owner = connect(ns);
+    sl::daemon::SensorClient& client = *client_owner;
+    const auto t0 = startScans(client, "3+3_horizontal", 3);
     for (int i = 0; i < 3; ++i) {
       const auto cloud = client.receiveCloud(t0, 10s);
       REQUIRE(cloud);
@@ -483,14 +485,9 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
 
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(20s));
-  const auto t0 = sl::test::nowNs();
-  const auto reply = client.request(Command::kStart, "3+3_horizontal", 2, 5s);
-  REQUIRE(reply);
-  REQUIRE(reply->accepted);
+  const auto client_owner = connect(ns);
+  sl::daemon::SensorClient& client = *client_owner;
+  const auto t0 = startScans(client, "3+3_horizontal", 2);
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   for (int i = 0; i < 2; ++i) {
     const auto cloud = client.receiveCloud(t0, 10s);
@@ -536,16 +533,13 @@ TEST_CASE("depth and shading images and camera_info accompany each cloud") {
   sl::dds::Reader<Image> depth_reader(participant, depth_topic, qos);
   sl::dds::Reader<Image> shading_reader(participant, shading_topic, qos);
   sl::dds::Reader<Info> info_reader(participant, info_topic, qos);
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(20s));
+  const auto client_owner = connect(ns);
+  sl::daemon::SensorClient& client = *client_owner;
   REQUIRE(depth_reader.waitForWriters(1, DDS_SECS(10)));
   REQUIRE(shading_reader.waitForWriters(1, DDS_SECS(10)));
   REQUIRE(info_reader.waitForWriters(1, DDS_SECS(10)));
 
-  const auto t0 = sl::test::nowNs();
-  REQUIRE(client.request(Command::kStart, "3+3_horizontal", 1, 5s)->accepted);
+  const auto t0 = startScans(client, "3+3_horizontal", 1);
   const auto cloud = client.receiveCloud(t0, 10s);
   REQUIRE(cloud);
   auto takeOne = [](auto& reader) {
@@ -608,10 +602,8 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   const std::string path = sl::test::writeConfigFile(root, ns);
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(20s));
+  const auto client_owner = connect(ns);
+  sl::daemon::SensorClient& client = *client_owner;
   auto scanValid = [&] {
     const auto t0 = sl::test::nowNs();
     REQUIRE(client.request(Command::kStart, "", 1, 5s)->accepted);
@@ -721,10 +713,8 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
   replay["calibrations"]["left"] = calibration_left;
   sl::test::DaemonProcess daemon(sl::test::writeConfigFile(replay, ns + "_replay"));
   REQUIRE(daemon.started());
-  sl::daemon::ClientOptions options;
-  options.ns = ns;
-  sl::daemon::SensorClient client(options);
-  REQUIRE(client.waitForDaemon(20s));
+  const auto client_owner = connect(ns);
+  sl::daemon::SensorClient& client = *client_owner;
 
   // Two clouds per phase, each checked against the ground truth of the camera
   // that must have triangulated it.
