@@ -21,6 +21,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
 
+#include "common/cli.h"
 #include "residual_plot.h"
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
@@ -72,12 +73,7 @@ constexpr const char* kUsage =
 }
 
 double parseNumber(const std::string& option, const std::string& value) {
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(value, &used);
-    if (used == value.size()) return v;
-  } catch (const std::exception&) {
-  }
+  if (const auto v = sl::tools::toNumber(value)) return *v;
   usageError(option + ": expected a number, got '" + value + "'");
 }
 

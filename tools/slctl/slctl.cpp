@@ -16,6 +16,7 @@
 
 #include <unistd.h>
 
+#include "common/cli.h"
 #include "common/ply.h"
 #include "sl/daemon/client.h"
 
@@ -66,12 +67,7 @@ struct Args {
 }
 
 int parseInt(const std::string& option, const std::string& value) {
-  try {
-    std::size_t used = 0;
-    const int v = std::stoi(value, &used);
-    if (used == value.size()) return v;
-  } catch (const std::exception&) {
-  }
+  if (const auto v = sl::tools::toInt(value)) return *v;
   usageError(option + " expects an integer, not '" + value + "'");
 }
 
@@ -93,11 +89,9 @@ Args parseArgs(int argc, char** argv) {
       args.ns = value();
     } else if (a == "--timeout") {
       const std::string v = value();
-      try {
-        args.timeout_s = std::stod(v);
-      } catch (const std::exception&) {
-        usageError("--timeout expects seconds, not '" + v + "'");
-      }
+      const auto seconds = sl::tools::toNumber(v);
+      if (!seconds) usageError("--timeout expects seconds, not '" + v + "'");
+      args.timeout_s = *seconds;
       if (!(args.timeout_s > 0)) usageError("--timeout must be > 0");
     } else if (a == "--count") {
       args.count = parseInt(a, value());
