@@ -143,6 +143,17 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
   sim.gain_dn_per_electron =
       nonNegative(radiometry, "gain_dn_per_electron", sim.gain_dn_per_electron);
   sim.read_noise_dn = nonNegative(radiometry, "read_noise_dn", sim.read_noise_dn);
+  sim.projector_gamma = positive(radiometry, "projector_gamma", sim.projector_gamma);
+  sim.projector_response =
+      radiometry.get<std::vector<double>>("projector_response", sim.projector_response);
+  if (radiometry.has("projector_response")) {
+    if (sim.projector_response.size() < 2)
+      radiometry.fail("projector_response", "needs at least 2 samples");
+    for (double v : sim.projector_response)
+      if (!(v >= 0 && v <= 1)) radiometry.fail("projector_response", "values must be in [0, 1]");
+    if (sim.projector_gamma != 1.0)
+      radiometry.fail("projector_gamma", "must be 1 (or absent) when projector_response is given");
+  }
   radiometry.done();
   const YamlMap rig = m.map("rig");
   sim.camera_id = rig.get<std::string>("camera_id", sim.camera_id);

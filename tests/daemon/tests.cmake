@@ -14,7 +14,7 @@ sl_add_test(test_engine daemon/test_engine.cpp)
 target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
 
 # Config loading and its error messages.
-sl_add_test(test_config daemon/test_config.cpp)
+sl_add_test(test_config daemon/test_config.cpp sim/test_sim_config.cpp)
 target_link_libraries(test_config PRIVATE sl_daemon)
 
 # End to end through slctl and the plain C subscriber.

@@ -40,10 +40,11 @@ const std::array<float, kTableSize>& normalTable() {
   return table;
 }
 
-// Per-pixel kernel. kNoise = false skips the noise draws (exact model values).
-template <typename Pixel, bool kNoise>
+// Per-pixel kernel. kNoise = false skips the noise draws (exact model values);
+// kLinear = false maps each texel through the projector's response.
+template <typename Pixel, bool kNoise, bool kLinear>
 void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const SensorResponse& r,
-                std::uint64_t noise_seed, cv::Mat& out) {
+                const float* light, std::uint64_t noise_seed, cv::Mat& out) {
   const int width = maps.width;
   const std::ptrdiff_t stride = maps.texture_width;
   const float shot_gain = static_cast<float>(r.gain_dn_per_electron);
@@ -66,7 +67,13 @@ void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const Senso
     // Pass 1 (gathers, scalar): noise-free signal in 8-bit DN.
     for (int c = 0; c < width; ++c) {
       const std::uint8_t* t = texture + texel[c];
-      const float t00 = t[0], t01 = t[1], t10 = t[stride], t11 = t[stride + 1];
+      float t00 = t[0], t01 = t[1], t10 = t[stride], t11 = t[stride + 1];
+      if constexpr (!kLinear) {
+        t00 = light[t[0]];
+        t01 = light[t[1]];
+        t10 = light[t[stride]];
+        t11 = light[t[stride + 1]];
+      }
       const float top = t00 + wx[c] * (t01 - t00);
       const float bottom = t10 + wx[c] * (t11 - t10);
       const float level = top + wy[c] * (bottom - top);  // 0..255
@@ -112,8 +119,37 @@ void NormalSource::fill(float* out, int count) {
   }
 }
 
+ProjectorResponse makeProjectorResponse(double gamma, const std::vector<double>& samples) {
+  if (!(gamma > 0 && std::isfinite(gamma)))
+    throw std::invalid_argument("projector_gamma must be finite and > 0");
+  ProjectorResponse r;
+  if (!samples.empty()) {
+    if (gamma != 1.0)
+      throw std::invalid_argument("projector_gamma must be 1 when projector_response is given");
+    if (samples.size() < 2)
+      throw std::invalid_argument("projector_response needs at least 2 samples");
+    for (double v : samples)
+      if (!(v >= 0 && v <= 1)) throw std::invalid_argument("projector_response values must be in [0, 1]");
+  }
+  for (int level = 0; level < 256; ++level) {
+    double fraction = level / 255.0;
+    if (!samples.empty()) {
+      const double x = fraction * static_cast<double>(samples.size() - 1);
+      const std::size_t k = std::min(static_cast<std::size_t>(x), samples.size() - 2);
+      fraction = samples[k] + (x - static_cast<double>(k)) * (samples[k + 1] - samples[k]);
+    } else if (gamma != 1.0) {
+      fraction = std::pow(fraction, gamma);
+    }
+    r.light[level] = static_cast<float>(255.0 * fraction);
+    // Linear means exactly the level itself (the fast path reads texels directly).
+    if (std::abs(r.light[level] - static_cast<float>(level)) > 1e-4f) r.linear = false;
+  }
+  return r;
+}
+
 cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
-                    const SensorResponse& response, std::uint64_t noise_seed) {
+                    const SensorResponse& response, std::uint64_t noise_seed,
+                    const ProjectorResponse& projector) {
   if (pattern_image.type() != CV_8UC1 || pattern_image.cols != maps.texture_width ||
       !pattern_image.isContinuous())
     throw std::invalid_argument(
@@ -121,19 +157,22 @@ cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
         "projector's width");
   const bool noise = response.gain_dn_per_electron > 0 || response.read_noise_dn > 0;
   const std::uint8_t* texture = pattern_image.ptr<std::uint8_t>();
-  if (response.bit_depth == 8) {
-    cv::Mat out(maps.height, maps.width, CV_8UC1);
-    if (noise)
-      renderRows<std::uint8_t, true>(maps, texture, response, noise_seed, out);
+  const float* light = projector.light.data();
+  cv::Mat out(maps.height, maps.width, response.bit_depth == 8 ? CV_8UC1 : CV_16UC1);
+  auto run = [&]<typename Pixel>() {
+    if (noise && projector.linear)
+      renderRows<Pixel, true, true>(maps, texture, response, light, noise_seed, out);
+    else if (noise)
+      renderRows<Pixel, true, false>(maps, texture, response, light, noise_seed, out);
+    else if (projector.linear)
+      renderRows<Pixel, false, true>(maps, texture, response, light, noise_seed, out);
     else
-      renderRows<std::uint8_t, false>(maps, texture, response, noise_seed, out);
-    return out;
-  }
-  cv::Mat out(maps.height, maps.width, CV_16UC1);
-  if (noise)
-    renderRows<std::uint16_t, true>(maps, texture, response, noise_seed, out);
+      renderRows<Pixel, false, false>(maps, texture, response, light, noise_seed, out);
+  };
+  if (response.bit_depth == 8)
+    run.template operator()<std::uint8_t>();
   else
-    renderRows<std::uint16_t, false>(maps, texture, response, noise_seed, out);
+    run.template operator()<std::uint16_t>();
   return out;
 }
 

@@ -2,7 +2,9 @@
 // sampling, ambient light, noise, ADC scaling and saturation.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <vector>
 #include <opencv2/core/mat.hpp>
 
 #include "sim_scene.h"
@@ -34,9 +36,19 @@ class NormalSource {
 // splitmix64 finaliser: a well-mixed 64-bit hash of x.
 std::uint64_t mix64(std::uint64_t x);
 
+// Light emitted by the projector per 8-bit pattern level, on the 0..255 scale
+// (SimConfig::projector_gamma / projector_response); identity when linear.
+struct ProjectorResponse {
+  bool linear = true;
+  std::array<float, 256> light{};  // light[L] for level L
+};
+// Throws std::invalid_argument naming the bad field.
+ProjectorResponse makeProjectorResponse(double gamma, const std::vector<double>& samples);
+
 // The camera image of one pattern frame. pattern_image is the projector image
 // (CV_8UC1, maps.texture_width wide); the same seed gives the same image.
 cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
-                    const SensorResponse& response, std::uint64_t noise_seed);
+                    const SensorResponse& response, std::uint64_t noise_seed,
+                    const ProjectorResponse& projector = {});
 
 }  // namespace sl::drivers::sim

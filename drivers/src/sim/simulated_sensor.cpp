@@ -77,6 +77,11 @@ void validateConfig(const SimConfig& c) {
   requireNonNegative(c.ambient_dn, "ambient_dn");
   requireNonNegative(c.gain_dn_per_electron, "gain_dn_per_electron");
   requireNonNegative(c.read_noise_dn, "read_noise_dn");
+  try {
+    sim::makeProjectorResponse(c.projector_gamma, c.projector_response);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("sim config: ") + e.what());
+  }
 
   for (std::size_t i = 0; i < c.scene.planes.size(); ++i) {
     const SimPlane& p = c.scene.planes[i];
@@ -202,6 +207,8 @@ class SceneRenderer {
     response_.gain_dn_per_electron = config_.gain_dn_per_electron;
     response_.read_noise_dn = config_.read_noise_dn;
     response_.bit_depth = config_.bit_depth;
+    projector_response_ =
+        sim::makeProjectorResponse(config_.projector_gamma, config_.projector_response);
     for (const pipeline::PatternSpec& p : config_.patterns) {
       names_.push_back(p.name);
       images_.push_back(pipeline::generatePatternImages(p));
@@ -239,13 +246,14 @@ class SceneRenderer {
       throw std::out_of_range("SimulatedSensor::render: frame " + std::to_string(frame) +
                               " of pattern '" + names_[pattern] + "' out of range");
     if (!config_.motion.moving())
-      return sim::renderImage(c.view.maps, frames[frame], response_, noise_seed);
+      return sim::renderImage(c.view.maps, frames[frame], response_, noise_seed,
+                              projector_response_);
     // Moving sensor: ray-cast this image's pose (camera rays undistorted once),
     // into per-thread buffers reused from image to image.
     thread_local sim::SceneView moved;
     sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame), false,
                               moved);
-    return sim::renderImage(moved.maps, frames[frame], response_, noise_seed);
+    return sim::renderImage(moved.maps, frames[frame], response_, noise_seed, projector_response_);
   }
 
  private:
@@ -280,6 +288,7 @@ class SceneRenderer {
   const sim::SceneGeometry geometry_;
   std::vector<CameraView> cameras_;
   sim::SensorResponse response_;
+  sim::ProjectorResponse projector_response_;
   std::vector<std::string> names_;
   std::vector<std::vector<cv::Mat>> images_;  // per pattern, projector images in order
 };

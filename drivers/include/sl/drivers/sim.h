@@ -179,6 +179,18 @@ struct SimConfig {
   double ambient_dn = 10.0;       // ambient light on an albedo-1 surface
   double gain_dn_per_electron = 0.25;  // shot noise: var = gain * signal (DN^2)
   double read_noise_dn = 0.8;          // std of additive Gaussian noise (DN)
+
+  // Projector intensity response: the light emitted for an 8-bit pattern
+  // level L, as a fraction of full white. The LightCrafter 4500 in pattern
+  // mode is linear (the default); a video-mode projector is not, and the
+  // non-linearity turns the sinusoids of a phase-shifting pattern into
+  // periodic phase errors. With projector_response empty the response is
+  // (L / 255)^projector_gamma. Otherwise projector_response holds n >= 2
+  // samples in [0, 1] of the response at L = 255 * k / (n - 1), k = 0..n-1,
+  // linear in between, and projector_gamma must be 1. The light P in the
+  // signal formula above is then 255 * response(L), not L.
+  double projector_gamma = 1.0;
+  std::vector<double> projector_response;
   // Noise seed. Live frame with camera frame_id f uses a seed hashed from
   // (seed, f), so a run is reproducible apart from dropped frames.
   std::uint64_t seed = 1;

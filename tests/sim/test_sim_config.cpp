@@ -1,0 +1,70 @@
+// The `sim:` section of the daemon config: the optics and electronics keys
+// parse into SimConfig, and mistakes name the file, line and key.
+#include <catch2/catch.hpp>
+
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "sl/daemon/config.h"
+
+namespace {
+
+std::string shippedSimConfig() {
+  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// The shipped config with `lines` inserted under `sim.radiometry:`.
+std::string withRadiometry(const std::string& lines) {
+  std::string text = shippedSimConfig();
+  const std::string anchor = "  radiometry:\n";
+  const auto at = text.find(anchor);
+  REQUIRE(at != std::string::npos);
+  return text.insert(at + anchor.size(), lines);
+}
+
+std::string errorOf(const std::string& yaml) {
+  try {
+    sl::daemon::parseConfig(yaml, "test.yaml");
+  } catch (const sl::daemon::ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST_CASE("sim config: projector response keys", "[sim][config]") {
+  const auto plain = sl::daemon::parseConfig(shippedSimConfig(), "test.yaml");
+  CHECK(plain.sim.projector_gamma == 1.0);
+  CHECK(plain.sim.projector_response.empty());
+
+  const auto gamma = sl::daemon::parseConfig(withRadiometry("    projector_gamma: 2.2\n"), "t.yaml");
+  CHECK(gamma.sim.projector_gamma == 2.2);
+  const auto table = sl::daemon::parseConfig(
+      withRadiometry("    projector_response: [0, 0.2, 1]\n"), "t.yaml");
+  CHECK(table.sim.projector_response == std::vector<double>{0, 0.2, 1});
+
+  struct Case {
+    std::string lines, expected;
+  };
+  const auto c = GENERATE(
+      Case{"    projector_gamma: steep\n",
+           "key 'sim.radiometry.projector_gamma': expected a number, found 'steep'"},
+      Case{"    projector_gamma: 0\n", "key 'sim.radiometry.projector_gamma': must be > 0"},
+      Case{"    projector_response: [0, 1.2]\n",
+           "key 'sim.radiometry.projector_response': values must be in [0, 1]"},
+      Case{"    projector_response: [0.5]\n",
+           "key 'sim.radiometry.projector_response': needs at least 2 samples"},
+      Case{"    projector_response: [0, 1]\n    projector_gamma: 2\n",
+           "key 'sim.radiometry.projector_gamma': must be 1"},
+      Case{"    projector_gama: 2\n", "unknown key 'sim.radiometry.projector_gama'"});
+  INFO("inserted: " << c.lines);
+  const std::string message = errorOf(withRadiometry(c.lines));
+  INFO("message: " << message);
+  CHECK(message.rfind("test.yaml:", 0) == 0);
+  CHECK(message.find(c.expected) != std::string::npos);
+}

@@ -1,0 +1,165 @@
+// Tests of the simulator's optics and electronics beyond the pinhole model:
+// projector intensity response (gamma). Each test compares what the rendered
+// images decode to against the ground truth and an independent 1-D model.
+#include <Eigen/Geometry>
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <numbers>
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "sl/drivers/sim.h"
+
+namespace {
+
+using sl::drivers::SimConfig;
+using sl::drivers::SimPlane;
+using sl::drivers::SimulatedSensor;
+
+constexpr double kPi = std::numbers::pi;
+constexpr int kFringes = 16;  // periods across the projector's 1824 columns
+
+// The default rig of config/sim.yaml: projector 150 mm right of the camera,
+// axes crossing at 550 mm.
+sl::pipeline::CameraProjectorCalibration defaultRig() {
+  sl::pipeline::CameraProjectorCalibration rig;
+  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
+  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
+  rig.R = Eigen::AngleAxisd(15.25 * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
+  return rig;
+}
+
+// A matte wall at 550 mm, noise off, 16-bit ADC (so quantisation does not
+// mask sub-milliradian effects), one 3+3 column-encoding pattern.
+SimConfig wallConfig() {
+  SimConfig c;
+  c.rig = defaultRig();
+  sl::pipeline::PhaseShift33Pattern p;
+  p.name = "3+3";
+  p.fringes = kFringes;
+  c.patterns = {p};
+  c.scene.planes = {SimPlane{{0, 0, 550}, {0, 0, -1}, 0.8}};
+  c.gain_dn_per_electron = 0;
+  c.read_noise_dn = 0;
+  c.bit_depth = 16;
+  c.projector_brightness_dn = 150;
+  return c;
+}
+
+double wrap(double a) { return std::remainder(a, 2 * kPi); }
+
+// 3-step wrapped phase of intensities shifted by 0, 2 pi / 3, 4 pi / 3
+// (I_k = A + B cos(phi - 2 pi k / 3)).
+double threeStepPhase(double i0, double i1, double i2) {
+  return std::atan2(std::sqrt(3.0) * (i1 - i2), 2 * i0 - i1 - i2);
+}
+
+// Amplitude of the 3rd harmonic of a phase error e(phi) sampled at phases
+// phi, and the rms left after removing the mean and that harmonic.
+struct Ripple {
+  double third_harmonic = 0;  // rad
+  double residual_rms = 0;    // rad
+};
+Ripple thirdHarmonic(const std::vector<double>& phi, const std::vector<double>& error) {
+  // Least squares on [1, sin 3phi, cos 3phi].
+  Eigen::MatrixXd a(static_cast<Eigen::Index>(phi.size()), 3);
+  Eigen::VectorXd b(static_cast<Eigen::Index>(phi.size()));
+  for (std::size_t i = 0; i < phi.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    a.row(k) << 1.0, std::sin(3 * phi[i]), std::cos(3 * phi[i]);
+    b(k) = error[i];
+  }
+  const Eigen::Vector3d x = a.colPivHouseholderQr().solve(b);
+  Ripple r;
+  r.third_harmonic = std::hypot(x(1), x(2));
+  r.residual_rms = std::sqrt((a * x - b).squaredNorm() / double(phi.size()));
+  return r;
+}
+
+// Decodes the fine fringes (frames 0..2) of the rendered wall and returns the
+// phase error against the ground-truth projector column, per lit pixel
+// (every 3rd row and column).
+Ripple decodedRipple(const SimulatedSensor& sensor) {
+  std::vector<cv::Mat> images;
+  for (int f = 0; f < 3; ++f) images.push_back(sensor.render("3+3", f, 0));
+  const cv::Mat& up = sensor.groundTruth().up;
+  std::vector<double> phi, error;
+  for (int r = 0; r < up.rows; r += 3)
+    for (int c = 0; c < up.cols; c += 3) {
+      const float u = up.at<float>(r, c);
+      if (std::isnan(u)) continue;
+      const double truth = 2 * kPi * kFringes * u / 1824.0;
+      const double measured =
+          threeStepPhase(images[0].at<std::uint16_t>(r, c), images[1].at<std::uint16_t>(r, c),
+                         images[2].at<std::uint16_t>(r, c));
+      phi.push_back(wrap(truth));
+      error.push_back(wrap(measured - truth));
+    }
+  REQUIRE(phi.size() > 10000);
+  return thirdHarmonic(phi, error);
+}
+
+// The same for the continuous 1-D model: emitted light (0.5 + 0.5 cos)^gamma.
+double modelThirdHarmonic(double gamma) {
+  std::vector<double> phi, error;
+  for (int i = 0; i < 3600; ++i) {
+    const double p = wrap(2 * kPi * (i + 0.5) / 3600);
+    double light[3];
+    for (int k = 0; k < 3; ++k) light[k] = std::pow(0.5 + 0.5 * std::cos(p - 2 * kPi * k / 3), gamma);
+    phi.push_back(p);
+    error.push_back(wrap(threeStepPhase(light[0], light[1], light[2]) - p));
+  }
+  return thirdHarmonic(phi, error).third_harmonic;
+}
+
+}  // namespace
+
+TEST_CASE("projector gamma: 3-step phase error is a 3rd-harmonic ripple of the model's size",
+          "[sim][optics][gamma]") {
+  SimConfig linear = wallConfig();
+  const Ripple flat = decodedRipple(*SimulatedSensor::create(linear));
+  SimConfig gamma = wallConfig();
+  gamma.projector_gamma = 2.2;
+  const Ripple rippled = decodedRipple(*SimulatedSensor::create(gamma));
+  const double expected = modelThirdHarmonic(2.2);
+  INFO("linear: 3rd harmonic " << flat.third_harmonic << " rad, residual " << flat.residual_rms);
+  INFO("gamma 2.2: 3rd harmonic " << rippled.third_harmonic << " rad (model " << expected
+                                  << "), residual " << rippled.residual_rms);
+  CHECK(expected > 0.05);  // the model itself predicts a visible ripple
+  CHECK(rippled.third_harmonic == Approx(expected).epsilon(0.05));
+  // The ripple is the error: little is left once the 3rd harmonic is removed.
+  CHECK(rippled.residual_rms < 0.2 * rippled.third_harmonic);
+  // Linear response: no ripple beyond the 8-bit pattern's rounding.
+  CHECK(flat.third_harmonic < 0.02 * expected);
+  CHECK(flat.residual_rms < 0.01);
+}
+
+TEST_CASE("projector response table: linear table = default, gamma table = gamma",
+          "[sim][optics][gamma]") {
+  const cv::Mat reference = SimulatedSensor::create(wallConfig())->render("3+3", 1, 0);
+  SimConfig table = wallConfig();
+  table.projector_response = {0.0, 0.5, 1.0};
+  CHECK(cv::norm(SimulatedSensor::create(table)->render("3+3", 1, 0), reference, cv::NORM_INF) ==
+        0);
+
+  SimConfig gamma = wallConfig();
+  gamma.projector_gamma = 2.2;
+  SimConfig sampled = wallConfig();
+  for (int k = 0; k <= 255; ++k) sampled.projector_response.push_back(std::pow(k / 255.0, 2.2));
+  const cv::Mat a = SimulatedSensor::create(gamma)->render("3+3", 1, 0);
+  const cv::Mat b = SimulatedSensor::create(sampled)->render("3+3", 1, 0);
+  CHECK(cv::norm(a, b, cv::NORM_INF) <= 1);  // 16-bit DN: float rounding only
+  CHECK(cv::norm(a, reference, cv::NORM_INF) > 1000);
+
+  SimConfig bad = wallConfig();
+  bad.projector_gamma = 0;
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("projector_gamma"));
+  bad = wallConfig();
+  bad.projector_response = {0.0, 1.5};
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("projector_response"));
+  bad = wallConfig();
+  bad.projector_response = {0.0, 1.0};
+  bad.projector_gamma = 2.0;
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("projector_gamma"));
+}
