@@ -62,6 +62,17 @@ TEST_CASE("the shipped sim config loads with the documented values") {
         Approx(150.0).margin(0.05));
 }
 
+TEST_CASE("the shipped sim config's camera noise model is SimConfig's default (sl_eval uses it)") {
+  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const sl::drivers::SimConfig defaults;
+  CHECK(config.sim.projector_brightness_dn == defaults.projector_brightness_dn);
+  CHECK(config.sim.reference_distance_mm == defaults.reference_distance_mm);
+  CHECK(config.sim.ambient_dn == defaults.ambient_dn);
+  CHECK(config.sim.gain_dn_per_electron == defaults.gain_dn_per_electron);
+  CHECK(config.sim.read_noise_dn == defaults.read_noise_dn);
+  CHECK(config.sim.bit_depth == defaults.bit_depth);
+}
+
 TEST_CASE("config mistakes are reported with file, line and key") {
   struct Case {
     std::string from, to, expected;
@@ -77,7 +88,7 @@ TEST_CASE("config mistakes are reported with file, line and key") {
            "key 'sim.rig.calibration.camera.distortion': expected 5 numbers"},
       Case{"direction: horizontal", "direction: diagonal",
            "key 'patterns[0].direction': direction must be horizontal, vertical or both"},
-      Case{"fringes: 16}", "fringes: 1000}", "key 'patterns[0].fringes'"},
+      Case{"fringes: 40}", "fringes: 1000}", "key 'patterns[0].fringes'"},
       Case{"family: phase_shift_3+3", "family: hexagons",
            "key 'patterns[0].family': unknown pattern family 'hexagons'"},
       Case{"default_pattern: 3+3_horizontal", "default_pattern: nope",

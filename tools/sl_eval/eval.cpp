@@ -26,6 +26,8 @@ namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr double kFps = 30.0;
+// High-frequency periods of the 3+3 patterns, as in config/sim.yaml.
+constexpr int kFringes = 40;
 
 // The simulated camera and projector of config/sim.yaml.
 pipeline::PinholeModel camera() {
@@ -55,12 +57,8 @@ drivers::SimConfig baseConfig(const pipeline::CameraProjectorCalibration& rig,
   c.rig = rig;
   c.patterns = {pattern};
   c.camera_fps = kFps;
-  // Radiometry of config/sim.yaml.
-  c.projector_brightness_dn = 200;
-  c.reference_distance_mm = 500;
-  c.ambient_dn = 10;
-  c.gain_dn_per_electron = 0.02;
-  c.read_noise_dn = 0.5;
+  // Radiometry: SimConfig's defaults, which are those of config/sim.yaml
+  // (test_config checks that they agree).
   return c;
 }
 
@@ -68,6 +66,7 @@ pipeline::PatternSpec pattern33(const std::string& name, pipeline::Direction dir
   pipeline::PhaseShift33Pattern p;
   p.name = name;
   p.direction = direction;
+  p.fringes = kFringes;
   return pipeline::toSpec(p);
 }
 
@@ -197,7 +196,7 @@ EvalResult runPrecision(const EvalOptions& options) {
 
   std::ostringstream md;
   md << "### Precision: " << n << " scans of a flat matte wall at 500 mm (3+3 horizontal, "
-     << "16 fringes, 150 mm baseline)\n\n"
+     << kFringes << " fringes, 150 mm baseline)\n\n"
      << "| | mean / mm | max / mm | RMS / mm |\n|---|---|---|---|\n"
      << "| depth std, simulated sensor | " << fmt(m["std_mean_mm"], 4) << " | "
      << fmt(m["std_max_mm"], 4) << " | " << fmt(m["std_rms_mm"], 4) << " |\n"

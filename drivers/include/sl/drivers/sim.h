@@ -174,11 +174,11 @@ struct SimConfig {
   // the image value is round((S + noise) * (2^bit_depth - 1) / 255) clamped
   // to [0, 2^bit_depth - 1]: a deeper ADC sees the same relative noise, with
   // finer quantisation. bit_depth 8 gives CV_8UC1, 9..16 CV_16UC1.
-  double projector_brightness_dn = 180.0;
+  double projector_brightness_dn = 220.0;
   double reference_distance_mm = 500.0;
   double ambient_dn = 10.0;       // ambient light on an albedo-1 surface
-  double gain_dn_per_electron = 0.25;  // shot noise: var = gain * signal (DN^2)
-  double read_noise_dn = 0.8;          // std of additive Gaussian noise (DN)
+  double gain_dn_per_electron = 0.0084;  // shot noise: var = gain * signal (DN^2)
+  double read_noise_dn = 0.05;          // std of additive Gaussian noise (DN)
 
   // Projector intensity response: the light emitted for an 8-bit pattern
   // level L, as a fraction of full white. The LightCrafter 4500 in pattern
