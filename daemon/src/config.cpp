@@ -143,6 +143,12 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
   sim.gain_dn_per_electron =
       nonNegative(radiometry, "gain_dn_per_electron", sim.gain_dn_per_electron);
   sim.read_noise_dn = nonNegative(radiometry, "read_noise_dn", sim.read_noise_dn);
+  sim.exposure_ms = positive(radiometry, "exposure_ms", sim.exposure_ms);
+  if (sim.exposure_ms > 1000.0 / sim.camera_fps)
+    radiometry.fail("exposure_ms", "must fit in the frame interval (1000 / camera_fps ms)");
+  sim.reference_exposure_ms =
+      positive(radiometry, "reference_exposure_ms", sim.reference_exposure_ms);
+  sim.analog_gain = positive(radiometry, "analog_gain", sim.analog_gain);
   sim.projector_gamma = positive(radiometry, "projector_gamma", sim.projector_gamma);
   sim.projector_response =
       radiometry.get<std::vector<double>>("projector_response", sim.projector_response);

@@ -37,7 +37,7 @@ std::string errorOf(const std::string& yaml) {
 
 }  // namespace
 
-TEST_CASE("sim config: projector response keys", "[sim][config]") {
+TEST_CASE("sim config: projector response, exposure and gain keys", "[sim][config]") {
   const auto plain = sl::daemon::parseConfig(shippedSimConfig(), "test.yaml");
   CHECK(plain.sim.projector_gamma == 1.0);
   CHECK(plain.sim.projector_response.empty());
@@ -47,6 +47,12 @@ TEST_CASE("sim config: projector response keys", "[sim][config]") {
   const auto table = sl::daemon::parseConfig(
       withRadiometry("    projector_response: [0, 0.2, 1]\n"), "t.yaml");
   CHECK(table.sim.projector_response == std::vector<double>{0, 0.2, 1});
+  const auto exposure = sl::daemon::parseConfig(
+      withRadiometry("    exposure_ms: 8\n    reference_exposure_ms: 2\n    analog_gain: 1.5\n"),
+      "t.yaml");
+  CHECK(exposure.sim.exposure_ms == 8);
+  CHECK(exposure.sim.reference_exposure_ms == 2);
+  CHECK(exposure.sim.analog_gain == 1.5);
 
   struct Case {
     std::string lines, expected;
@@ -61,7 +67,11 @@ TEST_CASE("sim config: projector response keys", "[sim][config]") {
            "key 'sim.radiometry.projector_response': needs at least 2 samples"},
       Case{"    projector_response: [0, 1]\n    projector_gamma: 2\n",
            "key 'sim.radiometry.projector_gamma': must be 1"},
-      Case{"    projector_gama: 2\n", "unknown key 'sim.radiometry.projector_gama'"});
+      Case{"    projector_gama: 2\n", "unknown key 'sim.radiometry.projector_gama'"},
+      Case{"    exposure_ms: 40\n", "key 'sim.radiometry.exposure_ms': must fit in the frame interval"},
+      Case{"    analog_gain: -1\n", "key 'sim.radiometry.analog_gain': must be > 0"},
+      Case{"    reference_exposure_ms: [1]\n",
+           "key 'sim.radiometry.reference_exposure_ms': expected a number"});
   INFO("inserted: " << c.lines);
   const std::string message = errorOf(withRadiometry(c.lines));
   INFO("message: " << message);

@@ -1,6 +1,7 @@
 // Tests of the simulator's optics and electronics beyond the pinhole model:
-// projector intensity response (gamma). Each test compares what the rendered
-// images decode to against the ground truth and an independent 1-D model.
+// projector intensity response (gamma), exposure, gain and saturation. Each
+// test compares the rendered images (or what they decode to) with the ground
+// truth and an independent model.
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -162,4 +163,67 @@ TEST_CASE("projector response table: linear table = default, gamma table = gamma
   bad.projector_response = {0.0, 1.0};
   bad.projector_gamma = 2.0;
   CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("projector_gamma"));
+}
+
+TEST_CASE("exposure scales signal and ambient; gain scales signal and noise; ADC saturates",
+          "[sim][radiometry][exposure]") {
+  SimConfig base = wallConfig();
+  base.ambient_dn = 20;
+  const cv::Rect block(700, 520, 24, 24);
+  auto meanOf = [&](const SimConfig& c, int frame) {
+    return cv::mean(SimulatedSensor::create(c)->render("3+3", frame, 0)(block))[0];
+  };
+  const double full_scale = 65535.0;
+  const double reference = meanOf(base, 0);
+  REQUIRE(reference > 0.1 * full_scale);
+
+  SimConfig longer = base;
+  longer.exposure_ms = 2 * base.reference_exposure_ms;
+  CHECK(meanOf(longer, 0) == Approx(2 * reference).epsilon(1e-4));
+  SimConfig gained = base;
+  gained.analog_gain = 1.8;
+  CHECK(meanOf(gained, 0) == Approx(1.8 * reference).epsilon(1e-4));
+  // Ambient alone (projector off) follows the exposure too.
+  SimConfig dark = base;
+  dark.projector_brightness_dn = 0;
+  SimConfig dark_longer = longer;
+  dark_longer.projector_brightness_dn = 0;
+  CHECK(meanOf(dark, 0) == Approx(20 * 0.8 * full_scale / 255).epsilon(1e-4));
+  CHECK(meanOf(dark_longer, 0) == Approx(2 * meanOf(dark, 0)).epsilon(1e-4));
+
+  // Noise: std^2 = G k S' + (G r)^2 on the 8-bit scale, S' the signal after gain.
+  SimConfig noisy = gained;
+  noisy.gain_dn_per_electron = 0.1;
+  noisy.read_noise_dn = 1.0;
+  noisy.bit_depth = 12;
+  const auto sensor = SimulatedSensor::create(noisy);
+  cv::Mat difference;
+  cv::subtract(sensor->render("3+3", 0, 1)(block), sensor->render("3+3", 0, 2)(block), difference,
+               cv::noArray(), CV_64F);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(difference, mean, stddev);
+  const double to_8bit = 255.0 / 4095.0;
+  const double signal_8bit = 1.8 * reference * 255.0 / full_scale;
+  const double model_std = std::sqrt(1.8 * 0.1 * signal_8bit + 1.8 * 1.8 * 1.0);
+  const double measured_std = stddev[0] * to_8bit / std::sqrt(2.0);  // difference of two draws
+  INFO("signal " << signal_8bit << " DN, noise std " << measured_std << " (model " << model_std
+                 << ")");
+  CHECK(measured_std == Approx(model_std).epsilon(0.08));
+
+  // Saturation: the ADC's full scale, exactly.
+  SimConfig saturated = base;
+  saturated.analog_gain = 8;
+  saturated.bit_depth = 10;
+  const cv::Mat image = SimulatedSensor::create(saturated)->render("3+3", 0, 0);
+  double min_value, max_value;
+  cv::minMaxLoc(image, &min_value, &max_value);
+  CHECK(max_value == 1023);
+  CHECK(cv::countNonZero(image == 1023) > int(image.total() / 10));
+
+  SimConfig bad = base;
+  bad.exposure_ms = 40;  // 30 fps: 33 ms frames
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("exposure_ms"));
+  bad = base;
+  bad.analog_gain = 0;
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("analog_gain"));
 }

@@ -47,6 +47,7 @@ void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const Senso
                 const float* light, std::uint64_t noise_seed, cv::Mat& out) {
   const int width = maps.width;
   const std::ptrdiff_t stride = maps.texture_width;
+  const float scale = static_cast<float>(r.signal_scale);
   const float shot_gain = static_cast<float>(r.gain_dn_per_electron);
   const float read_variance = static_cast<float>(r.read_noise_dn * r.read_noise_dn);
   const float full_scale = static_cast<float>((1 << r.bit_depth) - 1);
@@ -77,7 +78,7 @@ void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const Senso
       const float top = t00 + wx[c] * (t01 - t00);
       const float bottom = t10 + wx[c] * (t11 - t10);
       const float level = top + wy[c] * (bottom - top);  // 0..255
-      signal[c] = ambient[c] + per_level[c] * level;
+      signal[c] = (ambient[c] + per_level[c] * level) * scale;
     }
     // Pass 2 (no branches, vectorisable): noise, ADC scale, rounding, saturation.
     if constexpr (kNoise) normals.fill(z.data(), width);

@@ -14,7 +14,8 @@ namespace sl::drivers::sim {
 // Camera noise and ADC. Signal and noise are in 8-bit DN (full scale 255)
 // whatever the bit depth; see SimConfig.
 struct SensorResponse {
-  double gain_dn_per_electron = 0;  // shot noise variance per DN of signal
+  double signal_scale = 1;          // exposure / reference exposure * analog gain
+  double gain_dn_per_electron = 0;  // shot noise variance per DN of (scaled) signal
   double read_noise_dn = 0;         // std of the signal-independent noise
   int bit_depth = 8;                // output: 8 -> CV_8UC1, 9..16 -> CV_16UC1
 };

@@ -77,6 +77,11 @@ void validateConfig(const SimConfig& c) {
   requireNonNegative(c.ambient_dn, "ambient_dn");
   requireNonNegative(c.gain_dn_per_electron, "gain_dn_per_electron");
   requireNonNegative(c.read_noise_dn, "read_noise_dn");
+  if (!(c.exposure_ms > 0 && c.exposure_ms <= 1000.0 / c.camera_fps))
+    fail("exposure_ms", "must be > 0 and fit in the frame interval (1000 / camera_fps)");
+  if (!(c.reference_exposure_ms > 0 && std::isfinite(c.reference_exposure_ms)))
+    fail("reference_exposure_ms", "must be > 0");
+  if (!(c.analog_gain > 0 && std::isfinite(c.analog_gain))) fail("analog_gain", "must be > 0");
   try {
     sim::makeProjectorResponse(c.projector_gamma, c.projector_response);
   } catch (const std::invalid_argument& e) {
@@ -204,8 +209,11 @@ Eigen::Isometry3d cameraToFirst(const pipeline::CameraProjectorCalibration& firs
 class SceneRenderer {
  public:
   explicit SceneRenderer(SimConfig config) : config_(std::move(config)), geometry_(config_.scene) {
-    response_.gain_dn_per_electron = config_.gain_dn_per_electron;
-    response_.read_noise_dn = config_.read_noise_dn;
+    // Exposure and analog gain (see SimConfig): noise referred to the input.
+    response_.signal_scale =
+        config_.analog_gain * config_.exposure_ms / config_.reference_exposure_ms;
+    response_.gain_dn_per_electron = config_.analog_gain * config_.gain_dn_per_electron;
+    response_.read_noise_dn = config_.analog_gain * config_.read_noise_dn;
     response_.bit_depth = config_.bit_depth;
     projector_response_ =
         sim::makeProjectorResponse(config_.projector_gamma, config_.projector_response);

@@ -174,11 +174,30 @@ struct SimConfig {
   // the image value is round((S + noise) * (2^bit_depth - 1) / 255) clamped
   // to [0, 2^bit_depth - 1]: a deeper ADC sees the same relative noise, with
   // finer quantisation. bit_depth 8 gives CV_8UC1, 9..16 CV_16UC1.
+  //
+  // Exposure and gain: the DN values above are those at exposure_ms =
+  // reference_exposure_ms and analog_gain = 1. The camera collects light for
+  // exposure_ms (the projector shows each pattern for the whole exposure, and
+  // ambient light is collected for as long), so S scales with
+  // exposure_ms / reference_exposure_ms; the analog gain G multiplies the
+  // signal and, since both noises are referred to the sensor's input, the
+  // shot-noise std (var = G * gain_dn_per_electron * signal after gain) and
+  // the read noise (G * read_noise_dn). The model in full, on the 8-bit scale:
+  //   S' = G * S * exposure_ms / reference_exposure_ms
+  //   value = clamp(round((S' + N(0, G k S' + (G r)^2)) * (2^bits - 1) / 255),
+  //                 0, 2^bits - 1)
+  // with k = gain_dn_per_electron and r = read_noise_dn: saturation is the
+  // ADC's full scale, reached by signal plus noise (a saturated pixel reads
+  // exactly 2^bits - 1). Typical machine-vision outputs are Mono8, Mono10 and
+  // Mono12 (bit_depth 8, 10, 12).
   double projector_brightness_dn = 220.0;
   double reference_distance_mm = 500.0;
   double ambient_dn = 10.0;       // ambient light on an albedo-1 surface
   double gain_dn_per_electron = 0.0084;  // shot noise: var = gain * signal (DN^2)
   double read_noise_dn = 0.05;          // std of additive Gaussian noise (DN)
+  double exposure_ms = 4.0;            // camera exposure, <= 1000 / camera_fps
+  double reference_exposure_ms = 4.0; // exposure at which the DN values above hold
+  double analog_gain = 1.0;            // linear factor (> 0), see above
 
   // Projector intensity response: the light emitted for an 8-bit pattern
   // level L, as a fraction of full white. The LightCrafter 4500 in pattern
