@@ -1,0 +1,89 @@
+#include "sl/pipeline/scan_processor.h"
+
+#include <atomic>
+
+namespace sl::pipeline {
+
+namespace {
+
+// Buffers kept for reuse per kind: enough for a result in flight to each
+// consumer (publishers, queues) while the next scan is processed; beyond
+// that, fresh buffers are made and dropped by their last holder.
+constexpr std::size_t kPoolSize = 4;
+
+// True when `pool_ref` is the only owner. Nobody else can then gain a
+// reference; the acquire fence orders the last holder's reads (its
+// release-decrement) before our writes.
+template <typename T>
+bool isFree(const std::shared_ptr<T>& pool_ref) {
+  if (pool_ref.use_count() != 1) return false;
+  std::atomic_thread_fence(std::memory_order_acquire);
+  return true;
+}
+
+}  // namespace
+
+ScanProcessor::ScanProcessor(int threads) : workers_(threads) {}
+
+std::shared_ptr<ProjectorMaps> ScanProcessor::freeMaps(Direction direction) {
+  for (MapsSlot& slot : maps_pool_) {
+    if (slot.direction == direction && isFree(slot.maps)) return slot.maps;
+  }
+  // Codec::prepare() NaNs the unencoded map only when it allocates it: a
+  // buffer last filled for another direction is replaced, not reused.
+  for (MapsSlot& slot : maps_pool_) {
+    if (isFree(slot.maps)) {
+      slot = MapsSlot{std::make_shared<ProjectorMaps>(), direction};
+      return slot.maps;
+    }
+  }
+  auto maps = std::make_shared<ProjectorMaps>();
+  if (maps_pool_.size() < kPoolSize) maps_pool_.push_back(MapsSlot{maps, direction});
+  return maps;
+}
+
+std::shared_ptr<PointCloud> ScanProcessor::freeCloud() {
+  for (const auto& cloud : cloud_pool_) {
+    if (isFree(cloud)) return cloud;
+  }
+  auto cloud = std::make_shared<PointCloud>();
+  if (cloud_pool_.size() < kPoolSize) cloud_pool_.push_back(cloud);
+  return cloud;
+}
+
+ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triangulator,
+                                  const CameraImages& images, TimestampNs stamp_ns,
+                                  const std::string& frame_id) {
+  std::shared_ptr<ProjectorMaps> maps = freeMaps(codec.spec().direction);
+  std::shared_ptr<PointCloud> cloud = freeCloud();
+  const std::vector<cv::Mat>& frames = images.frames;
+  const int bit_depth = images.bit_depth;
+  codec.prepare(frames, bit_depth, *maps);
+  maps->camera_id = images.camera_id;
+  maps->stamp_ns = stamp_ns;
+  triangulator.prepare(*maps, *cloud);
+  cloud->frame_id = frame_id;
+  cloud->stamp_ns = stamp_ns;
+  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end) {
+    codec.decodeRows(frames, bit_depth, begin, end, *maps);
+    triangulator.triangulateRows(*maps, begin, end, *cloud);
+  });
+  return ScanOutput{std::move(maps), std::move(cloud)};
+}
+
+std::shared_ptr<const ProjectorMaps> ScanProcessor::decode(const Codec& codec,
+                                                           const CameraImages& images,
+                                                           TimestampNs stamp_ns) {
+  std::shared_ptr<ProjectorMaps> maps = freeMaps(codec.spec().direction);
+  const std::vector<cv::Mat>& frames = images.frames;
+  const int bit_depth = images.bit_depth;
+  codec.prepare(frames, bit_depth, *maps);
+  maps->camera_id = images.camera_id;
+  maps->stamp_ns = stamp_ns;
+  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end) {
+    codec.decodeRows(frames, bit_depth, begin, end, *maps);
+  });
+  return maps;
+}
+
+}  // namespace sl::pipeline
