@@ -11,6 +11,7 @@
 #include "sl/daemon/bounded_queue.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/motion_compensation.h"
+#include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/synchroniser.h"
 #include "sl/pipeline/triangulator.h"
 
@@ -275,14 +276,12 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
                                           [&](const auto& c) { return c.camera_id == camera_id; });
         if (images == set.cameras.end())
           throw std::runtime_error("no images of camera '" + camera_id + "' in the set");
-        auto maps = std::make_shared<pipeline::ProjectorMaps>(
-            decoder->second.decode(images->frames, images->bit_depth));
-        maps->camera_id = camera_id;
-        maps->stamp_ns = set.trigger_stamp_ns;
-        auto cloud = std::make_shared<pipeline::PointCloud>(
-            triangulators.at(camera_id).triangulate(*maps));
-        cloud->frame_id = frameIdOf(camera_id);
-        cloud->stamp_ns = set.trigger_stamp_ns;
+        // Decode + triangulate split over row blocks on this processing
+        // thread's own workers, reusing buffers that consumers have released.
+        thread_local pipeline::ScanProcessor processor;
+        auto [maps, cloud] =
+            processor.process(decoder->second.codec(), triangulators.at(camera_id), *images,
+                              set.trigger_stamp_ns, frameIdOf(camera_id));
         ScanResult r;
         r.pattern = set.pattern_name;
         r.camera_id = camera_id;
