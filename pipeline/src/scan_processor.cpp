@@ -61,12 +61,23 @@ ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triang
   codec.prepare(frames, bit_depth, *maps);
   maps->camera_id = images.camera_id;
   maps->stamp_ns = stamp_ns;
-  triangulator.prepare(*maps, *cloud);
+  // The triangulator reads the maps through a view without the map the
+  // pattern does not encode (all NaN) where that changes nothing but the
+  // memory read: Use::kBest falls back to the other map per pixel anyway.
+  ProjectorMaps view;
+  view.up = maps->up;
+  view.vp = maps->vp;
+  view.offset = maps->offset;
+  if (triangulator.options().use == TriangulatorOptions::Use::kBest) {
+    if (codec.spec().direction == Direction::kHorizontal) view.vp = cv::Mat();
+    if (codec.spec().direction == Direction::kVertical) view.up = cv::Mat();
+  }
+  triangulator.prepare(view, *cloud);
   cloud->frame_id = frame_id;
   cloud->stamp_ns = stamp_ns;
   workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end) {
     codec.decodeRows(frames, bit_depth, begin, end, *maps);
-    triangulator.triangulateRows(*maps, begin, end, *cloud);
+    triangulator.triangulateRows(view, begin, end, *cloud);
   });
   return ScanOutput{std::move(maps), std::move(cloud)};
 }

@@ -271,6 +271,8 @@ void Triangulator::triangulateBand(const ProjectorMaps& band, int row_begin, int
   im.triangulate(band, first, second, 0, row_end - row_begin, row_begin, cloud);
 }
 
+const TriangulatorOptions& Triangulator::options() const { return impl_->options; }
+
 void Triangulator::prepareCloud(const std::string& frame_id, TimestampNs stamp_ns,
                                 PointCloud& cloud) const {
   cloud.frame_id = frame_id;

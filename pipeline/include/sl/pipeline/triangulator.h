@@ -71,6 +71,8 @@ class Triangulator {
   void triangulateBand(const ProjectorMaps& band, int row_begin, int row_end,
                        PointCloud& cloud) const;
 
+  const TriangulatorOptions& options() const;
+
  private:
   // Checks the maps (camera-sized, or a band of the camera's width with at
   // least band_rows rows when band_rows >= 0); the axes tried per pixel in
