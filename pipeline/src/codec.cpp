@@ -11,6 +11,7 @@
 
 #include "codec_families.h"
 #include "frame_layout.h"
+#include "multiversion.h"
 
 namespace sl::pipeline {
 
@@ -22,6 +23,27 @@ void ensureMap(cv::Mat& m, cv::Size size, int type, bool* allocated = nullptr) {
   if (m.size() != size || m.type() != type || !m.isContinuous() || m.empty()) {
     m.create(size, type);
     if (allocated) *allocated = true;
+  }
+}
+
+// coord = NaN where status != 0 (one direction).
+SL_MULTIVERSION void nanWhereInvalid(int width, const std::uint8_t* __restrict status,
+                                     float* __restrict coord) {
+  for (int x = 0; x < width; ++x) coord[x] = status[x] == 0 ? coord[x] : kNaN;
+}
+
+// kBoth: a pixel is valid where both directions are; B is the smaller one.
+SL_MULTIVERSION void combineDirections(int width, std::uint8_t* __restrict status,
+                                       float* __restrict modulation, float* __restrict up,
+                                       float* __restrict vp, const std::uint8_t* __restrict status2,
+                                       const float* __restrict mod2,
+                                       const float* __restrict coord2) {
+  for (int x = 0; x < width; ++x) {
+    const std::uint8_t s = status[x] != 0 ? status[x] : status2[x];
+    status[x] = s;
+    modulation[x] = std::min(modulation[x], mod2[x]);
+    up[x] = s == 0 ? up[x] : kNaN;
+    vp[x] = s == 0 ? coord2[x] : kNaN;
   }
 }
 
@@ -165,18 +187,12 @@ void Codec::decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int 
     std::uint8_t* status = out.status.ptr<std::uint8_t>(yo);
     runRow(0, y, first_ctx, RowOutput{coord, modulation, offset, status});
     if (!both) {
-      for (int x = 0; x < width; ++x) coord[x] = status[x] == 0 ? coord[x] : kNaN;
+      nanWhereInvalid(width, status, coord);
       continue;
     }
     runRow(1, y, second_ctx, RowOutput{coord2.data(), mod2.data(), off2.data(), status2.data()});
-    float* vp = out.vp.ptr<float>(yo);
-    for (int x = 0; x < width; ++x) {
-      const std::uint8_t s = status[x] != 0 ? status[x] : status2[x];
-      status[x] = s;
-      modulation[x] = std::min(modulation[x], mod2[x]);
-      coord[x] = s == 0 ? coord[x] : kNaN;
-      vp[x] = s == 0 ? coord2[x] : kNaN;
-    }
+    combineDirections(width, status, modulation, coord, out.vp.ptr<float>(yo), status2.data(),
+                      mod2.data(), coord2.data());
   }
 }
 

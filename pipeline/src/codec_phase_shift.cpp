@@ -236,9 +236,9 @@ class PhaseShiftCodec final : public Codec {
     const Pixel* __restrict g0 = frames[coarse.frames[0]];
     const Pixel* __restrict g1 = frames[coarse.frames[1]];
     const Pixel* __restrict g2 = frames[coarse.frames[2]];
-    const Pixel* __restrict o0 = frames[first.frames[0]];
-    const Pixel* __restrict o1 = frames[first.frames[1]];
-    const Pixel* __restrict o2 = frames[first.frames[2]];
+    // Offset A from the frames of the set listed first (one of the two),
+    // already loaded: the same sum in the same order as from its frames.
+    const bool first_is_fine = &first == &fine;
     const float fs0 = fine.ws[0], fs1 = fine.ws[1], fs2 = fine.ws[2];
     const float fc0 = fine.wc[0], fc1 = fine.wc[1], fc2 = fine.wc[2];
     const float gs0 = coarse.ws[0], gs1 = coarse.ws[1], gs2 = coarse.ws[2];
@@ -260,7 +260,7 @@ class PhaseShiftCodec final : public Codec {
       const float a0 = f0[x], a1 = f1[x], a2 = f2[x];
       const float b0 = g0[x], b1 = g1[x], b2 = g2[x];
       const float peak = std::max(std::max(std::max(a0, a1), std::max(a2, b0)), std::max(b1, b2));
-      offset[x] = ((static_cast<float>(o0[x]) + o1[x]) + o2[x]) * inv_count;
+      offset[x] = (first_is_fine ? (a0 + a1) + a2 : (b0 + b1) + b2) * inv_count;
       const float sf = fs0 * a0 + fs1 * a1 + fs2 * a2;
       const float cf = fc0 * a0 + fc1 * a1 + fc2 * a2;
       const float sg = gs0 * b0 + gs1 * b1 + gs2 * b2;
