@@ -8,12 +8,12 @@
 #include <filesystem>
 #include <limits>
 #include <numbers>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <stdexcept>
 
-#include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
-
+#include "common.h"
 #include "plots.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/codec.h"
@@ -22,98 +22,13 @@
 
 namespace sl::eval {
 
-namespace {
-
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr double kFps = 30.0;
-// High-frequency periods of the 3+3 patterns, as in config/sim.yaml.
-constexpr int kFringes = 40;
-
-// The simulated camera and projector of config/sim.yaml.
-pipeline::PinholeModel camera() {
-  return {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
-}
-pipeline::PinholeModel projector() {
-  return {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
-}
-
-// Projector 150 mm from the camera along `offset_axis` (camera frame, mm),
-// turned so the optical axes cross at cross_mm.
-pipeline::CameraProjectorCalibration rig(const Eigen::Vector3d& projector_center,
-                                         double cross_mm) {
-  pipeline::CameraProjectorCalibration r;
-  r.camera = camera();
-  r.projector = projector();
-  // Rotate the projector's z axis onto the direction towards (0, 0, cross).
-  const Eigen::Vector3d axis = (Eigen::Vector3d(0, 0, cross_mm) - projector_center).normalized();
-  r.R = Eigen::Quaterniond::FromTwoVectors(axis, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  r.t = -r.R * projector_center;
-  return r;
-}
-
-drivers::SimConfig baseConfig(const pipeline::CameraProjectorCalibration& rig,
-                              const pipeline::PatternSpec& pattern) {
-  drivers::SimConfig c;
-  c.rig = rig;
-  c.patterns = {pattern};
-  c.camera_fps = kFps;
-  // Radiometry: SimConfig's defaults, which are those of config/sim.yaml
-  // (test_config checks that they agree).
-  return c;
-}
-
-pipeline::PatternSpec pattern33(const std::string& name, pipeline::Direction direction) {
-  pipeline::PhaseShift33Pattern p;
-  p.name = name;
-  p.direction = direction;
-  p.fringes = kFringes;
-  return pipeline::toSpec(p);
-}
-
-std::vector<cv::Mat> renderScan(const drivers::SimulatedSensor& sensor, const std::string& pattern,
-                                int frames, std::uint64_t seed) {
-  std::vector<cv::Mat> images;
-  for (int i = 0; i < frames; ++i)
-    images.push_back(sensor.render(pattern, i, seed * 1000 + static_cast<std::uint64_t>(i) + 1));
-  return images;
-}
-
-cv::Mat depthOf(const pipeline::PointCloud& cloud) {
-  cv::Mat z(cloud.height, cloud.width, CV_32FC1);
-  for (int r = 0; r < cloud.height; ++r)
-    for (int c = 0; c < cloud.width; ++c)
-      z.at<float>(r, c) = cloud.points[static_cast<std::size_t>(r) * cloud.width + c].z;
-  return z;
-}
-
-std::string fmt(double v, int decimals = 3) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, "%.*f", decimals, v);
-  return buffer;
-}
-
-std::string plotPath(const EvalOptions& options, const std::string& name) {
-  std::filesystem::create_directories(options.out_dir);
-  return (std::filesystem::path(options.out_dir) / name).string();
-}
-
-double radiansOf(double degrees) { return degrees * std::numbers::pi / 180.0; }
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
-  const auto k = static_cast<std::size_t>(std::clamp(q, 0.0, 1.0) * double(v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
-
-}  // namespace
-
-EvalResult runPrecision(const EvalOptions& options) {
+EvalResult runPrecision(const EvalOptions& requested) {
+  const EvalOptions options = withDefaultScans(requested, "precision");
   if (options.scans < 2) throw std::invalid_argument("precision: needs at least 2 scans");
   // Projector 150 mm to the right, axes crossing at 550 mm (config/sim.yaml).
   const pipeline::CameraProjectorCalibration calibration = rig({150, 0, 0}, 550);
   const pipeline::PatternSpec spec = pattern33("3+3_horizontal", pipeline::Direction::kHorizontal);
-  drivers::SimConfig config = baseConfig(calibration, spec);
+  drivers::SimConfig config = baseConfig(calibration, spec, options);
   config.scene.planes = {drivers::SimPlane{{0, 0, 500}, {0, 0, -1}, 0.8}};  // matte wall, 50 cm
   const auto sensor = drivers::SimulatedSensor::create(config);
   const pipeline::Decoder decoder(spec, pipeline::DecoderOptions{});
@@ -166,9 +81,8 @@ EvalResult runPrecision(const EvalOptions& options) {
       const double dz_dup = double(z_plus.at<float>(r, c)) - double(z_minus.at<float>(r, c));
       if (std::isnan(dz_dup)) continue;
       const double a = sum_a.at<double>(r, c) / n, b = sum_b.at<double>(r, c) / n;
-      const double sigma_i =
-          std::sqrt(config.gain_dn_per_electron * a +
-                    config.read_noise_dn * config.read_noise_dn + 1.0 / 12.0);
+      const double sigma_i = std::sqrt(config.gain_dn_per_electron * a +
+                                       config.read_noise_dn * config.read_noise_dn + 1.0 / 12.0);
       const double sigma_phi = std::sqrt(2.0 / steps) * sigma_i / b;
       const double theory = std::abs(dz_dup) * sigma_phi * period / (2 * std::numbers::pi);
       const double s = std::sqrt(variance);
@@ -200,8 +114,8 @@ EvalResult runPrecision(const EvalOptions& options) {
      << "| | mean / mm | max / mm | RMS / mm |\n|---|---|---|---|\n"
      << "| depth std, simulated sensor | " << fmt(m["std_mean_mm"], 4) << " | "
      << fmt(m["std_max_mm"], 4) << " | " << fmt(m["std_rms_mm"], 4) << " |\n"
-     << "| phase-noise floor sqrt(2/N) sigma_I / B -> z | " << fmt(m["theory_mean_mm"], 4)
-     << " | " << fmt(m["theory_max_mm"], 4) << " | " << fmt(m["theory_rms_mm"], 4) << " |\n"
+     << "| phase-noise floor sqrt(2/N) sigma_I / B -> z | " << fmt(m["theory_mean_mm"], 4) << " | "
+     << fmt(m["theory_max_mm"], 4) << " | " << fmt(m["theory_rms_mm"], 4) << " |\n"
      << "| paper, SL Sensor (real) | 0.070 | 0.251 | |\n\n"
      << "Measured / floor (RMS over " << valid << " pixels valid in every scan, "
      << fmt(100 * m["valid_fraction"], 1) << " % of the image): " << fmt(m["ratio_rms"], 3)
@@ -211,20 +125,20 @@ EvalResult runPrecision(const EvalOptions& options) {
   if (!options.out_dir.empty()) {
     const std::string path = plotPath(options, "precision_std.png");
     writeHeatMap(path, std_map, std::max(0.05, 2.0 * m["std_rms_mm"]),
-                 "Depth std per pixel over " + std::to_string(n) + " scans (wall at 500 mm)",
-                 "mm");
+                 "Depth std per pixel over " + std::to_string(n) + " scans (wall at 500 mm)", "mm");
     result.plots.push_back(path);
   }
   return result;
 }
 
-EvalResult runMotion(const EvalOptions& options) {
+EvalResult runMotion(const EvalOptions& requested) {
+  const EvalOptions options = withDefaultScans(requested, "motion");
   if (options.scans < 1) throw std::invalid_argument("motion: needs at least 1 scan");
   // "Top" camera 150 mm above the projector: vertical baseline, axes crossing
   // at 520 mm; the vertical 3+3 pattern encodes projector rows.
   const pipeline::CameraProjectorCalibration calibration = rig({0, 150, 0}, 520);
   const pipeline::PatternSpec spec = pattern33("3+3_vertical", pipeline::Direction::kVertical);
-  drivers::SimConfig config = baseConfig(calibration, spec);
+  drivers::SimConfig config = baseConfig(calibration, spec, options);
   // A relief on a plate at 520 mm: two spherical caps and two cones.
   config.scene.planes = {drivers::SimPlane{{0, 0, 520}, {0, 0, -1}, 0.8}};
   config.scene.spheres = {drivers::SimSphere{{-70, 0, 550}, 45, 0.8},
@@ -262,7 +176,8 @@ EvalResult runMotion(const EvalOptions& options) {
     for (int r = 1; r < gt.rows - 1; ++r)
       for (int c = 1; c < gt.cols - 1; ++c) {
         const float z = gt.at<float>(r, c);
-        const float dx = std::abs(gt.at<float>(r, c + 1) - z), dy = std::abs(gt.at<float>(r + 1, c) - z);
+        const float dx = std::abs(gt.at<float>(r, c + 1) - z),
+                    dy = std::abs(gt.at<float>(r + 1, c) - z);
         if (std::isnan(z) || !(dx < 1.0f) || !(dy < 1.0f)) steps.at<std::uint8_t>(r, c) = 255;
       }
     cv::dilate(steps, steps, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(61, 61)));
@@ -285,7 +200,7 @@ EvalResult runMotion(const EvalOptions& options) {
   };
   const cv::Mat relief_moving = reliefMask(gt_moving, mask_moving);
   const cv::Mat relief_still = reliefMask(gt_still, mask_still);
-  const int section_row = 540;  // through the first sphere and cone (y = 0)
+  const int section_row = 540;        // through the first sphere and cone (y = 0)
   constexpr double kOutlierMm = 2.0;  // |error| above: a gross (unwrapping) error
 
   struct Condition {
@@ -335,7 +250,8 @@ EvalResult runMotion(const EvalOptions& options) {
     const auto aligned_no_window = compensator_no_window.compensate(set, &estimate_no_window);
     for (int i = 0; i < frames; ++i)
       if (i != reference) {
-        shift_no_window_sum += std::abs(estimate_no_window.shifts_px[0][i]) / std::abs(i - reference);
+        shift_no_window_sum +=
+            std::abs(estimate_no_window.shifts_px[0][i]) / std::abs(i - reference);
         ++shift_no_window_count;
       }
     depths[3] =
@@ -399,8 +315,7 @@ EvalResult runMotion(const EvalOptions& options) {
   }
   m["ripple_reduction"] = m["moving_ripple_mm"] / m["compensated_ripple_mm"];
   m["rms_reduction"] = m["moving_relief_rms_mm"] / m["compensated_relief_rms_mm"];
-  m["ripple_reduction_no_window"] =
-      m["moving_ripple_mm"] / m["compensated_no_window_ripple_mm"];
+  m["ripple_reduction_no_window"] = m["moving_ripple_mm"] / m["compensated_no_window_ripple_mm"];
   m["rms_reduction_no_window"] =
       m["moving_relief_rms_mm"] / m["compensated_no_window_relief_rms_mm"];
   m["estimated_shift_px_per_image"] = shift_sum / std::max(shift_count, 1);
@@ -418,11 +333,10 @@ EvalResult runMotion(const EvalOptions& options) {
         "valid |\n|---|---|---|---|---|---|---|---|\n";
   for (const Condition& cond : conditions)
     md << "| " << cond.label << " | " << fmt(m[cond.key + "relief_rms_mm"], 4) << " | "
-       << fmt(m[cond.key + "rms_mm"], 4) << " | " << fmt(m[cond.key + "inlier_rms_mm"], 4)
-       << " | " << fmt(100 * m[cond.key + "outlier_fraction"], 2) << " % | "
+       << fmt(m[cond.key + "rms_mm"], 4) << " | " << fmt(m[cond.key + "inlier_rms_mm"], 4) << " | "
+       << fmt(100 * m[cond.key + "outlier_fraction"], 2) << " % | "
        << fmt(m[cond.key + "systematic_rms_mm"], 4) << " | " << fmt(m[cond.key + "ripple_mm"], 4)
-       << " | "
-       << fmt(100 * m[cond.key + "valid_fraction"], 1) << " % |\n";
+       << " | " << fmt(100 * m[cond.key + "valid_fraction"], 1) << " % |\n";
   auto list = [](const std::vector<double>& v) {
     std::string s;
     for (double x : v) s += (s.empty() ? "" : ", ") + fmt(x, 2);
@@ -430,14 +344,14 @@ EvalResult runMotion(const EvalOptions& options) {
   };
   md << "\nCompensation (daemon defaults): ripple reduced " << fmt(m["ripple_reduction"], 2)
      << "x, relief RMS " << fmt(m["rms_reduction"], 2) << "x; with window: false "
-     << fmt(m["ripple_reduction_no_window"], 2) << "x and "
-     << fmt(m["rms_reduction_no_window"], 2) << "x. Estimated shifts of scan 1 (px, per image): "
+     << fmt(m["ripple_reduction_no_window"], 2) << "x and " << fmt(m["rms_reduction_no_window"], 2)
+     << "x. Estimated shifts of scan 1 (px, per image): "
      << "[" << list(first_shifts[0]) << "] with the Hann window (" << rejected_estimates << " of "
      << options.scans << " scans had an estimate beyond max_shift_px, replaced by 0), ["
      << list(first_shifts[1]) << "] without. Mean |shift| per image "
      << fmt(m["estimated_shift_px_per_image"], 2) << " / "
-     << fmt(m["estimated_shift_no_window_px_per_image"], 2) << " px (plate at 520 mm: "
-     << fmt(m["true_shift_px_per_image_at_520mm"], 2)
+     << fmt(m["estimated_shift_no_window_px_per_image"], 2)
+     << " px (plate at 520 mm: " << fmt(m["true_shift_px_per_image_at_520mm"], 2)
      << " px; nearer relief moves up to 5 % more). Errors against the ground truth at image "
      << reference << " (the compensation's reference), over pixels more than 30 px from depth "
      << "steps; cross-section at image row " << section_row << ".\n";
@@ -468,7 +382,6 @@ EvalResult runMotion(const EvalOptions& options) {
   }
   return result;
 }
-
 
 namespace {
 
@@ -547,7 +460,8 @@ Eigen::Isometry3d cameraToFirst(const pipeline::CameraProjectorCalibration& firs
 
 }  // namespace
 
-EvalResult runCones(const EvalOptions& options) {
+EvalResult runCones(const EvalOptions& requested) {
+  const EvalOptions options = withDefaultScans(requested, "cones");
   if (options.scans < 1) throw std::invalid_argument("cones: needs at least 1 scan");
   // Top camera 150 mm above the projector (vertical 3+3, rows); left camera
   // 150 mm left of it (horizontal 3+3, columns); both calibrated against it.
@@ -556,7 +470,7 @@ EvalResult runCones(const EvalOptions& options) {
   const pipeline::PatternSpec vertical = pattern33("3+3_vertical", pipeline::Direction::kVertical);
   const pipeline::PatternSpec horizontal =
       pattern33("3+3_horizontal", pipeline::Direction::kHorizontal);
-  drivers::SimConfig config = baseConfig(top, vertical);
+  drivers::SimConfig config = baseConfig(top, vertical, options);
   config.patterns = {vertical, horizontal};
   config.second_camera = drivers::SimCamera{"sim_left", left};
   // The evaluation board: 6 cones (base radius 15 mm, height 20 mm) on a plate at 520 mm.
@@ -688,7 +602,8 @@ double planeEsd(const std::vector<Eigen::Vector3d>& points) {
 
 }  // namespace
 
-EvalResult runRoughness(const EvalOptions& options) {
+EvalResult runRoughness(const EvalOptions& requested) {
+  const EvalOptions options = withDefaultScans(requested, "roughness");
   if (options.scans < 1) throw std::invalid_argument("roughness: needs at least 1 scan");
   const pipeline::CameraProjectorCalibration calibration = rig({150, 0, 0}, 550);
   const pipeline::PatternSpec spec = pattern33("3+3_horizontal", pipeline::Direction::kHorizontal);
@@ -713,7 +628,7 @@ EvalResult runRoughness(const EvalOptions& options) {
   for (std::size_t i = 0; i < rms.size(); ++i) {
     std::string sample = "S";
     sample += std::to_string(i + 1);
-    drivers::SimConfig config = baseConfig(calibration, spec);
+    drivers::SimConfig config = baseConfig(calibration, spec, options);
     drivers::SimHeightField field;
     field.origin = {0, 0, 500};
     field.width_mm = 170;
@@ -741,7 +656,8 @@ EvalResult runRoughness(const EvalOptions& options) {
       std::vector<Eigen::Vector3d> points;
       for (int r = 0; r < cloud.height; ++r)
         for (int c = 0; c < cloud.width; ++c) {
-          const pipeline::PointXYZI& p = cloud.points[static_cast<std::size_t>(r) * cloud.width + c];
+          const pipeline::PointXYZI& p =
+              cloud.points[static_cast<std::size_t>(r) * cloud.width + c];
           if (!std::isnan(p.z) && !std::isnan(gt.at<cv::Vec3f>(r, c)[2]) && inPatch(r, c))
             points.emplace_back(p.x, p.y, p.z);
         }
@@ -759,13 +675,21 @@ EvalResult runRoughness(const EvalOptions& options) {
   return result;
 }
 
-std::vector<std::string> experimentNames() { return {"precision", "motion", "cones", "roughness"}; }
+std::vector<std::string> experimentNames() {
+  return {"precision", "cones", "roughness", "motion", "vdi2634"};
+}
+
+int defaultScans(const std::string& name) {
+  if (name == "vdi2634") return 1;  // the guideline measures each pose once
+  return 10;                        // the paper's 10 consecutive scans
+}
 
 EvalResult runExperiment(const std::string& name, const EvalOptions& options) {
   if (name == "precision") return runPrecision(options);
   if (name == "motion") return runMotion(options);
   if (name == "cones") return runCones(options);
   if (name == "roughness") return runRoughness(options);
+  if (name == "vdi2634") return runVdi2634(options);
   std::string known;
   for (const std::string& n : experimentNames()) known += (known.empty() ? "" : ", ") + n;
   throw std::invalid_argument("unknown experiment '" + name + "' (known: " + known + ")");

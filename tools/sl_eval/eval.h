@@ -12,8 +12,11 @@
 namespace sl::eval {
 
 struct EvalOptions {
-  int scans = 10;        // scans per condition
-  std::string out_dir;   // PNG plots go here (created); empty: no plots
+  int scans = 0;        // scans per condition; <= 0: the experiment's default
+  std::string out_dir;  // PNG plots go here (created); empty: no plots
+  // The simulated projector's intensity response (L / 255)^gamma; 1 = linear
+  // (the LightCrafter 4500 in pattern mode). Not compensated by the pipeline.
+  double projector_gamma = 1.0;
 };
 
 struct EvalResult {
@@ -54,8 +57,29 @@ EvalResult runCones(const EvalOptions& options);
 // S<i>_esd_truth_mm, S<i>_esd_mm.
 EvalResult runRoughness(const EvalOptions& options);
 
-// Names accepted by runExperiment ("precision", "motion", "cones", "roughness").
+// vdi2634: an acceptance test in the spirit of VDI/VDE 2634 part 2 (optical
+// 3D measuring systems, area scanning) on the "left" camera: probing error
+// form P_F (range of the radial residuals of a least-squares sphere) and size
+// P_S (fitted minus true diameter) of a 40 mm sphere at 7 positions in a
+// 200 x 150 x 100 mm volume at 500 mm; sphere spacing error S_D of a ball bar
+// (two 25 mm spheres 180 mm apart) at 7 poses; flatness error F (range of
+// the residuals to the least-squares plane) of 200 x 150 mm of a plane at 7
+// poses; `scans` measurements per pose. Each form statistic is also given
+// for the points' noise alone, as the camera noise model predicts it.
+// Metrics: sphere_form_max_mm, sphere_form997_max_mm (0.3 % discarded),
+// sphere_form_ratio_max, sphere_form997_ratio_max (measured / expected),
+// sphere_size_max_abs_mm, sphere_size_mean_mm, sphere_size_sigma_max_mm,
+// sphere_deviation_mean_mm, sphere_gross_fraction (|residual| > 1 mm: period
+// errors), spacing_max_abs_mm, spacing_mean_mm,
+// spacing_sigma_max_mm, flatness_max_mm, flatness997_max_mm,
+// flatness_ratio_max, flatness997_ratio_max, plane_deviation_mean_mm, plane_gross_points,
+// systematic_max_abs_mm. Plots: vdi2634_{sphere,ball_bar,plane}_residuals.png.
+EvalResult runVdi2634(const EvalOptions& options);
+
+// Names accepted by runExperiment, in the order `all` runs them.
 std::vector<std::string> experimentNames();
+// The number of scans an experiment uses when EvalOptions::scans <= 0.
+int defaultScans(const std::string& name);
 // Throws std::invalid_argument on an unknown name.
 EvalResult runExperiment(const std::string& name, const EvalOptions& options);
 

@@ -4,10 +4,9 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <stdexcept>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 namespace sl::eval {
 
@@ -29,8 +28,12 @@ void write(const std::string& path, const cv::Mat& image) {
 
 }  // namespace
 
-void writeHeatMap(const std::string& path, const cv::Mat& values, double max_value,
-                  const std::string& title, const std::string& unit) {
+namespace {
+
+// Colour map of values in [lo, hi] (NaN black), shown at about 720 px wide,
+// with a title and a colour bar labelled lo..hi.
+void writeMap(const std::string& path, const cv::Mat& values, double lo, double hi,
+              const std::string& title, const std::string& unit) {
   cv::Mat scaled(values.size(), CV_8UC1), mask(values.size(), CV_8UC1, cv::Scalar(0));
   for (int r = 0; r < values.rows; ++r)
     for (int c = 0; c < values.cols; ++c) {
@@ -38,17 +41,24 @@ void writeHeatMap(const std::string& path, const cv::Mat& values, double max_val
       if (std::isnan(v)) continue;
       mask.at<std::uint8_t>(r, c) = 255;
       scaled.at<std::uint8_t>(r, c) =
-          cv::saturate_cast<std::uint8_t>(255.0 * std::clamp(v / max_value, 0.0, 1.0));
+          cv::saturate_cast<std::uint8_t>(255.0 * std::clamp((v - lo) / (hi - lo), 0.0, 1.0));
     }
   cv::Mat coloured;
   cv::applyColorMap(scaled, coloured, cv::COLORMAP_JET);
   cv::Mat heat(values.size(), CV_8UC3, cv::Scalar(0, 0, 0));
   coloured.copyTo(heat, mask);
-  // Half size, white margin with title and colour bar.
+  // Large images at half size, small crops enlarged (whole pixels) to >= 360 px.
   cv::Mat small;
-  cv::resize(heat, small, cv::Size(values.cols / 2, values.rows / 2), 0, 0, cv::INTER_AREA);
+  if (values.cols > 1000) {
+    cv::resize(heat, small, cv::Size(values.cols / 2, values.rows / 2), 0, 0, cv::INTER_AREA);
+  } else {
+    const int factor = std::max(1, 360 / std::max(std::min(values.cols, values.rows), 1));
+    cv::resize(heat, small, cv::Size(values.cols * factor, values.rows * factor), 0, 0,
+               cv::INTER_NEAREST);
+  }
   const int bar = 170, top = 40;
-  cv::Mat canvas(small.rows + top + 20, small.cols + bar, CV_8UC3, cv::Scalar(255, 255, 255));
+  const int width = std::max(small.cols + bar, 12 * static_cast<int>(title.size()) + 20);
+  cv::Mat canvas(small.rows + top + 20, width, CV_8UC3, cv::Scalar(255, 255, 255));
   small.copyTo(canvas(cv::Rect(0, top, small.cols, small.rows)));
   text(canvas, title, {10, 25}, 0.6);
   for (int y = 0; y < small.rows; ++y) {
@@ -58,9 +68,21 @@ void writeHeatMap(const std::string& path, const cv::Mat& values, double max_val
     cv::line(canvas, {small.cols + 15, top + y}, {small.cols + 40, top + y},
              cv::Scalar(c.at<cv::Vec3b>(0, 0)));
   }
-  text(canvas, format(max_value) + " " + unit, {small.cols + 45, top + 12});
-  text(canvas, "0 " + unit, {small.cols + 45, top + small.rows});
+  text(canvas, format(hi) + " " + unit, {small.cols + 45, top + 12});
+  text(canvas, format(lo) + " " + unit, {small.cols + 45, top + small.rows});
   write(path, canvas);
+}
+
+}  // namespace
+
+void writeHeatMap(const std::string& path, const cv::Mat& values, double max_value,
+                  const std::string& title, const std::string& unit) {
+  writeMap(path, values, 0.0, max_value, title, unit);
+}
+
+void writeSignedMap(const std::string& path, const cv::Mat& values, double limit,
+                    const std::string& title, const std::string& unit) {
+  writeMap(path, values, -limit, limit, title, unit);
 }
 
 void writeLinePlot(const std::string& path, const std::vector<Curve>& curves,
@@ -97,8 +119,7 @@ void writeLinePlot(const std::string& path, const std::vector<Curve>& curves,
   for (const Curve& c : curves) {
     for (std::size_t i = 1; i < c.x.size(); ++i)
       if (!std::isnan(c.y[i - 1]) && !std::isnan(c.y[i]))
-        cv::line(canvas, px(c.x[i - 1], c.y[i - 1]), px(c.x[i], c.y[i]), c.colour, 1,
-                 cv::LINE_AA);
+        cv::line(canvas, px(c.x[i - 1], c.y[i - 1]), px(c.x[i], c.y[i]), c.colour, 1, cv::LINE_AA);
     cv::line(canvas, {width - 300, legend_y - 5}, {width - 270, legend_y - 5}, c.colour, 2);
     text(canvas, c.label, {width - 260, legend_y});
     legend_y += 22;
