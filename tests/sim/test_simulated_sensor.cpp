@@ -2,6 +2,7 @@
 // and noise, determinism, and the real-time trigger schedule. Every wait is
 // bounded by a timeout, so a broken schedule fails instead of hanging.
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -560,5 +561,43 @@ TEST_CASE("live: a slow consumer loses the oldest frames, counted", "[sim][live]
   CHECK(second->frame_id == first->frame_id + 1 + (sensor->counters().frames_dropped - dropped));
   CHECK(second->stamp_ns > first->stamp_ns);
   projector->stop();
+  camera->stop();
+}
+
+// Software triggering: the projector holds one pattern, a triggered camera
+// exposes it at once and delivers it one frame interval later.
+TEST_CASE("live: software trigger grabs the held pattern", "[sim][live]") {
+  constexpr double kFps = 60;
+  const auto sensor = SimulatedSensor::create(liveConfig(kFps));
+  auto camera = sensor->camera();
+  auto projector = sensor->projector();
+  REQUIRE(camera->hasSoftwareTrigger());
+  REQUIRE(projector->canProjectSingle());
+  CHECK_THROWS_AS(camera->triggerSoftware(), std::logic_error);  // not started
+  camera->start();
+  CHECK_THROWS_AS(camera->triggerSoftware(), std::logic_error);  // nothing projected
+  CHECK_THROWS_AS(projector->projectSingle(6), std::out_of_range);
+  projector->select("3+3_horizontal");
+  for (int k : {4, 1}) {
+    projector->projectSingle(k);
+    const std::int64_t before = nowNs();
+    camera->triggerSoftware();
+    const auto frame = camera->grab(500ms);
+    const std::int64_t after = nowNs();
+    REQUIRE(frame.has_value());
+    INFO("pattern frame " << k);
+    CHECK(frame->stamp_ns >= before);
+    CHECK(after - frame->stamp_ns >= std::int64_t(1e9 / kFps));  // exposed for a frame interval
+    // The image is that pattern frame (up to noise), not another one.
+    std::vector<double> distance;
+    for (int i = 0; i < 6; ++i)
+      distance.push_back(cv::norm(frame->image, sensor->render("3+3_horizontal", i, 7),
+                                  cv::NORM_L1) / double(frame->image.total()));
+    CHECK(std::min_element(distance.begin(), distance.end()) - distance.begin() == k);
+    CHECK(distance[k] < 2.0);
+  }
+  CHECK_FALSE(camera->grab(50ms).has_value());  // one frame per trigger
+  projector->stop();
+  CHECK_THROWS_AS(camera->triggerSoftware(), std::logic_error);  // stop() ends the held pattern
   camera->stop();
 }

@@ -111,6 +111,7 @@ void LiveSchedule::startProjector(int count) {
     t0_ns_ = now + kStartDelayNs;
     stop_ns_ = kNever;
     triggers_stopped_ = false;
+    held_frame_ = -1;
   }
   cv_.notify_all();
 }
@@ -119,8 +120,20 @@ void LiveSchedule::stopProjector() {
   {
     std::lock_guard lock(mutex_);
     if (generation_ != 0) stop_ns_ = std::min(stop_ns_, nowNs());
+    held_frame_ = -1;
   }
   cv_.notify_all();
+}
+
+void LiveSchedule::projectSingle(int index) {
+  std::lock_guard lock(mutex_);
+  if (runningLocked(nowNs()))
+    throw std::logic_error("projector: projectSingle() while a sequence runs; stop() first");
+  if (index < 0 || index >= sequences_[selected_].frame_count)
+    throw std::out_of_range("projector: pattern " + std::to_string(index) + " of '" +
+                            sequences_[selected_].name + "', which has " +
+                            std::to_string(sequences_[selected_].frame_count));
+  held_frame_ = index;
 }
 
 // --- camera ---
@@ -140,6 +153,7 @@ void LiveSchedule::disarmCamera(int camera) {
     CameraState& c = cameras_.at(static_cast<std::size_t>(camera));
     c.armed = false;
     ++c.stop_epoch;
+    c.triggered.clear();
   }
   cv_.notify_all();
 }
@@ -153,7 +167,24 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
     if (!c.armed || c.stop_epoch != epoch) return std::nullopt;
     const std::int64_t now = nowNs();
     std::int64_t wake = deadline;
-    if (generation_ != 0) {
+    if (!c.triggered.empty()) {  // software-triggered, ready after one frame interval
+      const Exposure e = c.triggered.front();
+      const std::int64_t ready = e.stamp_ns + std::llround(frame_interval_ns_);
+      if (now >= ready) {
+        c.triggered.erase(c.triggered.begin());
+        pipeline::Frame frame;
+        frame.frame_id = c.next_frame_id++;
+        frame.stamp_ns = e.stamp_ns;
+        frame.bit_depth = bit_depth_;
+        ++counters_.frames_delivered;
+        lock.unlock();
+        std::uint64_t noise_seed = mix64(seed_ ^ mix64(frame.frame_id));
+        if (camera > 0) noise_seed = mix64(noise_seed + static_cast<std::uint64_t>(camera));
+        frame.image = render_(camera, e.pattern, e.frame, noise_seed);
+        return frame;
+      }
+      wake = std::min(deadline, ready);
+    } else if (generation_ != 0) {
       if (c.generation != generation_) {
         c.generation = generation_;
         c.next = std::max<std::int64_t>(0, lastStampAtOrBefore(c.armed_ns - 1) + 1);
@@ -189,6 +220,18 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
     if (now >= deadline) return std::nullopt;
     waitUntil(lock, wake);
   }
+}
+
+void LiveSchedule::triggerCamera(int camera) {
+  {
+    std::lock_guard lock(mutex_);
+    CameraState& c = cameras_.at(static_cast<std::size_t>(camera));
+    if (!c.armed) throw std::logic_error("camera: software trigger while not started");
+    if (held_frame_ < 0)
+      throw std::logic_error("camera: software trigger while the projector shows no pattern");
+    c.triggered.push_back({nowNs(), selected_, held_frame_});
+  }
+  cv_.notify_all();
 }
 
 // --- trigger source ---
@@ -265,6 +308,8 @@ class LiveCamera final : public Camera {
   std::optional<pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
     return schedule_->grab(camera_, timeout);
   }
+  bool hasSoftwareTrigger() const override { return true; }
+  void triggerSoftware() override { schedule_->triggerCamera(camera_); }
 
  private:
   const std::shared_ptr<LiveSchedule> schedule_;
@@ -283,6 +328,8 @@ class LiveProjector final : public Projector {
   void select(const std::string& name) override { schedule_->select(name); }
   void start(int count) override { schedule_->startProjector(count); }
   void stop() override { schedule_->stopProjector(); }
+  bool canProjectSingle() const override { return true; }
+  void projectSingle(int index) override { schedule_->projectSingle(index); }
 
  private:
   const std::shared_ptr<LiveSchedule> schedule_;

@@ -43,6 +43,10 @@ inline constexpr std::int64_t kStartDelayNs = 20'000'000;
 // dt = 1 / camera_fps. It ends after `count` sequences or at stop(); frames
 // and triggers stamped before the end are still delivered. A new schedule
 // replaces the old one: what was not yet taken from the old one is discarded.
+//
+// Software triggering: projectSingle() holds one pattern (no schedule runs);
+// triggerCamera() exposes a frame of it at once, which grab() delivers one
+// frame interval (the exposure) later, before any scheduled frame.
 class LiveSchedule {
  public:
   // camera_count cameras (>= 1) expose on the same schedule.
@@ -55,12 +59,18 @@ class LiveSchedule {
   void select(const std::string& name);
   void startProjector(int count);
   void stopProjector();
+  // Holds frame `index` of the selected sequence; std::logic_error while a
+  // schedule runs, std::out_of_range on a bad index.
+  void projectSingle(int index);
 
   // Camera `camera` (index < camera_count): frames exposed while armed, in
   // schedule order. Each camera has its own frame ids, counted from 0.
   void armCamera(int camera);
   void disarmCamera(int camera);
   std::optional<pipeline::Frame> grab(int camera, std::chrono::milliseconds timeout);
+  // Software trigger of an armed camera while a pattern is held;
+  // std::logic_error otherwise.
+  void triggerCamera(int camera);
 
   // Trigger source.
   std::optional<TriggerEvent> nextTrigger(std::chrono::milliseconds timeout);
@@ -103,6 +113,15 @@ class LiveSchedule {
   std::int64_t sequence_count_ = 0;  // 0: until stop
   std::int64_t t0_ns_ = 0;
   std::int64_t stop_ns_ = kNever;
+  // projectSingle(): the held pattern (selected_) and frame; -1 = none.
+  int held_frame_ = -1;
+
+  // A software-triggered exposure waiting to be grabbed.
+  struct Exposure {
+    std::int64_t stamp_ns = 0;
+    std::size_t pattern = 0;
+    int frame = 0;
+  };
 
   // Per camera, guarded by mutex_.
   struct CameraState {
@@ -112,6 +131,7 @@ class LiveSchedule {
     std::int64_t next = 0;         // next frame index of that schedule
     std::uint64_t next_frame_id = 0;
     std::uint64_t stop_epoch = 0;  // bumped by disarmCamera() to wake grab()
+    std::vector<Exposure> triggered;  // software triggers, oldest first
   };
   std::vector<CameraState> cameras_;
 

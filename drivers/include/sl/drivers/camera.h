@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 #include <opencv2/core/mat.hpp>
@@ -30,6 +31,14 @@ class Camera {
   // Next frame, or nullopt on timeout or when stopped. Throws on a device
   // fault that the caller cannot recover from by retrying.
   virtual std::optional<Frame> grab(std::chrono::milliseconds timeout) = 0;
+
+  // Software trigger (setups without a trigger board): expose one frame now;
+  // grab() delivers it, stamped with its exposure start. Only while started.
+  // Cameras that cannot say false and throw std::logic_error.
+  virtual bool hasSoftwareTrigger() const { return false; }
+  virtual void triggerSoftware() {
+    throw std::logic_error("camera '" + id() + "' has no software trigger");
+  }
 };
 
 }  // namespace sl::drivers

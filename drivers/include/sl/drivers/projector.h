@@ -2,6 +2,7 @@
 // projectors.
 #pragma once
 
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -24,7 +25,16 @@ class Projector {
   virtual void select(const std::string& name) = 0;
   // Starts projecting the selected sequence `count` times (0 = until stop()).
   virtual void start(int count) = 0;
-  virtual void stop() = 0;
+  virtual void stop() = 0;  // also ends projectSingle()
+
+  // Software triggering: shows pattern `index` (0-based) of the selected
+  // sequence and holds it until the next call or stop(); not while running.
+  // Projectors that cannot say false and throw std::logic_error.
+  virtual bool canProjectSingle() const { return false; }
+  virtual void projectSingle(int index) {
+    throw std::logic_error("projector '" + id() + "' cannot show single patterns (" +
+                           std::to_string(index) + ")");
+  }
 };
 
 }  // namespace sl::drivers
