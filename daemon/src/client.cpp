@@ -73,6 +73,8 @@ const char* toString(CommandResult::Code code) {
     case CommandResult::Code::kInvalidCommand: return "invalid command";
     case CommandResult::Code::kDeviceError: return "device error";
     case CommandResult::Code::kNotRunning: return "not running";
+    case CommandResult::Code::kInvalidOption: return "invalid option";
+    case CommandResult::Code::kUnsupported: return "unsupported";
   }
   return "?";
 }
@@ -109,6 +111,10 @@ struct SensorClient::Impl {
   dds::Reader<Status> status_reader;
   std::optional<dds::Topic<PointCloud2>> points_topic;
   std::optional<dds::Reader<PointCloud2>> points_reader;
+
+  // Writes `req` with this client's id and the next request id, and waits
+  // for the reply carrying both.
+  std::optional<CommandReplyInfo> send(Request& req, std::chrono::milliseconds timeout);
 };
 
 SensorClient::SensorClient(const ClientOptions& options)
@@ -130,29 +136,14 @@ bool SensorClient::waitForDaemon(std::chrono::milliseconds timeout) {
   return true;
 }
 
-std::optional<CommandReplyInfo> SensorClient::request(Command command, const std::string& pattern,
-                                                      int count,
-                                                      std::chrono::milliseconds timeout,
-                                                      const std::string& recording) {
-  Impl& d = *impl_;
-  std::string client_id = d.client_id, pattern_copy = pattern, recording_copy = recording;
-  Request req{};
-  req.client_id = client_id.data();
-  req.request_id = d.next_request_id++;
-  switch (command) {
-    case Command::kStart: req.command = sl_msgs_msg_COMMAND_START; break;
-    case Command::kStop: req.command = sl_msgs_msg_COMMAND_STOP; break;
-    case Command::kSetPattern: req.command = sl_msgs_msg_COMMAND_SET_PATTERN; break;
-    case Command::kListPatterns: req.command = sl_msgs_msg_COMMAND_LIST_PATTERNS; break;
-    case Command::kGetConfig: req.command = sl_msgs_msg_COMMAND_GET_CONFIG; break;
-  }
-  req.pattern = pattern_copy.data();
-  req.count = count;
-  req.recording = recording_copy.data();
-  if (!d.request_writer.write(req)) return std::nullopt;
+std::optional<CommandReplyInfo> SensorClient::Impl::send(Request& req,
+                                                         std::chrono::milliseconds timeout) {
+  req.client_id = const_cast<char*>(client_id.c_str());
+  req.request_id = next_request_id++;
+  if (!request_writer.write(req)) return std::nullopt;
   const auto deadline = Clock::now() + timeout;
   while (Clock::now() < deadline) {
-    dds::Loan<Reply> replies = d.reply_reader.take(16);
+    dds::Loan<Reply> replies = reply_reader.take(16);
     for (std::size_t i = 0; i < replies.size(); ++i) {
       if (!replies.isValid(i)) continue;
       const Reply& r = replies[i];
@@ -169,6 +160,50 @@ std::optional<CommandReplyInfo> SensorClient::request(Command command, const std
     if (replies.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   return std::nullopt;
+}
+
+std::optional<CommandReplyInfo> SensorClient::request(Command command, const std::string& pattern,
+                                                      int count,
+                                                      std::chrono::milliseconds timeout,
+                                                      const std::string& recording) {
+  std::string pattern_copy = pattern, recording_copy = recording;
+  Request req{};
+  switch (command) {
+    case Command::kStart: req.command = sl_msgs_msg_COMMAND_START; break;
+    case Command::kStop: req.command = sl_msgs_msg_COMMAND_STOP; break;
+    case Command::kSetPattern: req.command = sl_msgs_msg_COMMAND_SET_PATTERN; break;
+    case Command::kListPatterns: req.command = sl_msgs_msg_COMMAND_LIST_PATTERNS; break;
+    case Command::kGetConfig: req.command = sl_msgs_msg_COMMAND_GET_CONFIG; break;
+  }
+  req.pattern = pattern_copy.data();
+  req.count = count;
+  req.recording = recording_copy.data();
+  return impl_->send(req, timeout);
+}
+
+std::optional<CommandReplyInfo> SensorClient::start(const StartRequest& request,
+                                                    std::chrono::milliseconds timeout) {
+  std::string pattern = request.pattern, recording = request.recording;
+  std::vector<std::string> cameras = request.cameras;
+  std::vector<char*> camera_pointers;
+  for (auto& id : cameras) camera_pointers.push_back(id.data());
+  Request req{};
+  req.command = sl_msgs_msg_COMMAND_START;
+  req.pattern = pattern.data();
+  req.count = request.count;
+  req.recording = recording.data();
+  req.trigger = !request.trigger                              ? sl_msgs_msg_TRIGGER_DEFAULT
+                : *request.trigger == TriggerMode::kSoftware ? sl_msgs_msg_TRIGGER_SOFTWARE
+                                                             : sl_msgs_msg_TRIGGER_HARDWARE;
+  req.delay_s = request.delay_s;
+  req.start_at = toTime(request.start_at_ns);
+  req.cameras._maximum = req.cameras._length = static_cast<std::uint32_t>(camera_pointers.size());
+  req.cameras._buffer = camera_pointers.data();
+  req.cameras._release = false;
+  req.motion_compensation = !request.motion_compensation ? sl_msgs_msg_MOTION_DEFAULT
+                            : *request.motion_compensation ? sl_msgs_msg_MOTION_ON
+                                                           : sl_msgs_msg_MOTION_OFF;
+  return impl_->send(req, timeout);
 }
 
 std::optional<pipeline::PointCloud> SensorClient::receiveCloud(
@@ -200,6 +235,7 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       StatusInfo info;
       info.state = s.state == sl_msgs_msg_STATE_SCANNING ? ScanState::kScanning
                    : s.state == sl_msgs_msg_STATE_IDLE   ? ScanState::kIdle
+                   : s.state == sl_msgs_msg_STATE_WAITING ? ScanState::kWaiting
                                                          : ScanState::kError;
       info.pattern = s.pattern ? s.pattern : "";
       info.scans_done = s.scans_done;
@@ -208,6 +244,17 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.frames_dropped = s.frames_dropped;
       info.sets_dropped = s.sets_dropped;
       info.sets_incomplete = s.sets_incomplete;
+      info.frame_rate_hz = s.frame_rate_hz;
+      info.frames_overflow = s.frames_overflow;
+      info.frames_unmatched = s.frames_unmatched;
+      info.sets_overflow = s.sets_overflow;
+      info.writes_timed_out = s.writes_timed_out;
+      info.sets_not_recorded = s.sets_not_recorded;
+      info.trigger = s.trigger == sl_msgs_msg_TRIGGER_SOFTWARE ? TriggerMode::kSoftware
+                                                             : TriggerMode::kHardware;
+      info.cameras = toStrings(s.cameras);
+      info.motion_compensation = s.motion_compensation;
+      info.start_at_ns = fromTime(s.start_at);
       info.last_error = s.last_error ? s.last_error : "";
       info.recording = s.recording ? s.recording : "";
       info.sets_recorded = s.sets_recorded;

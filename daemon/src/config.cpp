@@ -289,6 +289,17 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   r.default_pattern = m.get<std::string>("default_pattern", r.default_pattern);
   r.recording_root = m.get<std::string>("recording_root", r.recording_root);
   if (r.recording_root.empty()) m.fail("recording_root", "must not be empty");
+  const std::string trigger = m.get<std::string>("trigger", "hardware");
+  if (trigger == "hardware") r.trigger = TriggerMode::kHardware;
+  else if (trigger == "software") r.trigger = TriggerMode::kSoftware;
+  else m.fail("trigger", "must be hardware or software, not '" + trigger + "'");
+  m.done();
+}
+
+void parseSoftwareTrigger(const YamlMap& m, SoftwareTriggerConfig& s) {
+  s.settle_s = m.get<double>("settle_s", s.settle_s);
+  if (!(s.settle_s >= 0 && s.settle_s <= 10)) m.fail("settle_s", "must be in [0, 10] seconds");
+  s.grab_timeout_s = positive(m, "grab_timeout_s", s.grab_timeout_s);
   m.done();
 }
 
@@ -373,6 +384,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parseMotion(root.optionalMap("motion_compensation"), config.motion);
   parseDds(root.optionalMap("dds"), config.dds);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
+  parseSoftwareTrigger(root.optionalMap("software_trigger"), config.software_trigger);
   if (std::filesystem::path(config.runtime.recording_root).is_relative())
     config.runtime.recording_root =
         std::filesystem::absolute(base_dir / config.runtime.recording_root).lexically_normal().string();
@@ -387,6 +399,10 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
 }
 
 }  // namespace
+
+const char* toString(TriggerMode mode) {
+  return mode == TriggerMode::kSoftware ? "software" : "hardware";
+}
 
 const pipeline::PatternSpec* DaemonConfig::findPattern(const std::string& name) const {
   for (const auto& p : patterns)

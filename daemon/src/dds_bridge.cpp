@@ -47,8 +47,52 @@ sl_msgs_msg_State toState(ScanState s) {
     case ScanState::kIdle: return sl_msgs_msg_STATE_IDLE;
     case ScanState::kScanning: return sl_msgs_msg_STATE_SCANNING;
     case ScanState::kError: return sl_msgs_msg_STATE_ERROR;
+    case ScanState::kWaiting: return sl_msgs_msg_STATE_WAITING;
   }
   return sl_msgs_msg_STATE_ERROR;
+}
+
+// The START options of a request; a value outside the IDL enums is reported
+// in `error` (the request is then rejected).
+StartRequest toStartRequest(const Request& request, std::string& error) {
+  StartRequest r;
+  r.pattern = request.pattern ? request.pattern : "";
+  r.count = request.count;
+  r.recording = request.recording ? request.recording : "";
+  switch (request.trigger) {
+    case sl_msgs_msg_TRIGGER_DEFAULT: break;
+    case sl_msgs_msg_TRIGGER_HARDWARE: r.trigger = TriggerMode::kHardware; break;
+    case sl_msgs_msg_TRIGGER_SOFTWARE: r.trigger = TriggerMode::kSoftware; break;
+    default: error = "unknown trigger mode " + std::to_string(static_cast<int>(request.trigger));
+  }
+  switch (request.motion_compensation) {
+    case sl_msgs_msg_MOTION_DEFAULT: break;
+    case sl_msgs_msg_MOTION_ON: r.motion_compensation = true; break;
+    case sl_msgs_msg_MOTION_OFF: r.motion_compensation = false; break;
+    default:
+      error = "unknown motion compensation value " +
+              std::to_string(static_cast<int>(request.motion_compensation));
+  }
+  r.delay_s = request.delay_s;
+  r.start_at_ns = fromTime(request.start_at);
+  r.cameras = toStrings(request.cameras);
+  return r;
+}
+
+// " count N" and the options that differ from the defaults, for the log.
+std::string describeStart(const Request& request) {
+  std::string text = " count " + std::to_string(request.count);
+  if (request.trigger == sl_msgs_msg_TRIGGER_HARDWARE) text += " trigger hardware";
+  if (request.trigger == sl_msgs_msg_TRIGGER_SOFTWARE) text += " trigger software";
+  if (request.delay_s != 0) text += " delay " + std::to_string(request.delay_s) + " s";
+  if (fromTime(request.start_at) != 0) text += " at " + std::to_string(fromTime(request.start_at)) + " ns";
+  if (request.cameras._length > 0) {
+    text += " cameras";
+    for (const auto& id : toStrings(request.cameras)) text += " " + id;
+  }
+  if (request.motion_compensation == sl_msgs_msg_MOTION_ON) text += " motion on";
+  if (request.motion_compensation == sl_msgs_msg_MOTION_OFF) text += " motion off";
+  return text;
 }
 
 }  // namespace
@@ -261,9 +305,22 @@ void DdsBridge::Impl::publishStatus(const EngineStatus& s,
   msg.scans_done = s.scans_done;
   msg.scans_requested = s.scans_requested;
   msg.scan_rate_hz = s.scan_rate_hz;
+  const std::uint64_t timed_out = writes_timed_out.load();
   msg.frames_dropped = s.frames_dropped;
-  msg.sets_dropped = s.sets_dropped + writes_timed_out.load();
+  msg.sets_dropped = s.sets_dropped + timed_out;
   msg.sets_incomplete = s.sets_incomplete;
+  msg.frames_overflow = s.frames_overflow;
+  msg.frames_unmatched = s.frames_unmatched;
+  msg.sets_overflow = s.sets_overflow;
+  msg.writes_timed_out = timed_out;
+  msg.sets_not_recorded = s.sets_not_recorded;
+  msg.trigger = s.trigger == TriggerMode::kSoftware ? sl_msgs_msg_TRIGGER_SOFTWARE
+                                                    : sl_msgs_msg_TRIGGER_HARDWARE;
+  StringList cameras(s.cameras);
+  borrow(msg.cameras, cameras.pointers.data(), cameras.pointers.size());
+  msg.motion_compensation = s.motion_compensation;
+  msg.start_at = toTime(s.start_at_ns);
+  msg.frame_rate_hz = s.frame_rate_hz;
   msg.last_error = last_error.data();
   msg.recording = recording.data();
   msg.sets_recorded = s.sets_recorded;
@@ -275,9 +332,13 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   CommandResult result;
   const std::string pattern = request.pattern ? request.pattern : "";
   switch (request.command) {
-    case sl_msgs_msg_COMMAND_START:
-      result = engine.start(pattern, request.count, request.recording ? request.recording : "");
+    case sl_msgs_msg_COMMAND_START: {
+      std::string error;
+      const StartRequest start = toStartRequest(request, error);
+      result = error.empty() ? engine.start(start)
+                             : CommandResult{CommandResult::Code::kInvalidOption, error};
       break;
+    }
     case sl_msgs_msg_COMMAND_STOP:
       result = engine.stop();
       break;
@@ -300,8 +361,7 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
     logInfo("request " + std::to_string(request.request_id) + " from client " + client_id + ": " +
           (command >= 0 && command < 5 ? kCommands[command] : "unknown") +
           (pattern.empty() ? "" : " '" + pattern + "'") +
-          (request.command == sl_msgs_msg_COMMAND_START ? " count " + std::to_string(request.count)
-                                                        : "") +
+          (request.command == sl_msgs_msg_COMMAND_START ? describeStart(request) : "") +
           (result.accepted() ? ": accepted" : ": rejected: " + reason));
   StringList names(engine.patterns());
   Reply reply{};

@@ -41,7 +41,7 @@ inline pipeline::TimestampNs fromTime(const builtin_interfaces_msg_dds__Time_& t
 }
 
 // CommandResult codes and their wire values, one row each.
-inline constexpr std::array<std::pair<CommandResult::Code, sl_msgs_msg_ReplyCode>, 7> kReplyCodes{{
+inline constexpr std::array<std::pair<CommandResult::Code, sl_msgs_msg_ReplyCode>, 9> kReplyCodes{{
     {CommandResult::Code::kOk, sl_msgs_msg_REPLY_OK},
     {CommandResult::Code::kUnknownPattern, sl_msgs_msg_REPLY_UNKNOWN_PATTERN},
     {CommandResult::Code::kBusy, sl_msgs_msg_REPLY_BUSY},
@@ -49,6 +49,8 @@ inline constexpr std::array<std::pair<CommandResult::Code, sl_msgs_msg_ReplyCode
     {CommandResult::Code::kInvalidCommand, sl_msgs_msg_REPLY_INVALID_COMMAND},
     {CommandResult::Code::kDeviceError, sl_msgs_msg_REPLY_DEVICE_ERROR},
     {CommandResult::Code::kNotRunning, sl_msgs_msg_REPLY_NOT_RUNNING},
+    {CommandResult::Code::kInvalidOption, sl_msgs_msg_REPLY_INVALID_OPTION},
+    {CommandResult::Code::kUnsupported, sl_msgs_msg_REPLY_UNSUPPORTED},
 }};
 
 inline sl_msgs_msg_ReplyCode toReplyCode(CommandResult::Code code) {

@@ -2,12 +2,16 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <condition_variable>
 #include <deque>
 #include <optional>
 #include <map>
+#include <set>
 #include <variant>
 
 #include "recorder.h"
+#include "software_trigger.h"
 #include "sl/daemon/bounded_queue.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/motion_compensation.h"
@@ -25,11 +29,25 @@ const char* toString(ScanState s) {
     case ScanState::kIdle: return "idle";
     case ScanState::kScanning: return "scanning";
     case ScanState::kError: return "error";
+    case ScanState::kWaiting: return "waiting";
   }
   return "?";
 }
 
 namespace {
+
+pipeline::TimestampNs systemNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// Options of the current request that the processing thread applies per set.
+struct RequestOptions {
+  std::string cameras_pattern;       // the pattern `cameras` was given for
+  std::vector<std::string> cameras;  // empty: the pattern's configured cameras
+  std::optional<bool> motion_compensation;  // empty: as configured
+};
 
 // Events for the sync thread. Each carries the request generation it belongs
 // to; events of an older generation are discarded.
@@ -88,7 +106,9 @@ struct ScanEngine::Impl {
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
         motion(config.motion.options),
-        motion_enabled(config.motion.enabled) {
+        motion_enabled(config.motion.enabled),
+        software(this->devices.cameras, this->devices.projector, config.software_trigger),
+        active_trigger(config.runtime.trigger) {
     for (const auto& p : config.patterns)
       decoders.emplace(p.name, pipeline::Decoder(p, config.decoder));
     buildTriangulators(config);
@@ -106,6 +126,11 @@ struct ScanEngine::Impl {
                                    "(calibration: for the first camera, calibrations: for others)");
       }
       pattern_cameras[p.name] = ids;
+    }
+    if (config.runtime.trigger == TriggerMode::kSoftware) {
+      const std::string why = software.unsupportedReason();
+      if (!why.empty())
+        throw std::runtime_error(config.source_path + ": runtime.trigger is software, but " + why);
     }
     current_pattern = config.runtime.default_pattern;
     this->devices.projector->select(current_pattern);
@@ -138,7 +163,10 @@ struct ScanEngine::Impl {
                                                       : camera_id + "_optical_frame";
   }
   pipeline::MotionCompensator motion;                              // processing thread
-  bool motion_enabled = false;                                     // processing thread
+  // As configured (or reloaded); written by the processing thread.
+  std::atomic<bool> motion_enabled{false};
+  // Software-trigger acquisition (control thread only).
+  SoftwareTrigger software;
   // Settings from a config reload, applied by the processing thread before
   // its next image set (guarded by mutex; the flag avoids taking it per set).
   std::optional<DaemonConfig> pending_settings;
@@ -155,6 +183,25 @@ struct ScanEngine::Impl {
   std::string last_error;                 // guarded by mutex
   double scan_rate_hz = 0;                // guarded by mutex
   std::deque<Clock::time_point> recent_scans;  // guarded by mutex
+  // The current (or last) request's options; guarded by mutex.
+  TriggerMode active_trigger;
+  std::shared_ptr<const RequestOptions> request_options = std::make_shared<RequestOptions>();
+  // kWaiting: the request to begin at launch_at_ns (system clock); guarded by mutex.
+  pipeline::TimestampNs launch_at_ns = 0;
+  int pending_count = 0;
+  // Wakes the control thread (delayed starts, software-trigger runs); with mutex.
+  std::condition_variable control_cv;
+  // Camera frames received (all cameras), and the rate derived from them in
+  // status(); guarded by mutex.
+  std::atomic<std::uint64_t> frames_received{0};
+  mutable Clock::time_point rate_window_start = Clock::now();
+  mutable std::uint64_t rate_window_frames = 0;
+  mutable double frame_rate_hz = 0;
+  // Camera threads park while the control thread grabs (software trigger).
+  std::mutex gate_mutex;
+  std::condition_variable gate_cv;
+  bool cameras_held = false;       // guarded by gate_mutex
+  std::size_t cameras_parked = 0;  // guarded by gate_mutex
   // A finite request that has not delivered every scan by then ends with an
   // error (frames were lost); guarded by mutex.
   Clock::time_point request_deadline = Clock::time_point::max();
@@ -174,15 +221,37 @@ struct ScanEngine::Impl {
   void syncLoop(Heartbeat& hb);
   void processLoop(Heartbeat& hb);
   void outputLoop(Heartbeat& hb);
+  void controlLoop(Heartbeat& hb);
+  bool holdCameras(Heartbeat& hb);
+  void releaseCameras();
   void finishRequestLocked(const std::string& error);
   void launchLocked(const std::string& name, int frame_count, int count);
+  void beginLocked();
   void recordError(const std::string& error);
+  std::vector<std::string> camerasFor(const std::string& pattern,
+                                      const RequestOptions& options) const {
+    if (!options.cameras.empty() && options.cameras_pattern == pattern) return options.cameras;
+    return pattern_cameras.at(pattern);
+  }
 };
 
 void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
   auto& camera = *devices.cameras[index];
   while (running) {
     hb.beat();
+    {
+      std::unique_lock gate(gate_mutex);
+      if (cameras_held) {  // the control thread grabs (software trigger)
+        ++cameras_parked;
+        gate_cv.notify_all();
+        while (cameras_held && running) {
+          gate_cv.wait_for(gate, 100ms);
+          hb.beat();
+        }
+        --cameras_parked;
+        continue;
+      }
+    }
     std::optional<pipeline::Frame> frame;
     try {
       frame = camera.grab(100ms);
@@ -191,8 +260,114 @@ void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
       std::this_thread::sleep_for(100ms);
       continue;
     }
-    if (frame) events.push({generation.load(), FrameEvent{index, std::move(*frame)}});
+    if (frame) {
+      ++frames_received;
+      events.push({generation.load(), FrameEvent{index, std::move(*frame)}});
+    }
   }
+}
+
+// Parks every camera thread (each finishes the grab in progress); false when
+// they did not park within 3 s.
+bool ScanEngine::Impl::holdCameras(Heartbeat& hb) {
+  std::unique_lock gate(gate_mutex);
+  cameras_held = true;
+  const auto deadline = Clock::now() + 3s;
+  while (cameras_parked < devices.cameras.size() && Clock::now() < deadline) {
+    gate_cv.wait_for(gate, 100ms);
+    hb.beat();
+  }
+  return cameras_parked == devices.cameras.size();
+}
+
+void ScanEngine::Impl::releaseCameras() {
+  {
+    std::lock_guard gate(gate_mutex);
+    cameras_held = false;
+  }
+  gate_cv.notify_all();
+}
+
+// Starts delayed requests at their time, and runs software-trigger requests:
+// one image set per iteration, its pattern read at the sequence boundary (a
+// switch never mixes patterns within a set).
+void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
+  bool holding = false;
+  std::uint64_t run_generation = 0;  // generation of the software run in progress
+  std::uint64_t acquired = 0;        // its image sets so far
+  int failures = 0;                  // consecutive failed sequences
+  while (running) {
+    hb.beat();
+    std::unique_lock lock(mutex);
+    if (state == ScanState::kWaiting) {
+      const pipeline::TimestampNs now = systemNowNs();
+      if (now >= launch_at_ns) {
+        beginLocked();
+      } else {
+        control_cv.wait_for(lock, std::min<std::chrono::nanoseconds>(
+                                      100ms, std::chrono::nanoseconds(launch_at_ns - now)));
+      }
+      continue;
+    }
+    const bool software_run = state == ScanState::kScanning && active_trigger == TriggerMode::kSoftware;
+    if (!software_run) {
+      if (holding) {
+        lock.unlock();
+        software.stop();
+        releaseCameras();
+        holding = false;
+        continue;
+      }
+      control_cv.wait_for(lock, 100ms);
+      continue;
+    }
+    const std::uint64_t gen = generation.load();
+    if (scans_requested != 0 && gen == run_generation && acquired >= scans_requested) {
+      control_cv.wait_for(lock, 100ms);  // all sets taken; the output thread ends the request
+      continue;
+    }
+    const std::string pattern = current_pattern;
+    const int frame_count = config.findPattern(pattern)->frameCount();
+    lock.unlock();
+    if (gen != run_generation) {
+      software.stop();  // a new request: select its pattern afresh
+      run_generation = gen;
+      acquired = 0;
+      failures = 0;
+    }
+    if (!holding) {
+      if (!holdCameras(hb)) {
+        releaseCameras();
+        std::lock_guard relock(mutex);
+        if (generation.load() == gen)
+          finishRequestLocked("software trigger: the camera threads did not pause");
+        continue;
+      }
+      holding = true;
+    }
+    try {
+      auto set = software.acquire(pattern, frame_count, [&] {
+        hb.beat();
+        return !running || generation.load() != gen;
+      });
+      if (!set) continue;
+      ++acquired;
+      failures = 0;
+      frames_received += set->cameras.size() * static_cast<std::uint64_t>(frame_count);
+      sets.push({gen, std::move(set)});
+    } catch (const std::exception& e) {
+      ++sets_incomplete;
+      std::lock_guard relock(mutex);
+      if (generation.load() != gen) continue;
+      if (++failures >= 3) {
+        finishRequestLocked(std::string(e.what()) + " (3 sequences in a row failed; request ended)");
+      } else {
+        last_error = e.what();
+        ++status_version;
+      }
+    }
+  }
+  if (holding) releaseCameras();
 }
 
 void ScanEngine::Impl::triggerLoop(Heartbeat& hb) {
@@ -254,7 +429,12 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     // Motion compensation aligns every frame with the reference frame of its
     // sequence; the cloud is then stamped with the reference frame's time.
     if (settings_pending) applyPendingSettings();
-    if (motion_enabled) {
+    std::shared_ptr<const RequestOptions> options;
+    {
+      std::lock_guard lock(mutex);
+      options = request_options;
+    }
+    if (options->motion_compensation.value_or(motion_enabled.load())) {
       try {
         pipeline::MotionEstimate estimate;
         item->set = motion.compensate(*item->set, &estimate);
@@ -271,7 +451,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
       if (decoder == decoders.end())
         throw std::runtime_error("no decoder for pattern '" + set.pattern_name + "'");
       ResultItem result{item->generation, {}};
-      for (const std::string& camera_id : pattern_cameras.at(set.pattern_name)) {
+      for (const std::string& camera_id : camerasFor(set.pattern_name, *options)) {
         const auto images = std::find_if(set.cameras.begin(), set.cameras.end(),
                                           [&](const auto& c) { return c.camera_id == camera_id; });
         if (images == set.cameras.end())
@@ -391,6 +571,44 @@ void ScanEngine::Impl::launchLocked(const std::string& name, int frame_count, in
   devices.projector->start(count);
 }
 
+// Begins the accepted request (state kWaiting until now) with
+// current_pattern and pending_count; caller holds the mutex. A device error
+// ends it in kError.
+void ScanEngine::Impl::beginLocked() {
+  const pipeline::PatternSpec* pattern = config.findPattern(current_pattern);
+  const int count = pending_count;
+  scans_done = 0;
+  scan_rate_hz = 0;
+  recent_scans.clear();
+  // Time per sequence: one image interval per pattern with a trigger board;
+  // in software, settle plus (at least) an exposure per pattern, doubled
+  // for transfer and processing.
+  double sequence_s = pattern->frameCount() * config.synchroniser.image_interval_ns * 1e-9;
+  if (active_trigger == TriggerMode::kSoftware)
+    sequence_s = 2 * pattern->frameCount() *
+                 (config.software_trigger.settle_s + config.synchroniser.image_interval_ns * 1e-9);
+  request_deadline =
+      count == 0 ? Clock::time_point::max()
+                 : Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                      std::chrono::duration<double>(count * sequence_s + 2.0));
+  state = ScanState::kScanning;
+  launch_at_ns = 0;
+  try {
+    if (active_trigger == TriggerMode::kHardware) {
+      launchLocked(current_pattern, pattern->frameCount(), count);
+    } else {
+      generation++;  // the control thread acquires this generation's sets
+      control_cv.notify_all();
+    }
+  } catch (const std::exception& e) {
+    state = ScanState::kError;
+    recorder.stop();
+    recording_name.clear();
+    last_error = std::string("projector: ") + e.what();
+  }
+  ++status_version;
+}
+
 // Ends the current request; caller holds the mutex.
 void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   try {
@@ -400,6 +618,7 @@ void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   }
   generation++;
   state = ScanState::kIdle;
+  launch_at_ns = 0;
   recorder.stop();
   recording_name.clear();
   if (!error.empty()) last_error = error;
@@ -415,7 +634,7 @@ void ScanEngine::Impl::recordError(const std::string& error) {
 ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output)
     : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output))) {
   Impl& d = *impl_;
-  d.heartbeats = std::vector<Heartbeat>(d.devices.cameras.size() + 4);
+  d.heartbeats = std::vector<Heartbeat>(d.devices.cameras.size() + 5);
   for (std::size_t i = 0; i < d.devices.cameras.size(); ++i)
     d.threads.emplace_back([&d, i] { d.cameraLoop(i, d.heartbeats[i]); });
   const std::size_t k = d.devices.cameras.size();
@@ -423,6 +642,7 @@ ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, Output
   d.threads.emplace_back([&d, k] { d.syncLoop(d.heartbeats[k + 1]); });
   d.threads.emplace_back([&d, k] { d.processLoop(d.heartbeats[k + 2]); });
   d.threads.emplace_back([&d, k] { d.outputLoop(d.heartbeats[k + 3]); });
+  d.threads.emplace_back([&d, k] { d.controlLoop(d.heartbeats[k + 4]); });
 }
 
 ScanEngine::~ScanEngine() {
@@ -431,7 +651,15 @@ ScanEngine::~ScanEngine() {
     d.devices.projector->stop();
   } catch (...) {
   }
-  d.running = false;
+  {
+    // Under each mutex, so that no thread misses the wake-up between its
+    // check of `running` and its wait.
+    std::lock_guard lock(d.mutex);
+    std::lock_guard gate(d.gate_mutex);
+    d.running = false;
+  }
+  d.control_cv.notify_all();
+  d.gate_cv.notify_all();
   for (auto& camera : d.devices.cameras) camera->stop();
   d.devices.trigger->stop();
   d.events.close();
@@ -448,64 +676,124 @@ bool validRecordingName(const std::string& name) {
          std::string::npos;
 }
 
+std::string joined(const std::vector<std::string>& names) {
+  std::string text;
+  for (const auto& n : names) text += (text.empty() ? "" : ", ") + n;
+  return text;
+}
+
 }  // namespace
 
-CommandResult ScanEngine::start(const std::string& pattern_name, int count,
+CommandResult ScanEngine::start(const std::string& pattern, int count,
                                 const std::string& recording) {
+  StartRequest request;
+  request.pattern = pattern;
+  request.count = count;
+  request.recording = recording;
+  return start(request);
+}
+
+CommandResult ScanEngine::start(const StartRequest& request) {
   Impl& d = *impl_;
   using Code = CommandResult::Code;
   std::lock_guard lock(d.mutex);
-  if (d.state == ScanState::kScanning)
-    return {Code::kBusy, "already scanning '" + d.current_pattern + "' (" +
-                             std::to_string(d.scans_done) + " of " +
+  if (d.state == ScanState::kScanning || d.state == ScanState::kWaiting)
+    return {Code::kBusy, std::string(d.state == ScanState::kWaiting ? "waiting to scan '"
+                                                                     : "already scanning '") +
+                             d.current_pattern + "' (" + std::to_string(d.scans_done) + " of " +
                              (d.scans_requested ? std::to_string(d.scans_requested)
                                                 : std::string("continuous")) +
                              "); send stop first"};
-  if (count < 0) return {Code::kInvalidCount, "count must be >= 0 (0 = continuous)"};
-  const std::string name = pattern_name.empty() ? d.current_pattern : pattern_name;
+  if (request.count < 0) return {Code::kInvalidCount, "count must be >= 0 (0 = continuous)"};
+  const std::string name = request.pattern.empty() ? d.current_pattern : request.pattern;
   const pipeline::PatternSpec* pattern = d.config.findPattern(name);
   if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
-  if (!recording.empty()) {
-    if (!validRecordingName(recording))
-      return {Code::kInvalidCommand, "recording name '" + recording +
+
+  // --- options ---
+  const TriggerMode trigger = request.trigger.value_or(d.config.runtime.trigger);
+  if (trigger == TriggerMode::kSoftware) {
+    const std::string why = d.software.unsupportedReason();
+    if (!why.empty()) return {Code::kUnsupported, "software trigger: " + why};
+  }
+  if (!(std::isfinite(request.delay_s) && request.delay_s >= 0 && request.delay_s <= 3600))
+    return {Code::kInvalidOption, "delay must be 0..3600 s, not " + std::to_string(request.delay_s)};
+  const pipeline::TimestampNs now = systemNowNs();
+  if (request.start_at_ns != 0 && request.delay_s > 0)
+    return {Code::kInvalidOption, "give a delay or a start time, not both"};
+  if (request.start_at_ns != 0 && request.start_at_ns < now - 1'000'000'000)
+    return {Code::kInvalidOption, "the start time lies " +
+                                      std::to_string((now - request.start_at_ns) / 1'000'000) +
+                                      " ms in the past"};
+  if (request.start_at_ns > now + 3600'000'000'000)
+    return {Code::kInvalidOption, "the start time lies more than 3600 s ahead"};
+  const std::vector<std::string>& configured = d.pattern_cameras.at(name);
+  std::set<std::string> seen;
+  for (const std::string& id : request.cameras) {
+    if (!seen.insert(id).second) return {Code::kInvalidOption, "camera '" + id + "' given twice"};
+    if (std::find(configured.begin(), configured.end(), id) != configured.end()) continue;
+    const bool exists = std::any_of(d.devices.cameras.begin(), d.devices.cameras.end(),
+                                    [&](const auto& c) { return c->id() == id; });
+    return {Code::kInvalidOption,
+            exists ? "camera '" + id + "' does not triangulate pattern '" + name +
+                         "' (its cameras: " + joined(configured) + ")"
+                   : "unknown camera '" + id + "' (pattern '" + name + "' has " +
+                         joined(configured) + ")"};
+  }
+
+  if (!request.recording.empty()) {
+    if (!validRecordingName(request.recording))
+      return {Code::kInvalidCommand, "recording name '" + request.recording +
                                          "' must be letters, digits, '_', '-' or '.' (no paths)"};
-    const std::string dir = d.config.runtime.recording_root + "/" + recording;
+    const std::string dir = d.config.runtime.recording_root + "/" + request.recording;
     try {
-      d.recorder.start(dir, "pattern " + name + ", " + std::to_string(count) + " scans requested");
+      d.recorder.start(dir, "pattern " + name + ", " + std::to_string(request.count) +
+                                " scans requested");
     } catch (const std::exception& e) {
       return {Code::kDeviceError, std::string("cannot record: ") + e.what()};
     }
-    d.recording_name = recording;
+    d.recording_name = request.recording;
   }
-  try {
-    d.scans_requested = static_cast<std::uint64_t>(count);
-    d.scans_done = 0;
-    d.scan_rate_hz = 0;
-    d.recent_scans.clear();
-    const double sequence_s = pattern->frameCount() * d.config.synchroniser.image_interval_ns * 1e-9;
-    d.request_deadline =
-        count == 0 ? Clock::time_point::max()
-                   : Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                        std::chrono::duration<double>(count * sequence_s + 2.0));
-    d.last_error.clear();
-    d.state = ScanState::kScanning;
-    d.launchLocked(name, pattern->frameCount(), count);
-  } catch (const std::exception& e) {
-    d.state = ScanState::kError;
-    d.recorder.stop();
-    d.recording_name.clear();
-    d.last_error = std::string("projector: ") + e.what();
+  if (name != d.current_pattern) {
+    try {
+      d.devices.projector->select(name);
+    } catch (const std::exception& e) {
+      d.recorder.stop();
+      d.recording_name.clear();
+      d.last_error = std::string("projector: ") + e.what();
+      ++d.status_version;
+      return {Code::kDeviceError, d.last_error};
+    }
+    d.current_pattern = name;
+  }
+  auto options = std::make_shared<RequestOptions>();
+  options->cameras_pattern = name;
+  options->cameras = request.cameras;
+  options->motion_compensation = request.motion_compensation;
+  d.request_options = std::move(options);
+  d.active_trigger = trigger;
+  d.scans_requested = static_cast<std::uint64_t>(request.count);
+  d.scans_done = 0;
+  d.pending_count = request.count;
+  d.last_error.clear();
+  const pipeline::TimestampNs launch_at =
+      request.start_at_ns != 0 ? request.start_at_ns
+                               : now + static_cast<pipeline::TimestampNs>(request.delay_s * 1e9);
+  if (launch_at > now) {
+    d.state = ScanState::kWaiting;  // the control thread begins it
+    d.launch_at_ns = launch_at;
+    d.control_cv.notify_all();
     ++d.status_version;
-    return {Code::kDeviceError, d.last_error};
+    return {};
   }
-  ++d.status_version;
+  d.beginLocked();
+  if (d.state == ScanState::kError) return {Code::kDeviceError, d.last_error};
   return {};
 }
 
 CommandResult ScanEngine::stop() {
   Impl& d = *impl_;
   std::lock_guard lock(d.mutex);
-  if (d.state != ScanState::kScanning)
+  if (d.state != ScanState::kScanning && d.state != ScanState::kWaiting)
     return {CommandResult::Code::kNotRunning, "not scanning"};
   d.finishRequestLocked("");
   return {};
@@ -518,10 +806,17 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
   const pipeline::PatternSpec* pattern = d.config.findPattern(name);
   if (!pattern) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
   const bool scanning = d.state == ScanState::kScanning;
-  if (scanning && d.scans_requested != 0)
+  if ((scanning || d.state == ScanState::kWaiting) && d.scans_requested != 0)
     return {Code::kBusy, "cannot switch pattern during a request of " +
                              std::to_string(d.scans_requested) +
                              " scans; wait for it or send stop (continuous scans switch)"};
+  if (scanning && d.active_trigger == TriggerMode::kSoftware) {
+    // The control thread reads the pattern at each sequence boundary: the
+    // sequence in progress completes with the old pattern.
+    d.current_pattern = name;
+    ++d.status_version;
+    return {};
+  }
   try {
     if (scanning) {
       // Continuous scan: end the schedule and start the new pattern's. The
@@ -567,14 +862,31 @@ EngineStatus ScanEngine::status() const {
   s.scans_done = d.scans_done;
   s.scans_requested = d.scans_requested;
   s.scan_rate_hz = d.state == ScanState::kScanning ? d.scan_rate_hz : 0.0;
-  s.frames_dropped = d.events.dropped() + d.frames_unmatched.load();
-  s.sets_dropped = d.sets.dropped() + d.results.dropped();
+  s.frames_overflow = d.events.dropped();
+  s.frames_unmatched = d.frames_unmatched.load() + d.software.staleFrames();
+  s.frames_dropped = s.frames_overflow + s.frames_unmatched;
+  s.sets_overflow = d.sets.dropped() + d.results.dropped();
+  s.sets_not_recorded = d.recorder.dropped();
+  s.sets_dropped = s.sets_overflow + s.sets_not_recorded;
   s.sets_incomplete = d.sets_incomplete.load();
   s.recording = d.recording_name;
   s.sets_recorded = d.recorder.written();
   const std::string recorder_error = d.recorder.lastError();
   s.last_error = recorder_error.empty() ? d.last_error : recorder_error;
-  s.sets_dropped += d.recorder.dropped();
+  s.trigger = d.active_trigger;
+  s.cameras = d.camerasFor(d.current_pattern, *d.request_options);
+  s.motion_compensation = d.request_options->motion_compensation.value_or(d.motion_enabled.load());
+  s.start_at_ns = d.state == ScanState::kWaiting ? d.launch_at_ns : 0;
+  // Frame rate over windows of at least a second (status() is polled often).
+  const auto now = Clock::now();
+  const double window_s = std::chrono::duration<double>(now - d.rate_window_start).count();
+  if (window_s >= 1.0) {
+    const std::uint64_t frames = d.frames_received.load();
+    d.frame_rate_hz = (frames - d.rate_window_frames) / window_s;
+    d.rate_window_frames = frames;
+    d.rate_window_start = now;
+  }
+  s.frame_rate_hz = d.frame_rate_hz;
   return s;
 }
 

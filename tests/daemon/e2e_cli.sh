@@ -81,6 +81,27 @@ fi
 "$bin/tools/slctl" --ns "$ns" status | tee "$work/status.log"
 grep -q "scans: *1 of 1" "$work/status.log" || fail "status does not show 1 of 1 scans"
 
+# Start options: software trigger with a camera subset; a rejected option
+# (exit code 4, reason printed); a delayed start shown as waiting, then stopped.
+"$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 2 --trigger software --cameras sim_top \
+  --motion off --out "$work/sw" | tee "$work/sw.log"
+[ "$(grep -c '^scan [12]/2: 1440x1080' "$work/sw.log")" -eq 2 ] || fail "software-trigger scans"
+"$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
+grep -q "^trigger: *software" "$work/status.log" || fail "status does not show the software trigger"
+set +e
+msg=$("$bin/tools/slctl" --ns "$ns" scan --count 1 --cameras nope --out "$work/none" 2>&1)
+rc=$?
+set -e
+[ "$rc" -eq 4 ] || fail "bad camera: exit code $rc, expected 4"
+echo "$msg" | grep -q "rejected (invalid option): unknown camera 'nope'" || fail "bad camera message: $msg"
+echo "ok: bad camera -> $msg"
+"$bin/tools/slctl" --ns "$ns" start --delay 30 > /dev/null
+"$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
+grep -q "^state: *waiting" "$work/status.log" || fail "delayed start: $(cat "$work/status.log")"
+grep -q "^starts in: *[23][0-9]\.[0-9] s" "$work/status.log" || fail "delayed start time: $(cat "$work/status.log")"
+"$bin/tools/slctl" --ns "$ns" stop > /dev/null
+echo "ok: software trigger, option rejection, delayed start"
+
 kill -TERM "$daemon_pid"
 for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
 kill -0 "$daemon_pid" 2>/dev/null && fail "daemon still running 2 s after SIGTERM"

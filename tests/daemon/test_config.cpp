@@ -54,6 +54,8 @@ TEST_CASE("the shipped sim config loads with the documented values") {
   CHECK(config.findPattern(config.runtime.default_pattern) != nullptr);
   CHECK(config.dds.ns == "sl");
   CHECK(config.synchroniser.image_interval_ns == 33'333'333);
+  CHECK(config.runtime.trigger == sl::daemon::TriggerMode::kHardware);
+  CHECK(config.software_trigger.settle_s == 0.01);
   // 'calibration: sim' = the rig's own geometry.
   CHECK(config.calibration.t.isApprox(config.sim.rig.t));
   CHECK(config.calibration.camera.fx == config.sim.rig.camera.fx);
@@ -100,6 +102,9 @@ TEST_CASE("config mistakes are reported with file, line and key") {
       Case{"radius_mm: 60", "radius_mm: 0", "key 'sim.scene[1].sphere.radius_mm': must be > 0"},
       Case{"namespace: sl", "namespace: /bad/", "key 'dds.namespace'"},
       Case{"queue_depth: 2", "queue_depth: 0", "key 'runtime.queue_depth': must be in 1..64"},
+      Case{"trigger: hardware", "trigger: manual",
+           "key 'runtime.trigger': must be hardware or software, not 'manual'"},
+      Case{"settle_s: 0.01", "settle_s: -1", "key 'software_trigger.settle_s': must be in [0, 10]"},
       Case{"max_unwrap_error: 0.35", "max_unwrap_error: 0.7", "key 'decoder.max_unwrap_error'"},
       Case{"use: best", "use: diagonal", "key 'triangulator.use': must be best, columns or rows"},
       Case{"rotation_deg: [0, 15.25, 0],", "rotation_deg: [0, 15.25, 0], rotation: [1,0,0,0,1,0,0,0,1],",

@@ -77,3 +77,112 @@ TEST_CASE("the engine reports unhealthy while a device thread is stuck, and stil
   }  // destruction stops the camera, which releases the stuck grab()
   SUCCEED("engine destroyed");
 }
+
+namespace {
+
+using sl::daemon::CommandResult;
+using sl::daemon::ScanState;
+using sl::daemon::StartRequest;
+using sl::daemon::TriggerMode;
+
+// A projector without single-pattern projection (as the LightCrafter driver).
+class SequenceOnlyProjector : public sl::drivers::Projector {
+ public:
+  explicit SequenceOnlyProjector(std::shared_ptr<sl::drivers::Projector> inner)
+      : inner_(std::move(inner)) {}
+  std::string id() const override { return "sequence_only"; }
+  std::vector<sl::drivers::ProjectorSequence> sequences() const override {
+    return inner_->sequences();
+  }
+  void select(const std::string& name) override { inner_->select(name); }
+  void start(int count) override { inner_->start(count); }
+  void stop() override { inner_->stop(); }
+
+ private:
+  std::shared_ptr<sl::drivers::Projector> inner_;
+};
+
+}  // namespace
+
+TEST_CASE("start options are validated with a code and a reason naming the option") {
+  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  std::atomic<int> clouds{0};
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [&](const sl::daemon::ScanResult&) { ++clouds; });
+  auto rejected = [&](StartRequest request, CommandResult::Code code, const std::string& words) {
+    const CommandResult r = engine.start(request);
+    INFO("reason: " << r.reason);
+    CHECK(r.code == code);
+    CHECK(r.reason.find(words) != std::string::npos);
+  };
+  StartRequest r;
+  r.cameras = {"nope"};
+  rejected(r, CommandResult::Code::kInvalidOption, "unknown camera 'nope'");
+  r.cameras = {"sim_top", "sim_top"};
+  rejected(r, CommandResult::Code::kInvalidOption, "given twice");
+  r = {};
+  r.delay_s = -1;
+  rejected(r, CommandResult::Code::kInvalidOption, "delay");
+  r.delay_s = 1;
+  r.start_at_ns = sl::pipeline::TimestampNs(4e18);
+  rejected(r, CommandResult::Code::kInvalidOption, "not both");
+  r.delay_s = 0;
+  r.start_at_ns = 1'000'000'000;  // 1970
+  rejected(r, CommandResult::Code::kInvalidOption, "in the past");
+  r = {};
+  r.count = -1;
+  rejected(r, CommandResult::Code::kInvalidCount, "count");
+  CHECK(engine.status().state == ScanState::kIdle);
+
+  // A delayed start waits (and says until when), can be cancelled, and
+  // otherwise begins at its time with its options.
+  r = {};
+  r.delay_s = 30;
+  REQUIRE(engine.start(r).accepted());
+  auto s = engine.status();
+  CHECK(s.state == ScanState::kWaiting);
+  CHECK(s.start_at_ns > sl::pipeline::TimestampNs(29e9) + std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+  CHECK(engine.start(StartRequest{}).code == CommandResult::Code::kBusy);
+  CHECK(engine.stop().accepted());
+  CHECK(engine.status().state == ScanState::kIdle);
+
+  r.delay_s = 0.3;
+  r.count = 1;
+  r.cameras = {"sim_top"};
+  r.motion_compensation = true;
+  const auto requested = std::chrono::steady_clock::now();
+  REQUIRE(engine.start(r).accepted());
+  s = engine.status();
+  CHECK(s.state == ScanState::kWaiting);
+  CHECK(s.motion_compensation);
+  CHECK(s.cameras == std::vector<std::string>{"sim_top"});
+  while (engine.status().state == ScanState::kWaiting &&
+         std::chrono::steady_clock::now() - requested < 3s)
+    std::this_thread::sleep_for(5ms);
+  const auto began = std::chrono::steady_clock::now() - requested;
+  CHECK(began >= 300ms);
+  CHECK(began < 450ms);
+  for (int i = 0; i < 100 && clouds == 0; ++i) std::this_thread::sleep_for(50ms);
+  CHECK(clouds == 1);
+}
+
+TEST_CASE("software trigger is refused when the projector cannot show single patterns") {
+  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  auto projector = std::make_shared<SequenceOnlyProjector>(sim->projector());
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), projector, sim->triggerSource()},
+                                [](const sl::daemon::ScanResult&) {});
+  StartRequest r;
+  r.trigger = TriggerMode::kSoftware;
+  const CommandResult result = engine.start(r);
+  CHECK(result.code == CommandResult::Code::kUnsupported);
+  CHECK(result.reason.find("projector 'sequence_only' cannot show single patterns") !=
+        std::string::npos);
+  // As the configured default, it stops the daemon at start-up instead.
+  auto software = config;
+  software.runtime.trigger = TriggerMode::kSoftware;
+  CHECK_THROWS_WITH(sl::daemon::ScanEngine(software, {sim->cameras(), projector, sim->triggerSource()},
+                                           [](const sl::daemon::ScanResult&) {}),
+                    Catch::Contains("runtime.trigger is software, but projector"));
+}

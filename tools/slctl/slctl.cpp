@@ -1,7 +1,9 @@
 // slctl: command-line client of a running sl_sensord (over DDS).
 //
-//   slctl scan --count N --out DIR [--pattern NAME] [--units mm|m]
-//   slctl start [--pattern NAME] | stop | status | patterns | pattern set NAME
+//   slctl scan --count N --out DIR [--pattern NAME] [--units mm|m] [start options]
+//   slctl start [--pattern NAME] [start options] | stop | status | patterns | pattern set NAME
+// Start options: --trigger hardware|software, --delay S | --at UNIX_SECONDS,
+// --cameras ID[,ID...], --motion on|off.
 // Common options: --domain N, --ns NAMESPACE, --timeout SECONDS.
 #include <chrono>
 #include <cmath>
@@ -42,6 +44,13 @@ constexpr const char* kUsage =
     "  config             print the daemon's configuration file\n"
     "  watch [--count N]  print the status every second (N lines, default until Ctrl-C)\n"
     "  pattern set NAME   select the pattern for the next scans\n"
+    "start options (scan, start, record; default: as the daemon is configured):\n"
+    "  --trigger MODE     hardware (trigger board / projector) or software (project\n"
+    "                     pattern i, wait, grab: no trigger board needed, slower)\n"
+    "  --delay S          start S seconds after the request\n"
+    "  --at T             start at time T (Unix seconds, e.g. $(date -d '+5 sec' +%s))\n"
+    "  --cameras A[,B]    triangulate with these of the pattern's cameras only\n"
+    "  --motion on|off    motion compensation for this request\n"
     "options:\n"
     "  --domain N         DDS domain id (default 0)\n"
     "  --ns NAME          topic namespace (default sl)\n"
@@ -59,7 +68,20 @@ struct Args {
   std::string pattern;
   sl::tools::LengthUnit unit = sl::tools::LengthUnit::kMillimetre;
   bool pcd = false;
+  sl::daemon::StartRequest start;  // options of scan / start / record
+  bool start_options_given = false;
 };
+
+std::vector<std::string> splitCommas(const std::string& text) {
+  std::vector<std::string> parts;
+  std::size_t begin = 0;
+  while (begin <= text.size()) {
+    const std::size_t end = std::min(text.find(',', begin), text.size());
+    parts.push_back(text.substr(begin, end - begin));
+    begin = end + 1;
+  }
+  return parts;
+}
 
 [[noreturn]] void usageError(const std::string& message) {
   std::cerr << "slctl: " << message << "\n" << kUsage;
@@ -105,6 +127,36 @@ Args parseArgs(int argc, char** argv) {
       if (v == "ply") args.pcd = false;
       else if (v == "pcd") args.pcd = true;
       else usageError("--format must be ply or pcd, not '" + v + "'");
+    } else if (a == "--trigger") {
+      const std::string v = value();
+      if (v == "hardware") args.start.trigger = sl::daemon::TriggerMode::kHardware;
+      else if (v == "software") args.start.trigger = sl::daemon::TriggerMode::kSoftware;
+      else usageError("--trigger must be hardware or software, not '" + v + "'");
+      args.start_options_given = true;
+    } else if (a == "--delay") {
+      const std::string v = value();
+      const auto seconds = sl::tools::toNumber(v);
+      if (!seconds || !(*seconds >= 0)) usageError("--delay expects seconds >= 0, not '" + v + "'");
+      args.start.delay_s = *seconds;
+      args.start_options_given = true;
+    } else if (a == "--at") {
+      const std::string v = value();
+      const auto seconds = sl::tools::toNumber(v);
+      if (!seconds || !(*seconds > 0)) usageError("--at expects Unix seconds, not '" + v + "'");
+      args.start.start_at_ns = static_cast<std::int64_t>(*seconds * 1e9);
+      args.start_options_given = true;
+    } else if (a == "--cameras") {
+      const std::string v = value();
+      args.start.cameras = splitCommas(v);
+      for (const auto& id : args.start.cameras)
+        if (id.empty()) usageError("--cameras expects ID[,ID...], not '" + v + "'");
+      args.start_options_given = true;
+    } else if (a == "--motion") {
+      const std::string v = value();
+      if (v == "on") args.start.motion_compensation = true;
+      else if (v == "off") args.start.motion_compensation = false;
+      else usageError("--motion must be on or off, not '" + v + "'");
+      args.start_options_given = true;
     } else if (a == "--units") {
       const std::string v = value();
       if (v == "mm") args.unit = sl::tools::LengthUnit::kMillimetre;
@@ -121,6 +173,10 @@ Args parseArgs(int argc, char** argv) {
   if (args.command.empty()) usageError("no command given");
   // watch and record run until stopped unless --count is given.
   if ((args.command == "watch" || args.command == "record") && !count_given) args.count = 0;
+  if (args.start_options_given && args.command != "scan" && args.command != "start" &&
+      args.command != "record")
+    usageError("--trigger, --delay, --at, --cameras and --motion go with scan, start or record");
+  if (args.start.delay_s > 0 && args.start.start_at_ns != 0) usageError("give --delay or --at, not both");
   return args;
 }
 
@@ -159,6 +215,31 @@ int sendCommand(SensorClient& client, const Args& args, Command command,
   return 0;
 }
 
+// Sends a START with the request's options; returns the exit code (0 = accepted).
+int sendStart(SensorClient& client, const Args& args, const std::string& recording, int count) {
+  sl::daemon::StartRequest request = args.start;
+  request.pattern = args.pattern;
+  request.count = count;
+  request.recording = recording;
+  const auto reply = client.start(request, toMs(args.timeout_s));
+  if (!reply) {
+    std::cerr << "slctl: the daemon did not reply within " << args.timeout_s << " s\n";
+    return 3;
+  }
+  if (!reply->accepted) {
+    std::cerr << "slctl: request rejected (" << sl::daemon::toString(reply->code)
+              << "): " << reply->reason << "\n";
+    return 4;
+  }
+  return 0;
+}
+
+// Seconds from now until a delayed request starts (0 without a delay).
+double secondsUntilStart(const Args& args) {
+  if (args.start.start_at_ns != 0) return std::max(0.0, (args.start.start_at_ns - nowNs()) * 1e-9);
+  return args.start.delay_s;
+}
+
 void progressBar(int done, int total) {
   constexpr int kWidth = 30;
   const int filled = total > 0 ? done * kWidth / total : 0;
@@ -178,18 +259,19 @@ int scan(SensorClient& client, const Args& args) {
     return 1;
   }
   const std::int64_t requested_at = nowNs();
-  if (const int rc = sendCommand(client, args, Command::kStart, args.pattern, args.count))
-    return rc;
+  if (const int rc = sendStart(client, args, "", args.count)) return rc;
+  // The first scan may wait for a delayed start.
+  double wait_s = args.timeout_s + secondsUntilStart(args);
   const char* unit = args.unit == sl::tools::LengthUnit::kMetre ? "m" : "mm";
   // A progress bar on a terminal (stderr), for multi-scan requests.
   const bool show_progress = args.count > 1 && ::isatty(STDERR_FILENO);
   if (show_progress) progressBar(0, args.count);
   const double scale = args.unit == sl::tools::LengthUnit::kMetre ? 1e-3 : 1.0;
   for (int i = 1; i <= args.count; ++i) {
-    const auto cloud = client.receiveCloud(requested_at, toMs(args.timeout_s));
+    const auto cloud = client.receiveCloud(requested_at, toMs(wait_s));
     if (!cloud) {
       std::cerr << "slctl: scan " << i << " of " << args.count << " did not arrive within "
-                << args.timeout_s << " s";
+                << wait_s << " s";
       if (const auto s = client.status(1s); s && !s->last_error.empty())
         std::cerr << " (daemon: " << s->last_error << ")";
       std::cerr << "\n";
@@ -219,6 +301,7 @@ int scan(SensorClient& client, const Args& args) {
     }
     std::fflush(stdout);
     if (show_progress) progressBar(i, args.count);
+    wait_s = args.timeout_s;
   }
   if (show_progress) std::fputs("\n", stderr);
   return 0;
@@ -231,10 +314,22 @@ int printStatus(SensorClient& client, const Args& args) {
   std::printf("pattern:          %s\n", s->pattern.c_str());
   std::printf("scans:            %llu of %s\n", static_cast<unsigned long long>(s->scans_done),
               s->scans_requested ? std::to_string(s->scans_requested).c_str() : "continuous");
+  if (s->state == sl::daemon::ScanState::kWaiting)
+    std::printf("starts in:        %.1f s\n", (s->start_at_ns - nowNs()) * 1e-9);
+  std::printf("trigger:          %s\n", sl::daemon::toString(s->trigger));
+  std::string cameras;
+  for (const auto& id : s->cameras) cameras += (cameras.empty() ? "" : ", ") + id;
+  std::printf("cameras:          %s\n", cameras.c_str());
+  std::printf("motion comp.:     %s\n", s->motion_compensation ? "on" : "off");
   std::printf("scan rate:        %.2f Hz\n", s->scan_rate_hz);
-  std::printf("frames dropped:   %llu\n", static_cast<unsigned long long>(s->frames_dropped));
-  std::printf("sets dropped:     %llu\n", static_cast<unsigned long long>(s->sets_dropped));
-  std::printf("sets incomplete:  %llu\n", static_cast<unsigned long long>(s->sets_incomplete));
+  std::printf("frame rate:       %.1f Hz\n", s->frame_rate_hz);
+  auto u = [](std::uint64_t v) { return static_cast<unsigned long long>(v); };
+  std::printf("frames dropped:   %llu (queue full %llu, unmatched %llu)\n", u(s->frames_dropped),
+              u(s->frames_overflow), u(s->frames_unmatched));
+  std::printf("sets dropped:     %llu (queue full %llu, write timed out %llu, not recorded %llu)\n",
+              u(s->sets_dropped), u(s->sets_overflow), u(s->writes_timed_out),
+              u(s->sets_not_recorded));
+  std::printf("sets incomplete:  %llu\n", u(s->sets_incomplete));
   std::printf("recording:        %s (%llu sets recorded)\n",
               s->recording.empty() ? "-" : s->recording.c_str(),
               static_cast<unsigned long long>(s->sets_recorded));
@@ -251,10 +346,11 @@ int watch(SensorClient& client, const Args& args) {
     if (!s) return noDaemon(args);
     const std::string of =
         s->scans_requested ? std::to_string(s->scans_requested) : std::string("continuous");
-    std::printf("%-8s %-20s scans %6llu of %-10s rate %5.2f Hz  dropped frames %llu sets %llu  "
-                "incomplete %llu%s%s\n",
-                sl::daemon::toString(s->state), s->pattern.c_str(),
+    std::printf("%-8s %-20s %-8s scans %6llu of %-10s rate %5.2f Hz frames %5.1f Hz  dropped "
+                "frames %llu sets %llu  incomplete %llu%s%s\n",
+                sl::daemon::toString(s->state), s->pattern.c_str(), sl::daemon::toString(s->trigger),
                 static_cast<unsigned long long>(s->scans_done), of.c_str(), s->scan_rate_hz,
+                s->frame_rate_hz,
                 static_cast<unsigned long long>(s->frames_dropped),
                 static_cast<unsigned long long>(s->sets_dropped),
                 static_cast<unsigned long long>(s->sets_incomplete),
@@ -278,7 +374,7 @@ int run(const Args& args) {
   if (!client.waitForDaemon(toMs(args.timeout_s))) return noDaemon(args);
   if (args.command == "scan") return scan(client, args);
   if (args.command == "start") {
-    const int rc = sendCommand(client, args, Command::kStart, args.pattern, 0);
+    const int rc = sendStart(client, args, "", 0);
     if (rc == 0) std::printf("scanning continuously; 'slctl stop' ends it\n");
     return rc;
   }
@@ -286,14 +382,7 @@ int run(const Args& args) {
     if (args.positional.size() != 1) usageError("usage: slctl record NAME [--count N]");
     const int count = args.count;
     if (count < 0) usageError("record --count must be >= 0");
-    const auto answer = client.request(Command::kStart, args.pattern, count, toMs(args.timeout_s),
-                                       args.positional[0]);
-    if (!answer) return noDaemon(args);
-    if (!answer->accepted) {
-      std::cerr << "slctl: request rejected (" << sl::daemon::toString(answer->code)
-                << "): " << answer->reason << "\n";
-      return 4;
-    }
+    if (const int rc = sendStart(client, args, args.positional[0], count)) return rc;
     std::printf("recording '%s' (%s); 'slctl stop' ends it\n", args.positional[0].c_str(),
                 count ? (std::to_string(count) + " scans").c_str() : "until stop");
     return 0;

@@ -34,12 +34,20 @@ struct StatusInfo {
   std::string pattern;
   std::uint64_t scans_done = 0, scans_requested = 0;
   double scan_rate_hz = 0;
+  double frame_rate_hz = 0;
   std::uint64_t frames_dropped = 0, sets_dropped = 0, sets_incomplete = 0;
+  // The drops by cause (see sl_msgs/Status.idl).
+  std::uint64_t frames_overflow = 0, frames_unmatched = 0, sets_overflow = 0,
+                writes_timed_out = 0, sets_not_recorded = 0;
   std::string recording;
   std::uint64_t sets_recorded = 0;
   std::string last_error;
   std::vector<std::string> patterns;
   pipeline::TimestampNs stamp_ns = 0;
+  TriggerMode trigger = TriggerMode::kHardware;
+  std::vector<std::string> cameras;
+  bool motion_compensation = false;
+  pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };
@@ -63,6 +71,9 @@ class SensorClient {
   std::optional<CommandReplyInfo> request(Command command, const std::string& pattern, int count,
                                           std::chrono::milliseconds timeout,
                                           const std::string& recording = "");
+  // A start request with options (see StartRequest); nullopt on timeout.
+  std::optional<CommandReplyInfo> start(const StartRequest& request,
+                                        std::chrono::milliseconds timeout);
 
   // Next point cloud stamped at or after `not_before_ns`, converted back to
   // the pipeline type (mm); nullopt on timeout.

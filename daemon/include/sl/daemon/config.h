@@ -44,12 +44,26 @@ struct MotionConfig {
   pipeline::MotionCompensationOptions options;
 };
 
+// How image sets are acquired. kHardware: the projector runs whole sequences
+// and the images are grouped by trigger time (trigger board or projector).
+// kSoftware: the daemon shows pattern i, waits, grabs one image per camera
+// (setups without a trigger board; slower).
+enum class TriggerMode { kHardware, kSoftware };
+const char* toString(TriggerMode mode);
+
+// Software-trigger timing (`software_trigger:`).
+struct SoftwareTriggerConfig {
+  double settle_s = 0.01;       // wait after showing a pattern before triggering the cameras
+  double grab_timeout_s = 1.0;  // longest wait for a triggered image (exposure + transfer)
+};
+
 struct RuntimeConfig {
   int queue_depth = 2;   // image sets / clouds waiting between stages (drop oldest)
   std::string default_pattern;  // selected at startup; first pattern if empty
   // Recordings requested over DDS go to <recording_root>/<name>; absolute
   // after loading (a relative key is resolved against the config file).
   std::string recording_root = "recordings";
+  TriggerMode trigger = TriggerMode::kHardware;  // default of start requests
 };
 
 struct DaemonConfig {
@@ -74,6 +88,7 @@ struct DaemonConfig {
   pipeline::TriangulatorOptions triangulator;
   pipeline::SynchroniserOptions synchroniser;
   MotionConfig motion;
+  SoftwareTriggerConfig software_trigger;
   DdsConfig dds;
   RuntimeConfig runtime;
 

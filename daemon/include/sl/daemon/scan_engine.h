@@ -7,6 +7,11 @@
 //                               +--> event queue -> sync thread -> set queue
 //   trigger thread  --triggers--+                                     |
 //                          output thread <- result queue <- processing thread
+//
+// A control thread starts delayed requests at their time and, in software-
+// trigger mode, acquires the image sets itself (projector stepped pattern by
+// pattern, one grab per camera) straight into the set queue; the camera
+// threads are parked meanwhile.
 #pragma once
 
 #include <atomic>
@@ -14,6 +19,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -26,16 +32,33 @@
 
 namespace sl::daemon {
 
-enum class ScanState { kIdle, kScanning, kError };
+// kWaiting: a start request was accepted and waits for its start time.
+enum class ScanState { kIdle, kScanning, kError, kWaiting };
 const char* toString(ScanState s);
 
 // Outcome of a control request; `code` mirrors the DDS reply codes.
 struct CommandResult {
   enum class Code { kOk, kUnknownPattern, kBusy, kInvalidCount, kInvalidCommand, kDeviceError,
-                    kNotRunning };
+                    kNotRunning, kInvalidOption, kUnsupported };
   Code code = Code::kOk;
   std::string reason;
   bool accepted() const { return code == Code::kOk; }
+};
+
+// One start request. The optional fields left empty keep the configured
+// behaviour.
+struct StartRequest {
+  std::string pattern;        // empty = the current pattern
+  int count = 1;              // scans, 0 = until stop
+  std::string recording;      // also record the image sets under this name ("" = no)
+  std::optional<TriggerMode> trigger;  // default: runtime.trigger
+  double delay_s = 0;         // start this long after the request, [0, 3600] s
+  pipeline::TimestampNs start_at_ns = 0;  // or at this time (system clock); 0 = now
+  // Cameras that triangulate `pattern`: a subset of its configured cameras
+  // (empty = all). The subset applies to that pattern only: after a switch
+  // to another pattern, that pattern's configured cameras triangulate.
+  std::vector<std::string> cameras;
+  std::optional<bool> motion_compensation;  // default: motion_compensation.enabled
 };
 
 struct EngineStatus {
@@ -45,12 +68,22 @@ struct EngineStatus {
   std::uint64_t scans_done = 0;       // of the current / last request
   std::uint64_t scans_requested = 0;  // 0 = continuous
   double scan_rate_hz = 0;            // clouds per second, smoothed
-  std::uint64_t frames_dropped = 0;   // frames lost before grouping (queue overflow, unmatched)
-  std::uint64_t sets_dropped = 0;     // image sets or clouds dropped by a full queue
-  std::uint64_t sets_incomplete = 0;  // sequences purged before all frames arrived
+  double frame_rate_hz = 0;           // camera frames received per second, all cameras
+  std::uint64_t frames_dropped = 0;   // frames_overflow + frames_unmatched
+  std::uint64_t sets_dropped = 0;     // sets_overflow + sets_not_recorded
+  std::uint64_t sets_incomplete = 0;  // sequences purged or abandoned before all frames arrived
+  std::uint64_t frames_overflow = 0;  // the frame queue was full (oldest dropped)
+  std::uint64_t frames_unmatched = 0; // no trigger window took them
+  std::uint64_t sets_overflow = 0;    // a set or result queue was full
+  std::uint64_t sets_not_recorded = 0;  // the recorder fell behind
   std::string recording;              // recording in progress ("" = none)
   std::uint64_t sets_recorded = 0;    // since start-up
   std::string last_error;
+  // The current (or last) request's options as applied.
+  TriggerMode trigger = TriggerMode::kHardware;
+  std::vector<std::string> cameras;   // triangulating the current pattern
+  bool motion_compensation = false;
+  pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
 };
 
 // One scan's results, shared with the output callback.
@@ -89,8 +122,13 @@ class ScanEngine {
 
   // Starts `count` scans (0 = until stop) of `pattern` (empty = current);
   // with a `recording` name, the image sets are also written to
-  // <runtime.recording_root>/<recording> until the request ends.
+  // <runtime.recording_root>/<recording> until the request ends. Rejected
+  // (with a code and a reason naming the option) when scanning or waiting
+  // (kBusy), on a negative count, an unknown pattern, an invalid option, or
+  // a trigger mode the devices cannot do (kUnsupported).
+  CommandResult start(const StartRequest& request);
   CommandResult start(const std::string& pattern, int count, const std::string& recording = "");
+  // Ends a scan, or cancels a start that is still waiting for its time.
   CommandResult stop();
   // Selects the pattern for the next start(); during a continuous scan it
   // switches at once (the sequence in progress is abandoned; no image set
