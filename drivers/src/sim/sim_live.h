@@ -46,7 +46,8 @@ inline constexpr std::int64_t kStartDelayNs = 20'000'000;
 //
 // Software triggering: projectSingle() holds one pattern (no schedule runs);
 // triggerCamera() exposes a frame of it at once, which grab() delivers one
-// frame interval (the exposure) later, before any scheduled frame.
+// frame interval later (exposure and readout at the camera's frame rate),
+// before any scheduled frame.
 class LiveSchedule {
  public:
   // camera_count cameras (>= 1) expose on the same schedule.
