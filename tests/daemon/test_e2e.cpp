@@ -785,8 +785,9 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
     CHECK(std::abs(s.mean_error_mm) < 0.05);
     CHECK(s.outliers < 0.001 * (s.points + s.outliers));
   }
-  // Each pattern costs at least the settle time plus the simulated exposure
-  // (one frame interval): sequences start at least 6 * (10 + 33.3) ms apart,
+  // Each pattern costs at least the settle time plus the simulated camera's
+  // exposure and readout (one frame interval): sequences start at least
+  // 6 * (10 + 33.3) ms apart,
   // against 6 * 33.3 ms with the trigger board.
   const double min_period_s =
       6 * (config.software_trigger.settle_s + config.synchroniser.image_interval_ns * 1e-9);
