@@ -1,19 +1,50 @@
-// sl_eval EXPERIMENT [--scans N] [--out DIR]: runs one of the paper's
-// experiments on the simulated sensor and prints a Markdown table; plots go
-// to DIR (default sl_eval_out). Exit codes: 0 ok, 1 error, 2 usage.
+// sl_eval EXPERIMENT|all [--scans N] [--out DIR]: runs the paper's
+// experiments on the simulated sensor and prints Markdown tables; plots go to
+// DIR (default sl_eval_out). `all` runs every experiment in turn with its
+// default scan count (or N) and reports progress on stderr.
+// Exit codes: 0 ok, 1 error, 2 usage.
+#include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "eval.h"
 
 namespace {
 
 int usage() {
-  std::cerr << "usage: sl_eval EXPERIMENT [--scans N] [--out DIR]\n  experiments:";
+  std::cerr << "usage: sl_eval EXPERIMENT|all [--scans N] [--out DIR]\n  experiments:";
   for (const std::string& n : sl::eval::experimentNames()) std::cerr << ' ' << n;
-  std::cerr << "\n";
+  std::cerr << "\n  --scans N: scans per condition (default: each experiment's own)\n";
   return 2;
+}
+
+void print(const sl::eval::EvalResult& result) {
+  std::cout << result.markdown;
+  for (const std::string& plot : result.plots) std::cout << "\nplot: " << plot << "\n";
+  std::cout << std::flush;
+}
+
+int runAll(const sl::eval::EvalOptions& options) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
+  const std::vector<std::string> names = sl::eval::experimentNames();
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const auto begin = Clock::now();
+    std::fprintf(stderr, "sl_eval: [%zu/%zu] %s ... (elapsed %.0f s)\n", i + 1, names.size(),
+                 names[i].c_str(), seconds(begin - start));
+    const sl::eval::EvalResult result = sl::eval::runExperiment(names[i], options);
+    std::fprintf(stderr, "sl_eval: [%zu/%zu] %s done in %.1f s\n", i + 1, names.size(),
+                 names[i].c_str(), seconds(Clock::now() - begin));
+    if (i > 0) std::cout << "\n";
+    print(result);
+  }
+  std::fprintf(stderr, "sl_eval: all %zu experiments done in %.1f s\n", names.size(),
+               seconds(Clock::now() - start));
+  return 0;
 }
 
 }  // namespace
@@ -32,7 +63,9 @@ int main(int argc, char** argv) {
         options.out_dir = value;
       } else {
         try {
-          options.scans = std::stoi(value);
+          std::size_t used = 0;
+          options.scans = std::stoi(value, &used);
+          if (used != value.size() || options.scans < 1) return usage();
         } catch (const std::exception&) {
           return usage();
         }
@@ -42,9 +75,8 @@ int main(int argc, char** argv) {
     }
   }
   try {
-    const sl::eval::EvalResult result = sl::eval::runExperiment(experiment, options);
-    std::cout << result.markdown;
-    for (const std::string& plot : result.plots) std::cout << "\nplot: " << plot << "\n";
+    if (experiment == "all") return runAll(options);
+    print(sl::eval::runExperiment(experiment, options));
     return 0;
   } catch (const std::invalid_argument& e) {
     std::cerr << "sl_eval: " << e.what() << "\n";
