@@ -51,10 +51,15 @@ EvalResult runMotion(const EvalOptions& options);
 // as the paper's Table 1). Metrics: <camera>_rmse_1_<k>_mm, worst_rmse_mm.
 EvalResult runCones(const EvalOptions& options);
 
-// 4.2 roughness: four rough height fields (seeded, RMS 0.008..0.146 mm as the
-// paper's reference ESDs) at 500 mm; ESD (std of the distances to the
-// best-fit plane) over a 30 cm^2 patch, ground truth vs the sensor. Metrics:
-// S<i>_esd_truth_mm, S<i>_esd_mm.
+// 4.2 roughness: four rough height fields (seeded) at 500 mm, each scaled so
+// that the ESD (std of the orthogonal distances to the best-fit plane) of
+// its surface on a 30 cm^2 patch is the paper's reference ESD (0.008,
+// 0.026, 0.053, 0.146 mm). The sensor's ESD on the patch per scan (averaged
+// over the scans) and of the point-by-point mean of the scans. Metrics:
+// S<i>_esd_truth_mm, S<i>_esd_truth_pixels_mm (truth at the camera's
+// pixels), S<i>_esd_mm, S<i>_esd_error_mm, S<i>_esd_averaged_mm,
+// S<i>_esd_averaged_error_mm, ranked_correctly, ranked_correctly_averaged
+// (1 or 0), noise_esd_mm.
 EvalResult runRoughness(const EvalOptions& options);
 
 // vdi2634: an acceptance test in the spirit of VDI/VDE 2634 part 2 (optical
