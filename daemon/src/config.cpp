@@ -167,6 +167,26 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
   sim.rig = parseCalibrationKeys(calibration);
   calibration.done();
   rig.done();
+  // sim.optics.camera / .projector: thin-lens defocus (f_number 0 = pinhole).
+  const YamlMap optics = m.optionalMap("optics");
+  struct Device {
+    std::string key;
+    drivers::SimLens* lens;
+    const pipeline::PinholeModel* model;
+  };
+  for (const Device& d : {Device{"camera", &sim.camera_lens, &sim.rig.camera},
+                          Device{"projector", &sim.projector_lens, &sim.rig.projector}}) {
+    const YamlMap l = optics.optionalMap(d.key);
+    d.lens->focus_distance_mm = positive(l, "focus_distance_mm", d.lens->focus_distance_mm);
+    d.lens->f_number = nonNegative(l, "f_number", d.lens->f_number);
+    d.lens->pixel_pitch_um = positive(l, "pixel_pitch_um", d.lens->pixel_pitch_um);
+    const double focal_mm = d.model->fx * d.lens->pixel_pitch_um * 1e-3;
+    if (d.lens->f_number > 0 && d.lens->focus_distance_mm <= 2 * focal_mm)
+      l.fail("focus_distance_mm", "must exceed twice the focal length fx * pixel_pitch (" +
+                                      std::to_string(focal_mm) + " mm)");
+    l.done();
+  }
+  optics.done();
   sim.scene = parseScene(m);
   parseSimMotionAndCameras(m, sim);
   m.done();

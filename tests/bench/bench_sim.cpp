@@ -10,7 +10,9 @@
 
 namespace {
 
-sl::drivers::SimConfig benchConfig(int bit_depth, bool noise) {
+// optics: 0 pinhole camera and projector, 1 default defocus (both lenses at
+// f/4 focused at 550 mm), 2 projector defocus only, 3 camera defocus only.
+sl::drivers::SimConfig benchConfig(int bit_depth, bool noise, int optics = 1) {
   sl::drivers::SimConfig c;
   auto& rig = c.rig;
   rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
@@ -27,6 +29,8 @@ sl::drivers::SimConfig benchConfig(int bit_depth, bool noise) {
   p.direction = sl::pipeline::Direction::kBoth;
   c.patterns = {p};
   c.bit_depth = bit_depth;
+  if (optics == 0 || optics == 3) c.projector_lens.f_number = 0;
+  if (optics == 0 || optics == 2) c.camera_lens.f_number = 0;
   if (!noise) {
     c.gain_dn_per_electron = 0;
     c.read_noise_dn = 0;
@@ -34,10 +38,10 @@ sl::drivers::SimConfig benchConfig(int bit_depth, bool noise) {
   return c;
 }
 
-// Args: bit depth, noise on (1) / off (0).
+// Args: bit depth, noise on (1) / off (0), optics (see benchConfig).
 void BM_Render(benchmark::State& state) {
-  const auto sensor =
-      sl::drivers::SimulatedSensor::create(benchConfig(int(state.range(0)), state.range(1) != 0));
+  const auto sensor = sl::drivers::SimulatedSensor::create(
+      benchConfig(int(state.range(0)), state.range(1) != 0, int(state.range(2))));
   std::uint64_t seed = 0;
   int frame = 0;
   for (auto _ : state) {
@@ -47,7 +51,14 @@ void BM_Render(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * 1440 * 1080);
 }
-BENCHMARK(BM_Render)->Args({8, 1})->Args({12, 1})->Args({8, 0})->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Render)
+    ->Args({8, 1, 1})
+    ->Args({12, 1, 1})
+    ->Args({8, 0, 1})
+    ->Args({8, 1, 0})
+    ->Args({8, 1, 2})
+    ->Args({8, 1, 3})
+    ->Unit(benchmark::kMillisecond);
 
 void BM_CreateScene(benchmark::State& state) {
   const sl::drivers::SimConfig config = benchConfig(8, true);

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "sl/daemon/config.h"
+#include "sl/drivers/sim.h"
 
 namespace {
 
@@ -74,6 +75,43 @@ TEST_CASE("sim config: projector response, exposure and gain keys", "[sim][confi
            "key 'sim.radiometry.reference_exposure_ms': expected a number"});
   INFO("inserted: " << c.lines);
   const std::string message = errorOf(withRadiometry(c.lines));
+  INFO("message: " << message);
+  CHECK(message.rfind("test.yaml:", 0) == 0);
+  CHECK(message.find(c.expected) != std::string::npos);
+}
+
+TEST_CASE("sim config: optics keys", "[sim][config]") {
+  const auto plain = sl::daemon::parseConfig(shippedSimConfig(), "test.yaml");
+  const sl::drivers::SimConfig defaults;
+  // The shipped file states the built-in defaults.
+  CHECK(plain.sim.camera_lens.f_number == defaults.camera_lens.f_number);
+  CHECK(plain.sim.camera_lens.focus_distance_mm == defaults.camera_lens.focus_distance_mm);
+  CHECK(plain.sim.camera_lens.pixel_pitch_um == defaults.camera_lens.pixel_pitch_um);
+  CHECK(plain.sim.projector_lens.f_number == defaults.projector_lens.f_number);
+  CHECK(plain.sim.projector_lens.pixel_pitch_um == defaults.projector_lens.pixel_pitch_um);
+
+  auto withCameraLens = [](const std::string& from, const std::string& to) {
+    std::string text = shippedSimConfig();
+    const auto at = text.find(from);
+    REQUIRE(at != std::string::npos);
+    return text.replace(at, from.size(), to);
+  };
+  const std::string lens = "camera:    {focus_distance_mm: 550, f_number: 4, pixel_pitch_um: 3.45}";
+  const auto pinhole = sl::daemon::parseConfig(
+      withCameraLens(lens, "camera: {f_number: 0}"), "t.yaml");
+  CHECK(pinhole.sim.camera_lens.f_number == 0);
+
+  struct Case {
+    std::string to, expected;
+  };
+  const auto c = GENERATE(
+      Case{"camera: {f_number: -2}", "key 'sim.optics.camera.f_number': must be >= 0"},
+      Case{"camera: {f_number: wide}", "key 'sim.optics.camera.f_number': expected a number"},
+      Case{"camera: {focus_distance_mm: 10}",
+           "key 'sim.optics.camera.focus_distance_mm': must exceed twice the focal length"},
+      Case{"camera: {aperture: 2}", "unknown key 'sim.optics.camera.aperture'"});
+  INFO("camera lens: " << c.to);
+  const std::string message = errorOf(withCameraLens(lens, c.to));
   INFO("message: " << message);
   CHECK(message.rfind("test.yaml:", 0) == 0);
   CHECK(message.find(c.expected) != std::string::npos);

@@ -32,19 +32,22 @@ sl::pipeline::CameraProjectorCalibration defaultRig() {
 }
 
 // A matte wall at 550 mm, noise off, 16-bit ADC (so quantisation does not
-// mask sub-milliradian effects), one 3+3 column-encoding pattern.
-SimConfig wallConfig() {
+// mask sub-milliradian effects), pinhole optics, one 3+3 column-encoding
+// pattern.
+SimConfig wallConfig(int fringes = kFringes) {
   SimConfig c;
   c.rig = defaultRig();
   sl::pipeline::PhaseShift33Pattern p;
   p.name = "3+3";
-  p.fringes = kFringes;
+  p.fringes = fringes;
   c.patterns = {p};
   c.scene.planes = {SimPlane{{0, 0, 550}, {0, 0, -1}, 0.8}};
   c.gain_dn_per_electron = 0;
   c.read_noise_dn = 0;
   c.bit_depth = 16;
   c.projector_brightness_dn = 150;
+  c.camera_lens.f_number = 0;  // pinhole optics unless a test says otherwise
+  c.projector_lens.f_number = 0;
   return c;
 }
 
@@ -226,4 +229,136 @@ TEST_CASE("exposure scales signal and ambient; gain scales signal and noise; ADC
   bad = base;
   bad.analog_gain = 0;
   CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("analog_gain"));
+}
+
+namespace {
+
+// 3-step modulation B of the fine fringes (frames 0..2) at (row, col).
+double modulationAt(const std::vector<cv::Mat>& images, int row, int col) {
+  const double i0 = images[0].at<std::uint16_t>(row, col);
+  const double i1 = images[1].at<std::uint16_t>(row, col);
+  const double i2 = images[2].at<std::uint16_t>(row, col);
+  return std::sqrt(3 * (i1 - i2) * (i1 - i2) + (2 * i0 - i1 - i2) * (2 * i0 - i1 - i2)) / 3;
+}
+
+std::vector<cv::Mat> fineFringes(const SimulatedSensor& sensor) {
+  std::vector<cv::Mat> images;
+  for (int f = 0; f < 3; ++f) images.push_back(sensor.render("3+3", f, 0));
+  return images;
+}
+
+// The wall with 120 fringes across the projector (period 15.2 projector px).
+constexpr int kFineFringes = 120;
+SimConfig fineWall() { return wallConfig(kFineFringes); }
+
+struct MtfComparison {
+  double mean_measured = 0, mean_expected = 0, max_error = 0;
+  int pixels = 0;
+};
+
+// Ratio of the blurred to the sharp modulation against the Gaussian MTF
+// exp(-2 pi^2 sigma^2 / T^2), per pixel of the image's central region.
+template <typename Expected>
+MtfComparison compareMtf(const SimulatedSensor& sharp, const SimulatedSensor& blurred,
+                         Expected expected) {
+  const std::vector<cv::Mat> a = fineFringes(sharp), b = fineFringes(blurred);
+  const cv::Mat& lit = sharp.groundTruth().lit;
+  MtfComparison m;
+  for (int r = 200; r < 880; r += 7)
+    for (int c = 300; c < 1140; c += 7) {
+      if (!lit.at<std::uint8_t>(r, c)) continue;
+      const double reference = modulationAt(a, r, c);
+      if (reference < 1000) continue;  // 16-bit DN
+      const double measured = modulationAt(b, r, c) / reference;
+      const double model = expected(r, c);
+      m.mean_measured += measured;
+      m.mean_expected += model;
+      m.max_error = std::max(m.max_error, std::abs(measured - model));
+      ++m.pixels;
+    }
+  REQUIRE(m.pixels > 5000);
+  m.mean_measured /= m.pixels;
+  m.mean_expected /= m.pixels;
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("projector defocus: fringe modulation falls as the Gaussian MTF of the thin lens",
+          "[sim][optics][defocus]") {
+  const auto sharp = SimulatedSensor::create(fineWall());
+  SimConfig config = fineWall();
+  // Focused at 1 m, wide open: the wall at ~0.55 m is blurred by ~2.6 px.
+  config.projector_lens = {1000, 2, 5.4};
+  const auto blurred = SimulatedSensor::create(config);
+  const cv::Mat& xyz = sharp->groundTruth().xyz_mm;
+  const double period = 1824.0 / kFineFringes;
+  const sl::drivers::SimLens& lens = config.projector_lens;
+  const double fx = 0.5 * (config.rig.projector.fx + config.rig.projector.fy);
+  double max_sigma = 0;
+  const MtfComparison m = compareMtf(*sharp, *blurred, [&](int r, int c) {
+    const cv::Vec3f p = xyz.at<cv::Vec3f>(r, c);
+    const Eigen::Vector3d in_projector = config.rig.R * Eigen::Vector3d(p[0], p[1], p[2]) +
+                                         config.rig.t;
+    const double sigma = lens.blurSigmaPx(in_projector.z(), fx);
+    max_sigma = std::max(max_sigma, sigma);
+    return std::exp(-2 * kPi * kPi * sigma * sigma / (period * period));
+  });
+  INFO("pixels " << m.pixels << ", mean modulation ratio " << m.mean_measured << " (model "
+                 << m.mean_expected << "), max |error| " << m.max_error << ", sigma up to "
+                 << max_sigma << " px");
+  CHECK(max_sigma > 2);
+  CHECK(m.mean_expected < 0.7);  // a clearly visible loss
+  CHECK(m.mean_measured == Approx(m.mean_expected).margin(0.005));
+  CHECK(m.max_error < 0.015);
+}
+
+TEST_CASE("camera defocus: fringe modulation falls as the Gaussian MTF of the thin lens",
+          "[sim][optics][defocus]") {
+  const auto sharp = SimulatedSensor::create(fineWall());
+  SimConfig config = fineWall();
+  config.camera_lens = {1000, 2, 3.45};  // the wall at 0.55 m: ~2 px
+  const auto blurred = SimulatedSensor::create(config);
+  const cv::Mat& up = sharp->groundTruth().up;
+  const cv::Mat& depth = sharp->groundTruth().depth_mm;
+  const double period = 1824.0 / kFineFringes;  // projector px
+  const double fx = 0.5 * (config.rig.camera.fx + config.rig.camera.fy);
+  double max_sigma = 0;
+  const MtfComparison m = compareMtf(*sharp, *blurred, [&](int r, int c) {
+    const double sigma = config.camera_lens.blurSigmaPx(depth.at<float>(r, c), fx);
+    max_sigma = std::max(max_sigma, sigma);
+    // The fringe period in the camera image: projector period / |grad up|.
+    const double du = 0.5 * (up.at<float>(r, c + 1) - up.at<float>(r, c - 1));
+    const double dv = 0.5 * (up.at<float>(r + 1, c) - up.at<float>(r - 1, c));
+    const double camera_period = period / std::hypot(du, dv);
+    return std::exp(-2 * kPi * kPi * sigma * sigma / (camera_period * camera_period));
+  });
+  INFO("pixels " << m.pixels << ", mean modulation ratio " << m.mean_measured << " (model "
+                 << m.mean_expected << "), max |error| " << m.max_error << ", sigma up to "
+                 << max_sigma << " px");
+  CHECK(max_sigma > 1.5);
+  CHECK(m.mean_expected < 0.85);
+  CHECK(m.mean_measured == Approx(m.mean_expected).margin(0.01));
+  CHECK(m.max_error < 0.03);
+}
+
+TEST_CASE("default lenses: a wall near the focus keeps its modulation; f_number 0 is a pinhole",
+          "[sim][optics][defocus]") {
+  const auto sharp = SimulatedSensor::create(fineWall());
+  SimConfig config = fineWall();
+  config.camera_lens = SimConfig{}.camera_lens;
+  config.projector_lens = SimConfig{}.projector_lens;
+  REQUIRE(config.camera_lens.f_number > 0);
+  const auto defaults = SimulatedSensor::create(config);
+  const MtfComparison m = compareMtf(*sharp, *defaults, [](int, int) { return 1.0; });
+  INFO("mean modulation ratio " << m.mean_measured << ", max |1 - ratio| " << m.max_error);
+  CHECK(m.mean_measured > 0.99);
+  CHECK(m.max_error < 0.02);
+
+  SimConfig bad = fineWall();
+  bad.camera_lens.f_number = -1;
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("camera_lens.f_number"));
+  bad = fineWall();
+  bad.projector_lens = {10, 2, 5.4};  // focus inside twice the focal length (11.9 mm)
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("projector_lens.focus_distance_mm"));
 }

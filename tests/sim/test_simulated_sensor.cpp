@@ -252,6 +252,9 @@ TEST_CASE("radiometry without noise equals the model within quantisation", "[sim
   config.scene.planes = {tilted};
   config.gain_dn_per_electron = 0;
   config.read_noise_dn = 0;
+  // Pinhole optics: the model below has no defocus (see test_sim_optics).
+  config.camera_lens.f_number = 0;
+  config.projector_lens.f_number = 0;
   const int bit_depth = GENERATE(8, 12, 16);
   config.bit_depth = bit_depth;
   const auto sensor = SimulatedSensor::create(config);

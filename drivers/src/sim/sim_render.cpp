@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include <opencv2/imgproc.hpp>
+
 namespace sl::drivers::sim {
 
 namespace {
@@ -40,13 +42,42 @@ const std::array<float, kTableSize>& normalTable() {
   return table;
 }
 
-// Per-pixel kernel. kNoise = false skips the noise draws (exact model values);
-// kLinear = false maps each texel through the projector's response.
-template <typename Pixel, bool kNoise, bool kLinear>
-void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const SensorResponse& r,
-                const float* light, std::uint64_t noise_seed, cv::Mat& out) {
+// Noise-free signal (8-bit DN, before exposure and gain) of one row, from
+// the 8-bit pattern image (kLinear = false: through the projector response,
+// `light`) or, Texel = uint16_t, from the light image (1/256 units).
+template <typename Texel, bool kLinear>
+void signalRow(const RenderMaps& maps, const Texel* texture, const float* light, int row,
+               float* signal) {
   const int width = maps.width;
   const std::ptrdiff_t stride = maps.texture_width;
+  const std::size_t base = static_cast<std::size_t>(row) * width;
+  const float* ambient = maps.ambient_dn.data() + base;
+  const float* per_level = maps.projector_dn_per_level.data() + base;
+  const std::int32_t* texel = maps.texel_index.data() + base;
+  const float* wx = maps.weight_x.data() + base;
+  const float* wy = maps.weight_y.data() + base;
+  const float unit = sizeof(Texel) == 1 ? 1.0f : 1.0f / 256.0f;
+  for (int c = 0; c < width; ++c) {
+    const Texel* t = texture + texel[c];
+    float t00 = t[0], t01 = t[1], t10 = t[stride], t11 = t[stride + 1];
+    if constexpr (!kLinear) {
+      t00 = light[t[0]];
+      t01 = light[t[1]];
+      t10 = light[t[stride]];
+      t11 = light[t[stride + 1]];
+    }
+    const float top = t00 + wx[c] * (t01 - t00);
+    const float bottom = t10 + wx[c] * (t11 - t10);
+    const float level = top + wy[c] * (bottom - top);  // 0..255 (or * 256)
+    signal[c] = ambient[c] + per_level[c] * unit * level;
+  }
+}
+
+// Noise, exposure and gain, ADC scale, rounding and saturation of one row
+// (no branches, vectorisable). z: standard normal variates (kNoise only).
+template <typename Pixel, bool kNoise>
+void finishRow(const float* signal, const float* z, const SensorResponse& r, int width,
+               Pixel* dst) {
   const float scale = static_cast<float>(r.signal_scale);
   const float shot_gain = static_cast<float>(r.gain_dn_per_electron);
   const float read_variance = static_cast<float>(r.read_noise_dn * r.read_noise_dn);
@@ -54,41 +85,82 @@ void renderRows(const RenderMaps& maps, const std::uint8_t* texture, const Senso
   const float to_output = full_scale / 255.0f;
   // Round to nearest by truncating value + 0.5; the upper bound truncates to full scale.
   const float upper = full_scale + 0.5f;
+  for (int c = 0; c < width; ++c) {
+    float s = signal[c] * scale;
+    if constexpr (kNoise) s += std::sqrt(shot_gain * s + read_variance) * z[c];
+    const float value = std::min(std::max(s * to_output + 0.5f, 0.0f), upper);
+    dst[c] = static_cast<Pixel>(static_cast<int>(value));
+  }
+}
 
-  NormalSource normals(noise_seed);
-  std::vector<float> signal(width);
-  std::vector<float> z(kNoise ? width : 0);
-  for (int row = 0; row < maps.height; ++row) {
-    const std::size_t base = static_cast<std::size_t>(row) * width;
-    const float* ambient = maps.ambient_dn.data() + base;
-    const float* per_level = maps.projector_dn_per_level.data() + base;
-    const std::int32_t* texel = maps.texel_index.data() + base;
-    const float* wx = maps.weight_x.data() + base;
-    const float* wy = maps.weight_y.data() + base;
-    // Pass 1 (gathers, scalar): noise-free signal in 8-bit DN.
-    for (int c = 0; c < width; ++c) {
-      const std::uint8_t* t = texture + texel[c];
-      float t00 = t[0], t01 = t[1], t10 = t[stride], t11 = t[stride + 1];
-      if constexpr (!kLinear) {
-        t00 = light[t[0]];
-        t01 = light[t[1]];
-        t10 = light[t[stride]];
-        t11 = light[t[stride + 1]];
+// The camera's defocus on `signal` (camera size, CV_32FC1): `passes`
+// passes of the separable 3-tap kernel [a, 1 - 2a, a] with each pixel's own
+// a (variance 2a per pass and axis), gathering from its neighbours; image
+// edges replicate.
+void blurCameraImage(const RenderMaps& maps, int passes, cv::Mat& signal) {
+  const int width = maps.width, height = maps.height;
+  thread_local std::vector<float> line, previous;
+  line.resize(static_cast<std::size_t>(width) + 2);
+  previous.resize(static_cast<std::size_t>(width));
+  for (int pass = 0; pass < passes; ++pass) {
+    for (int row = 0; row < height; ++row) {  // along x
+      float* s = signal.ptr<float>(row);
+      const float* a = maps.camera_blur_a.data() + static_cast<std::size_t>(row) * width;
+      std::copy(s, s + width, line.begin() + 1);
+      line[0] = s[0];
+      line[static_cast<std::size_t>(width) + 1] = s[width - 1];
+      const float* l = line.data() + 1;
+      for (int c = 0; c < width; ++c) s[c] = l[c] + a[c] * (l[c - 1] + l[c + 1] - 2 * l[c]);
+    }
+    // Along y, keeping the unfiltered previous row.
+    std::copy(signal.ptr<float>(0), signal.ptr<float>(0) + width, previous.begin());
+    for (int row = 0; row < height; ++row) {
+      float* s = signal.ptr<float>(row);
+      const float* below = signal.ptr<float>(std::min(row + 1, height - 1));
+      const float* a = maps.camera_blur_a.data() + static_cast<std::size_t>(row) * width;
+      float* above = previous.data();
+      for (int c = 0; c < width; ++c) {
+        const float centre = s[c];
+        s[c] = centre + a[c] * (above[c] + below[c] - 2 * centre);
+        above[c] = centre;
       }
-      const float top = t00 + wx[c] * (t01 - t00);
-      const float bottom = t10 + wx[c] * (t11 - t10);
-      const float level = top + wy[c] * (bottom - top);  // 0..255
-      signal[c] = (ambient[c] + per_level[c] * level) * scale;
     }
-    // Pass 2 (no branches, vectorisable): noise, ADC scale, rounding, saturation.
+  }
+}
+
+template <typename Pixel, bool kNoise>
+void renderInto(const RenderMaps& maps, const ProjectorFrame& frame, const SensorResponse& r,
+                const ProjectorResponse& projector, int camera_blur_passes,
+                std::uint64_t noise_seed, cv::Mat& out) {
+  const int width = maps.width;
+  auto signalRowOf = [&](int row, float* signal) {
+    if (!frame.light.empty())
+      signalRow<std::uint16_t, true>(maps, frame.light.ptr<std::uint16_t>(), nullptr, row, signal);
+    else if (projector.linear)
+      signalRow<std::uint8_t, true>(maps, frame.image.ptr<std::uint8_t>(), nullptr, row, signal);
+    else
+      signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(),
+                                     projector.light.data(), row, signal);
+  };
+  NormalSource normals(noise_seed);
+  std::vector<float> z(kNoise ? width : 0);
+  if (camera_blur_passes == 0) {
+    // Row by row: the signal row stays in cache.
+    std::vector<float> signal(width);
+    for (int row = 0; row < maps.height; ++row) {
+      signalRowOf(row, signal.data());
+      if constexpr (kNoise) normals.fill(z.data(), width);
+      finishRow<Pixel, kNoise>(signal.data(), z.data(), r, width, out.ptr<Pixel>(row));
+    }
+    return;
+  }
+  thread_local cv::Mat signal;
+  signal.create(maps.height, width, CV_32FC1);
+  for (int row = 0; row < maps.height; ++row) signalRowOf(row, signal.ptr<float>(row));
+  blurCameraImage(maps, camera_blur_passes, signal);
+  for (int row = 0; row < maps.height; ++row) {
     if constexpr (kNoise) normals.fill(z.data(), width);
-    Pixel* dst = out.ptr<Pixel>(row);
-    for (int c = 0; c < width; ++c) {
-      float s = signal[c];
-      if constexpr (kNoise) s += std::sqrt(shot_gain * s + read_variance) * z[c];
-      const float value = std::min(std::max(s * to_output + 0.5f, 0.0f), upper);
-      dst[c] = static_cast<Pixel>(static_cast<int>(value));
-    }
+    finishRow<Pixel, kNoise>(signal.ptr<float>(row), z.data(), r, width, out.ptr<Pixel>(row));
   }
 }
 
@@ -148,33 +220,123 @@ ProjectorResponse makeProjectorResponse(double gamma, const std::vector<double>&
   return r;
 }
 
-cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
+cv::Mat renderImage(const RenderMaps& maps, const ProjectorFrame& frame,
                     const SensorResponse& response, std::uint64_t noise_seed,
-                    const ProjectorResponse& projector) {
-  if (pattern_image.type() != CV_8UC1 || pattern_image.cols != maps.texture_width ||
-      !pattern_image.isContinuous())
+                    const ProjectorResponse& projector, int camera_blur_passes) {
+  const cv::Mat& texture = frame.light.empty() ? frame.image : frame.light;
+  if (texture.type() != (frame.light.empty() ? CV_8UC1 : CV_16UC1) ||
+      texture.cols != maps.texture_width || !texture.isContinuous())
     throw std::invalid_argument(
-        "renderImage: pattern image must be continuous CV_8UC1 of the "
+        "renderImage: pattern image must be continuous CV_8UC1 (light CV_16UC1) of the "
         "projector's width");
+  if (camera_blur_passes > 0 && maps.camera_blur_a.size() != maps.ambient_dn.size())
+    throw std::invalid_argument("renderImage: camera blur not assigned to the maps");
   const bool noise = response.gain_dn_per_electron > 0 || response.read_noise_dn > 0;
-  const std::uint8_t* texture = pattern_image.ptr<std::uint8_t>();
-  const float* light = projector.light.data();
   cv::Mat out(maps.height, maps.width, response.bit_depth == 8 ? CV_8UC1 : CV_16UC1);
   auto run = [&]<typename Pixel>() {
-    if (noise && projector.linear)
-      renderRows<Pixel, true, true>(maps, texture, response, light, noise_seed, out);
-    else if (noise)
-      renderRows<Pixel, true, false>(maps, texture, response, light, noise_seed, out);
-    else if (projector.linear)
-      renderRows<Pixel, false, true>(maps, texture, response, light, noise_seed, out);
+    if (noise)
+      renderInto<Pixel, true>(maps, frame, response, projector, camera_blur_passes, noise_seed,
+                              out);
     else
-      renderRows<Pixel, false, false>(maps, texture, response, light, noise_seed, out);
+      renderInto<Pixel, false>(maps, frame, response, projector, camera_blur_passes, noise_seed,
+                               out);
   };
   if (response.bit_depth == 8)
     run.template operator()<std::uint8_t>();
   else
     run.template operator()<std::uint16_t>();
   return out;
+}
+
+cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
+                    const SensorResponse& response, std::uint64_t noise_seed,
+                    const ProjectorResponse& projector) {
+  ProjectorFrame frame;
+  frame.image = pattern_image;
+  return renderImage(maps, frame, response, noise_seed, projector, 0);
+}
+
+void BlurLevels::locate(double sigma, int& k, float& weight) const {
+  const std::size_t n = sigma_px.size();
+  std::size_t i = 0;
+  while (i + 2 < n && sigma_px[i + 1] <= sigma) ++i;
+  k = static_cast<int>(i);
+  const double v0 = sigma_px[i] * sigma_px[i], v1 = sigma_px[i + 1] * sigma_px[i + 1];
+  weight = static_cast<float>(std::clamp((sigma * sigma - v0) / (v1 - v0), 0.0, 1.0));
+}
+
+BlurLevels chooseBlurLevels(double min_sigma, double max_sigma, double ratio, int max_levels) {
+  BlurLevels levels;
+  constexpr double kNegligible = 0.15, kFirstMax = 1.0;
+  if (!(max_sigma >= kNegligible)) return levels;
+  // 0, then the first level at max_sigma if that is within 1 px (a mild
+  // blur: the blend of sharp and blurred is the Gaussian to second order),
+  // else at 1 px and growing by `ratio`, enough that max_levels suffice.
+  std::vector<double> all{0.0, std::min(max_sigma, kFirstMax)};
+  ratio = std::max(ratio, std::pow(max_sigma / all.back(), 1.0 / std::max(max_levels - 2, 1)));
+  while (all.back() < max_sigma * (1 - 1e-9)) all.push_back(std::min(all.back() * ratio, max_sigma));
+  // Keep the levels that bracket [min_sigma, max_sigma].
+  std::size_t first = 0;
+  while (first + 2 < all.size() && all[first + 1] <= min_sigma) ++first;
+  levels.sigma_px.assign(all.begin() + static_cast<std::ptrdiff_t>(first), all.end());
+  return levels;
+}
+
+ProjectorFrame makeProjectorFrame(const cv::Mat& pattern_image, const ProjectorResponse& response,
+                                  const BlurLevels& levels, const cv::Mat& sigma_px) {
+  ProjectorFrame frame;
+  frame.image = pattern_image;
+  if (!levels.active()) return frame;
+  cv::Mat light(pattern_image.size(), CV_32FC1);
+  for (int r = 0; r < pattern_image.rows; ++r) {
+    const std::uint8_t* in = pattern_image.ptr<std::uint8_t>(r);
+    float* out = light.ptr<float>(r);
+    for (int c = 0; c < pattern_image.cols; ++c) out[c] = response.light[in[c]];
+  }
+  std::vector<cv::Mat> copies;
+  for (double sigma : levels.sigma_px) {
+    copies.emplace_back();
+    // No light comes from outside the DMD: the border is dark.
+    if (sigma > 0)
+      cv::GaussianBlur(light, copies.back(), cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
+    else
+      copies.back() = light;
+  }
+  frame.light.create(pattern_image.size(), CV_16UC1);
+  std::vector<const float*> rows(copies.size());
+  for (int r = 0; r < pattern_image.rows; ++r) {
+    for (std::size_t k = 0; k < copies.size(); ++k) rows[k] = copies[k].ptr<float>(r);
+    const float* sigma = sigma_px.ptr<float>(r);
+    std::uint16_t* out = frame.light.ptr<std::uint16_t>(r);
+    for (int c = 0; c < pattern_image.cols; ++c) {
+      int k = 0;
+      float w = 0;
+      levels.locate(sigma[c], k, w);
+      const float a = rows[static_cast<std::size_t>(k)][c];
+      const float b = rows[static_cast<std::size_t>(k) + 1][c];
+      out[c] = cv::saturate_cast<std::uint16_t>(256.0f * (a + w * (b - a)));
+    }
+  }
+  return frame;
+}
+
+int cameraBlurPasses(double max_sigma) {
+  constexpr double kNegligible = 0.15, kMaxVariancePerPass = 0.64;
+  if (!(max_sigma >= kNegligible)) return 0;
+  return static_cast<int>(std::ceil(max_sigma * max_sigma / kMaxVariancePerPass));
+}
+
+void assignCameraBlur(RenderMaps& maps, int passes, const SimLens& lens, double fx_px) {
+  const std::size_t n = maps.ambient_dn.size();
+  maps.camera_blur_a.assign(n, 0.0f);
+  for (std::size_t i = 0; i < n; ++i) {
+    const float z = maps.camera_depth_mm[i];
+    if (!(z > 0)) continue;  // no surface: no light to spread
+    const double sigma = lens.blurSigmaPx(z, fx_px);
+    // Variance sigma^2 per axis split over the passes; beyond the passes
+    // planned for (a moving sensor) the kernel is kept non-negative.
+    maps.camera_blur_a[i] = static_cast<float>(std::min(sigma * sigma / (2.0 * passes), 0.45));
+  }
 }
 
 }  // namespace sl::drivers::sim

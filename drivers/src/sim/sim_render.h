@@ -46,8 +46,57 @@ struct ProjectorResponse {
 // Throws std::invalid_argument naming the bad field.
 ProjectorResponse makeProjectorResponse(double gamma, const std::vector<double>& samples);
 
-// The camera image of one pattern frame. pattern_image is the projector image
-// (CV_8UC1, maps.texture_width wide); the same seed gives the same image.
+// Defocus blur levels of the projector: Gaussian sigmas (px, ascending) at
+// which blurred copies of each pattern are made. A pixel whose sigma lies between two levels
+// gets the blend of those two copies, linear in variance (exact for the
+// Gaussian MTF to first order); outside the range it is clamped to the end
+// levels. Inactive (no blur anywhere) with fewer than two levels.
+struct BlurLevels {
+  std::vector<double> sigma_px;
+
+  bool active() const { return sigma_px.size() >= 2; }
+  // Lower level k in [0, size - 2] and the weight of level k + 1.
+  void locate(double sigma, int& k, float& weight) const;
+};
+
+// Levels covering sigmas in [min_sigma, max_sigma]: 0, then min(max_sigma,
+// 1 px), then growing by `ratio` (or faster, so that at most max_levels are
+// used) up to max_sigma; only those bracketing the range are kept. Inactive
+// when max_sigma < 0.15 px (a blur that small changes nothing a pixel grid
+// can show).
+BlurLevels chooseBlurLevels(double min_sigma, double max_sigma, double ratio, int max_levels);
+
+// A pattern frame as the renderer samples it. Without projector blur: the
+// 8-bit projector image (the response is applied per texel). With it: the
+// light the projector sends through each pixel's direction (response
+// applied, 0..255 in units of 1/256), blurred by the projector's defocus.
+struct ProjectorFrame {
+  cv::Mat image;  // CV_8UC1 pattern levels
+  cv::Mat light;  // CV_16UC1 light * 256, or empty (then image is sampled)
+};
+
+// The projector's defocus in projector space: the light of each pixel p is
+// the pattern blurred by a Gaussian of sigma(p), the sigma for the depth of
+// the surface p lights (depth_mm, projector size; 0: no surface, no blur).
+// Blurred copies are made at each of `levels` and blended per pixel,
+// linear in variance. Inactive levels: no light image (the pattern itself).
+ProjectorFrame makeProjectorFrame(const cv::Mat& pattern_image, const ProjectorResponse& response,
+                                  const BlurLevels& levels, const cv::Mat& sigma_px);
+
+// Camera blur: passes of a per-pixel 3-tap kernel [a, 1 - 2a, a] along x
+// and y (variance 2a each), repeated often enough that a <= 0.32: a Gaussian
+// of variance sigma^2 to second order, and cheap for the fraction of a pixel
+// a mild defocus spreads. 0 passes below sigma 0.15 px (no blur).
+int cameraBlurPasses(double max_sigma);
+// Sets maps.camera_blur_a from the camera depths: a = sigma^2 / (2 passes).
+void assignCameraBlur(RenderMaps& maps, int passes, const SimLens& lens, double fx_px);
+
+// The camera image of one pattern frame; the same seed gives the same
+// image. camera_blur_passes: as assignCameraBlur used (0: sharp).
+cv::Mat renderImage(const RenderMaps& maps, const ProjectorFrame& frame,
+                    const SensorResponse& response, std::uint64_t noise_seed,
+                    const ProjectorResponse& projector = {}, int camera_blur_passes = 0);
+// Unblurred 8-bit pattern image: the same as a ProjectorFrame without light.
 cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
                     const SensorResponse& response, std::uint64_t noise_seed,
                     const ProjectorResponse& projector = {});

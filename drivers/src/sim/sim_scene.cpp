@@ -401,6 +401,11 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
   maps.texel_index.assign(n, 0);
   maps.weight_x.assign(n, 0.0f);
   maps.weight_y.assign(n, 0.0f);
+  const bool camera_depths = config.camera_lens.f_number > 0;
+  if (camera_depths)
+    maps.camera_depth_mm.assign(n, 0.0f);
+  else
+    maps.camera_depth_mm.clear();
 
   const double inf = std::numeric_limits<double>::infinity();
   const SimScene& planes_scene = scene.scene();
@@ -426,6 +431,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
     bool lit = false;
     float ambient = 0, per_level = 0;
     double up = 0, vp = 0;
+    double camera_z = 0;  // mm along the camera's optical axis (0: no surface)
   };
   auto castPixel = [&](int col, int row) {
     Sample out;
@@ -437,6 +443,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
     if (!hit) return out;
     out.primitive = hit->primitive;
     const Eigen::Vector3d point_camera = hit->distance * ray;
+    out.camera_z = point_camera.z();
     const Eigen::Vector3d point = camera_center + hit->distance * ray_scene;  // scene frame
     if (with_ground_truth) {
       gt.depth_mm.ptr<float>(row)[col] = static_cast<float>(point_camera.z());
@@ -490,6 +497,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
   auto store = [&](int col, int row, const Sample& sample) {
     const std::size_t i = static_cast<std::size_t>(row) * width + col;
     maps.ambient_dn[i] = sample.ambient;
+    if (camera_depths) maps.camera_depth_mm[i] = static_cast<float>(sample.camera_z);
     if (!sample.lit) return;
     maps.projector_dn_per_level[i] = sample.per_level;
     // Bilinear sampling at the pixel centres, clamped to the image edge.
@@ -533,6 +541,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
         static_cast<float>(mix(s00.per_level, s01.per_level, s10.per_level, s11.per_level));
     s.up = mix(s00.up, s01.up, s10.up, s11.up);
     s.vp = mix(s00.vp, s01.vp, s10.vp, s11.vp);
+    s.camera_z = mix(s00.camera_z, s01.camera_z, s10.camera_z, s11.camera_z);
     return s;
   };
   for (std::size_t gy = 0; gy + 1 < grid_rows.size(); ++gy) {
@@ -573,6 +582,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
           const float p0 = left.per_level, dp = (right.per_level - left.per_level) * inv_w;
           const float u0 = float(left.up), du = float(right.up - left.up) * inv_w;
           const float v0 = float(left.vp), dv = float(right.vp - left.vp) * inv_w;
+          const float zc0 = float(left.camera_z), dzc = float(right.camera_z - left.camera_z) * inv_w;
           const std::size_t base = static_cast<std::size_t>(row) * width;
           for (int col = c0; col < col_end; ++col) {
             const float k = float(col - c0);
@@ -586,6 +596,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
             maps.texel_index[i] = y0 * proj_width + x0;
             maps.weight_x[i] = u - float(x0);
             maps.weight_y[i] = v - float(y0);
+            if (camera_depths) maps.camera_depth_mm[i] = zc0 + k * dzc;
           }
         }
         continue;
@@ -598,6 +609,50 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
         }
     }
   }
+}
+
+cv::Mat projectorDepthMap(const SceneGeometry& scene,
+                          const pipeline::CameraProjectorCalibration& rig,
+                          const Eigen::Isometry3d& camera_to_scene, int step) {
+  const int width = rig.projector.width, height = rig.projector.height;
+  // Projector frame -> scene frame: X_scene = camera_to_scene * R^T (X_p - t).
+  const Eigen::Matrix3d to_scene = camera_to_scene.linear() * rig.R.transpose();
+  const Eigen::Vector3d origin = camera_to_scene * (-rig.R.transpose() * rig.t);
+  const double inf = std::numeric_limits<double>::infinity();
+  const int cols = (width - 1 + step - 1) / step + 1, rows = (height - 1 + step - 1) / step + 1;
+  cv::Mat coarse(rows, cols, CV_32FC1);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const double u = std::min(c * step, width - 1), v = std::min(r * step, height - 1);
+      const Eigen::Vector2d xn = rig.projector.pixelToNormalized({u, v});
+      // Direction (x, y, 1) in the projector frame: s is the projector depth.
+      const std::optional<SurfaceHit> hit =
+          scene.intersect(origin, to_scene * Eigen::Vector3d(xn.x(), xn.y(), 1.0), 0.0, inf);
+      coarse.at<float>(r, c) = hit ? static_cast<float>(hit->distance) : 0.0f;
+    }
+  cv::Mat depth(height, width, CV_32FC1);
+  for (int v = 0; v < height; ++v) {
+    const double y = double(v) / step;
+    const int r0 = std::min(int(y), rows - 2 < 0 ? 0 : rows - 2);
+    const int r1 = std::min(r0 + 1, rows - 1);
+    const float fy = static_cast<float>(std::clamp(y - r0, 0.0, 1.0));
+    float* out = depth.ptr<float>(v);
+    for (int u = 0; u < width; ++u) {
+      const double x = double(u) / step;
+      const int c0 = std::min(int(x), cols - 2 < 0 ? 0 : cols - 2);
+      const int c1 = std::min(c0 + 1, cols - 1);
+      const float fx = static_cast<float>(std::clamp(x - c0, 0.0, 1.0));
+      const float d00 = coarse.at<float>(r0, c0), d01 = coarse.at<float>(r0, c1);
+      const float d10 = coarse.at<float>(r1, c0), d11 = coarse.at<float>(r1, c1);
+      // Where a corner misses the scene, take the nearest corner (no blend with 0).
+      if (d00 <= 0 || d01 <= 0 || d10 <= 0 || d11 <= 0) {
+        out[u] = (fy < 0.5f ? (fx < 0.5f ? d00 : d01) : (fx < 0.5f ? d10 : d11));
+        continue;
+      }
+      out[u] = (1 - fy) * ((1 - fx) * d00 + fx * d01) + fy * ((1 - fx) * d10 + fx * d11);
+    }
+  }
+  return depth;
 }
 
 }  // namespace sl::drivers::sim

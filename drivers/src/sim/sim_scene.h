@@ -77,6 +77,12 @@ struct RenderMaps {
   std::vector<std::int32_t> texel_index;
   std::vector<float> weight_x;
   std::vector<float> weight_y;
+  // Depth of each pixel's surface point along the camera's optical axis (mm;
+  // 0 where no surface), for the camera's defocus blur: filled only when
+  // SimConfig::camera_lens has an aperture (f_number > 0), else empty.
+  std::vector<float> camera_depth_mm;
+  // Per-pixel coefficient of the camera blur (assignCameraBlur), else empty.
+  std::vector<float> camera_blur_a;
 };
 
 struct SceneView {
@@ -115,5 +121,15 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
                           const pipeline::CameraProjectorCalibration& rig, const CameraRays& rays,
                           const Eigen::Isometry3d& camera_to_scene, bool with_ground_truth,
                           SceneView& view);
+
+// Depth (mm, along the projector's optical axis) of the first surface each
+// projector pixel lights, with the sensor at camera_to_scene (as in
+// computeSceneView): CV_32FC1 of the projector's size, 0 where the pixel's
+// ray hits nothing. Ray-cast on every `step`-th pixel and interpolated
+// bilinearly (the depth only sets a blur width, so a few pixels' error at
+// silhouettes do not matter).
+cv::Mat projectorDepthMap(const SceneGeometry& scene,
+                          const pipeline::CameraProjectorCalibration& rig,
+                          const Eigen::Isometry3d& camera_to_scene, int step);
 
 }  // namespace sl::drivers::sim

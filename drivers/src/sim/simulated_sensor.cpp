@@ -3,6 +3,8 @@
 #include <Eigen/Dense>
 #include <opencv2/core.hpp>
 #include <cmath>
+#include <deque>
+#include <limits>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -77,6 +79,22 @@ void validateConfig(const SimConfig& c) {
   requireNonNegative(c.ambient_dn, "ambient_dn");
   requireNonNegative(c.gain_dn_per_electron, "gain_dn_per_electron");
   requireNonNegative(c.read_noise_dn, "read_noise_dn");
+  for (const auto& [lens, name] : {std::pair{&c.camera_lens, std::string("camera_lens")},
+                                    std::pair{&c.projector_lens, std::string("projector_lens")}}) {
+    requireNonNegative(lens->f_number, name + ".f_number");
+    if (!(lens->pixel_pitch_um > 0 && std::isfinite(lens->pixel_pitch_um)))
+      fail(name + ".pixel_pitch_um", "must be > 0");
+    if (!(lens->focus_distance_mm > 0 && std::isfinite(lens->focus_distance_mm)))
+      fail(name + ".focus_distance_mm", "must be > 0");
+  }
+  // The lens must focus beyond its focal length (fx * pitch).
+  auto checkFocus = [&](const SimLens& lens, const pipeline::PinholeModel& m,
+                        const std::string& name) {
+    if (lens.f_number > 0 && lens.focus_distance_mm <= 2 * m.fx * lens.pixel_pitch_um * 1e-3)
+      fail(name + ".focus_distance_mm", "must exceed twice the focal length fx * pixel_pitch");
+  };
+  checkFocus(c.camera_lens, c.rig.camera, "camera_lens");
+  checkFocus(c.projector_lens, c.rig.projector, "projector_lens");
   if (!(c.exposure_ms > 0 && c.exposure_ms <= 1000.0 / c.camera_fps))
     fail("exposure_ms", "must be > 0 and fit in the frame interval (1000 / camera_fps)");
   if (!(c.reference_exposure_ms > 0 && std::isfinite(c.reference_exposure_ms)))
@@ -223,6 +241,7 @@ class SceneRenderer {
     }
     addCamera(config_.rig);
     if (config_.second_camera) addCamera(config_.second_camera->rig);
+    setUpDefocus();
   }
 
   const SimConfig& config() const { return config_; }
@@ -249,19 +268,22 @@ class SceneRenderer {
 
   cv::Mat render(int camera, std::size_t pattern, int frame, std::uint64_t noise_seed) const {
     const CameraView& c = checkedCamera(camera);
-    const std::vector<cv::Mat>& frames = images_.at(pattern);
+    const std::vector<const sim::ProjectorFrame*>& frames = frames_.at(pattern);
     if (frame < 0 || frame >= static_cast<int>(frames.size()))
       throw std::out_of_range("SimulatedSensor::render: frame " + std::to_string(frame) +
                               " of pattern '" + names_[pattern] + "' out of range");
+    const sim::ProjectorFrame& projected = *frames[static_cast<std::size_t>(frame)];
     if (!config_.motion.moving())
-      return sim::renderImage(c.view.maps, frames[frame], response_, noise_seed,
-                              projector_response_);
+      return sim::renderImage(c.view.maps, projected, response_, noise_seed, projector_response_,
+                              c.camera_blur_passes);
     // Moving sensor: ray-cast this image's pose (camera rays undistorted once),
     // into per-thread buffers reused from image to image.
     thread_local sim::SceneView moved;
     sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame), false,
                               moved);
-    return sim::renderImage(moved.maps, frames[frame], response_, noise_seed, projector_response_);
+    assignDefocus(c, moved.maps);
+    return sim::renderImage(moved.maps, projected, response_, noise_seed, projector_response_,
+                            c.camera_blur_passes);
   }
 
  private:
@@ -270,7 +292,72 @@ class SceneRenderer {
     Eigen::Isometry3d to_first;  // X_first = to_first * X_this
     sim::CameraRays rays;
     sim::SceneView view;         // at the configured pose (image 0)
+    int camera_blur_passes = 0;  // 0: sharp
   };
+
+  static double meanFocalPx(const pipeline::PinholeModel& m) { return 0.5 * (m.fx + m.fy); }
+
+  // Defocus. Camera: the blur passes for the depth range each camera sees
+  // in the configured pose (widened for a moving sensor; beyond it the
+  // per-pass kernel is capped), and each pixel's kernel. Projector: the
+  // sigma of every projector pixel from the depth of the surface it lights
+  // in the configured pose (kept for all poses of a moving sensor: the
+  // depths change by the motion, a few mm, the blur by a small fraction),
+  // and the blurred light of each distinct pattern image.
+  void setUpDefocus() {
+    for (CameraView& c : cameras_) {
+      if (!(config_.camera_lens.f_number > 0)) break;
+      double hi = 0;
+      for (float z : c.view.maps.camera_depth_mm)
+        if (z > 0) hi = std::max(hi, config_.camera_lens.blurSigmaPx(z, meanFocalPx(c.rig.camera)));
+      if (config_.motion.moving()) hi = hi * 1.3 + 0.2;
+      c.camera_blur_passes = sim::cameraBlurPasses(hi);
+      assignDefocus(c, c.view.maps);
+    }
+
+    sim::BlurLevels projector_blur;
+    cv::Mat sigma;
+    if (config_.projector_lens.f_number > 0) {
+      constexpr int kDepthStep = 4;  // ray-cast every 4th projector pixel
+      sigma = sim::projectorDepthMap(geometry_, config_.rig, Eigen::Isometry3d::Identity(),
+                                     kDepthStep);
+      const double fx = meanFocalPx(config_.rig.projector);
+      double lo = std::numeric_limits<double>::infinity(), hi = 0;
+      for (int r = 0; r < sigma.rows; ++r) {
+        float* row = sigma.ptr<float>(r);
+        for (int c = 0; c < sigma.cols; ++c) {
+          row[c] = static_cast<float>(config_.projector_lens.blurSigmaPx(row[c], fx));
+          if (row[c] > 0) lo = std::min(lo, double(row[c])), hi = std::max(hi, double(row[c]));
+        }
+      }
+      // Sigma steps of 2^(1/4): the variance-linear blend of neighbouring
+      // levels is then within about 0.5 % of the Gaussian's modulation.
+      constexpr int kMaxLevels = 10;
+      projector_blur = sim::chooseBlurLevels(lo, hi, std::pow(2.0, 0.25), kMaxLevels);
+    }
+
+    // Distinct pattern images (patterns often share frames) get one frame each.
+    std::vector<const cv::Mat*> distinct;
+    for (std::size_t p = 0; p < images_.size(); ++p) {
+      frames_.emplace_back();
+      for (const cv::Mat& image : images_[p]) {
+        std::size_t k = 0;
+        while (k < distinct.size() && cv::norm(*distinct[k], image, cv::NORM_INF) != 0) ++k;
+        if (k == distinct.size()) {
+          distinct.push_back(&image);
+          storage_.push_back(
+              sim::makeProjectorFrame(image, projector_response_, projector_blur, sigma));
+        }
+        frames_.back().push_back(&storage_[k]);
+      }
+    }
+  }
+
+  void assignDefocus(const CameraView& c, sim::RenderMaps& maps) const {
+    if (c.camera_blur_passes > 0)
+      sim::assignCameraBlur(maps, c.camera_blur_passes, config_.camera_lens,
+                            meanFocalPx(c.rig.camera));
+  }
 
   void addCamera(const pipeline::CameraProjectorCalibration& rig) {
     CameraView c;
@@ -299,6 +386,8 @@ class SceneRenderer {
   sim::ProjectorResponse projector_response_;
   std::vector<std::string> names_;
   std::vector<std::vector<cv::Mat>> images_;  // per pattern, projector images in order
+  std::deque<sim::ProjectorFrame> storage_;  // distinct frames (stable addresses)
+  std::vector<std::vector<const sim::ProjectorFrame*>> frames_;  // per pattern, in order
 };
 
 // Thread-safe: the renderer is immutable, the live state is LiveSchedule's.
@@ -358,6 +447,14 @@ class SimulatedSensorImpl final : public SimulatedSensor {
 };
 
 }  // namespace
+
+double SimLens::blurSigmaPx(double z_mm, double fx_px) const {
+  if (f_number <= 0 || !(z_mm > 0)) return 0;
+  const double focal_mm = fx_px * pixel_pitch_um * 1e-3;
+  const double disk_px = fx_px * focal_mm / (f_number * (focus_distance_mm - focal_mm)) *
+                         std::abs(z_mm - focus_distance_mm) / z_mm;
+  return disk_px / 4;
+}
 
 bool SimMotion::moving() const {
   if (!poses.empty()) {
