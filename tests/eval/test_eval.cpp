@@ -31,6 +31,11 @@ TEST_CASE("precision: depth noise on a wall at 500 mm is at the phase-noise floo
   CHECK(m.at("ratio_rms") < 1.25);
   CHECK(m.at("ratio_rms") > 0.8);
   CHECK(m.at("std_mean_mm") > 0.0);
+  // Issue 3: no worse than the paper's SL Sensor (mean 0.070 mm).
+  CHECK(m.at("std_mean_mm") <= 0.070);
+  // Issue 3: systematic error (mean deviation from the truth) < 0.02 mm.
+  CHECK(std::abs(m.at("systematic_mean_mm")) < 0.02);
+  CHECK(m.at("period_error_fraction") == 0);
   REQUIRE(r.plots.size() == 1);
   CHECK(std::filesystem::file_size(r.plots[0]) > 1000);
 }
@@ -71,7 +76,15 @@ TEST_CASE("cones: apex distances from both cameras match the truth", "[eval]") {
   // Perfect calibration: only noise remains (the paper's 0.08..1.1 mm come
   // from the real calibration).
   CHECK(r.metrics.at("worst_rmse_mm") < 0.2);
+  // Issue 3: every distance RMSE < 0.1 mm for the top camera.
+  for (int k = 2; k <= 6; ++k)
+    CHECK(r.metrics.at("top_rmse_1_" + std::to_string(k) + "_mm") < 0.1);
   CHECK(r.metrics.count("left_rmse_1_6_mm") == 1);
+  // Issue 3: systematic errors (mean deviations from the truth) < 0.02 mm.
+  for (const char* camera : {"top", "left"}) {
+    CHECK(std::abs(r.metrics.at(std::string(camera) + "_distance_mean_error_mm")) < 0.02);
+    CHECK(std::abs(r.metrics.at(std::string(camera) + "_surface_mean_deviation_mm")) < 0.02);
+  }
 }
 
 TEST_CASE("roughness: the samples have the issue's ESDs and the sensor ranks and measures them",
@@ -121,4 +134,21 @@ TEST_CASE("vdi2634: probing, spacing and flatness errors are those of the camera
   CHECK(m.at("systematic_max_abs_mm") < 0.02);
   REQUIRE(r.plots.size() == 3);
   for (const std::string& plot : r.plots) CHECK(std::filesystem::file_size(plot) > 1000);
+}
+
+TEST_CASE("gamma: an uncompensated projector gamma of 2.2 adds the error the model predicts",
+          "[eval]") {
+  sl::eval::EvalOptions o = options(2);
+  o.out_dir.clear();
+  o.projector_gamma = 2.2;
+  const sl::eval::EvalResult r = sl::eval::runPrecision(o);
+  INFO(r.markdown);
+  const auto& m = r.metrics;
+  // The 3-step phase error of gamma 2.2 peaks at ~0.29 rad: ~84 projector px
+  // on the unit-frequency phase, far beyond the +-22.8 px the 40-period
+  // unwrapping tolerates, so most pixels get a wrong period; the rest carry a
+  // ripple of up to ~2 px (~1.6 mm) instead of the linear projector's noise.
+  CHECK(m.at("period_error_fraction") > 0.3);
+  CHECK(m.at("systematic_inlier_rms_mm") > 0.5);
+  CHECK(m.at("systematic_inlier_rms_mm") < 2.0);
 }

@@ -78,8 +78,18 @@ EvalResult runRoughness(const EvalOptions& options);
 // errors), spacing_max_abs_mm, spacing_mean_mm,
 // spacing_sigma_max_mm, flatness_max_mm, flatness997_max_mm,
 // flatness_ratio_max, flatness997_ratio_max, plane_deviation_mean_mm, plane_gross_points,
+// plane_gross_fraction,
 // systematic_max_abs_mm. Plots: vdi2634_{sphere,ball_bar,plane}_residuals.png.
 EvalResult runVdi2634(const EvalOptions& options);
+
+// Systematic errors (signed mean deviations from the truth) and the main
+// accuracy figures of precision, cones and vdi2634 (their default scans, or
+// `scans`), run with a linear projector and with projector gamma
+// options.projector_gamma (2.2 when that is 1): how much error an
+// uncompensated projector non-linearity adds. Metrics:
+// <experiment>.<metric>_linear / _gamma for the rows of the table,
+// systematic_max_abs_linear_mm, systematic_max_abs_gamma_mm, gamma.
+EvalResult runGamma(const EvalOptions& options);
 
 // Names accepted by runExperiment, in the order `all` runs them.
 std::vector<std::string> experimentNames();

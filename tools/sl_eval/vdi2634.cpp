@@ -472,7 +472,7 @@ EvalResult runVdi2634(const EvalOptions& requested) {
   std::vector<double> flatness, flatness_trimmed, flatness_ratio, flatness_trimmed_ratio,
       plane_deviation;
   cv::Mat worst_plane_map;
-  std::size_t plane_gross = 0;
+  std::size_t plane_gross = 0, plane_points = 0;
   double worst_flatness = -1;
   md << "#### Flatness error, " << fmt(2 * half_width, 0) << " x " << fmt(2 * half_height, 0)
      << " mm of a plane (F: range of the residuals to the least-squares plane)\n\n"
@@ -496,6 +496,7 @@ EvalResult runVdi2634(const EvalOptions& requested) {
       flatness_trimmed_ratio.push_back(f.form_trimmed / f.expected_form_trimmed);
       plane_deviation.push_back(f.deviation);
       plane_gross += f.gross;
+      plane_points += f.points;
       if (f.form > worst_flatness) {
         worst_flatness = f.form;
         worst_plane_map = cropped(f.residual_map);
@@ -515,6 +516,7 @@ EvalResult runVdi2634(const EvalOptions& requested) {
   m["flatness997_ratio_max"] = percentile(flatness_trimmed_ratio, 1);
   m["plane_deviation_mean_mm"] = mean(plane_deviation);
   m["plane_gross_points"] = double(plane_gross);
+  m["plane_gross_fraction"] = double(plane_gross) / double(std::max<std::size_t>(plane_points, 1));
   m["systematic_max_abs_mm"] =
       std::max({std::abs(m["sphere_size_mean_mm"]), std::abs(m["sphere_deviation_mean_mm"]),
                 std::abs(m["spacing_mean_mm"]), std::abs(m["plane_deviation_mean_mm"])});
