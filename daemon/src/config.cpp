@@ -36,16 +36,26 @@ Eigen::Matrix3d rotationDeg(const YamlMap& m, const std::string& key) {
       .toRotationMatrix();
 }
 
-drivers::SimScene parseScene(const YamlMap& sim) {
-  drivers::SimScene scene;
-  static const std::vector<std::string> kKinds = {"plane", "sphere", "cone", "box", "height_field"};
-  for (const YamlMap& item : sim.listOfMaps("scene")) {
+Eigen::Isometry3d poseOf(const YamlMap& m) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = rotationDeg(m, "rotation_deg");
+  pose.translation() = vec3(m, "translation_mm", Eigen::Vector3d::Zero());
+  return pose;
+}
+
+// The items of a scene list (sim.scene or a group's items) into `scene`.
+// Files (mesh PLY) are relative to base_dir.
+void parseSceneItems(const std::vector<YamlMap>& items, const std::filesystem::path& base_dir,
+                     drivers::SimScene& scene) {
+  static const std::vector<std::string> kKinds = {"plane", "sphere", "cone", "box",
+                                                  "height_field", "mesh", "group"};
+  for (const YamlMap& item : items) {
     std::string kind;
     for (const std::string& k : kKinds)
       if (item.has(k)) kind = kind.empty() ? k : "";
     if (kind.empty())
       item.fail("plane", "each scene item is exactly one of 'plane' or 'sphere' "
-                         "(or 'cone', 'box', 'height_field')");
+                         "(or 'cone', 'box', 'height_field', 'mesh', 'group')");
     const YamlMap p = item.map(kind);
     if (kind == "plane") {
       drivers::SimPlane s;
@@ -77,7 +87,7 @@ drivers::SimScene parseScene(const YamlMap& sim) {
       s.rotation = rotationDeg(p, "rotation_deg");
       s.albedo = albedo(p, s.albedo);
       scene.boxes.push_back(s);
-    } else {
+    } else if (kind == "height_field") {
       drivers::SimHeightField s;
       s.origin = vec3(p, "origin_mm");
       s.normal = vec3(p, "normal", s.normal);
@@ -95,10 +105,33 @@ drivers::SimScene parseScene(const YamlMap& sim) {
       r.done();
       s.roughness = rough;
       scene.height_fields.push_back(s);
+    } else if (kind == "mesh") {
+      std::filesystem::path file = p.get<std::string>("file");
+      if (file.is_relative()) file = base_dir / file;
+      const double scale = positive(p, "scale", 1.0);
+      drivers::SimMesh mesh;
+      try {
+        mesh = drivers::loadPlyMesh(file.string(), scale);
+      } catch (const std::runtime_error& e) {
+        p.fail("file", e.what());
+      }
+      mesh.pose = poseOf(p);
+      mesh.albedo = albedo(p, mesh.albedo);
+      scene.meshes.push_back(std::move(mesh));
+    } else {
+      // A composite: its items in its own frame, placed by one pose.
+      drivers::SimScene group;
+      parseSceneItems(p.listOfMaps("items"), base_dir, group);
+      drivers::appendTransformed(scene, group, poseOf(p));
     }
     p.done();
     item.done();
   }
+}
+
+drivers::SimScene parseScene(const YamlMap& sim, const std::filesystem::path& base_dir) {
+  drivers::SimScene scene;
+  parseSceneItems(sim.listOfMaps("scene"), base_dir, scene);
   return scene;
 }
 
@@ -129,7 +162,7 @@ void parseSimMotionAndCameras(const YamlMap& m, drivers::SimConfig& sim) {
   }
 }
 
-void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
+void parseSim(const YamlMap& m, const std::filesystem::path& base_dir, drivers::SimConfig& sim) {
   sim.seed = m.get<std::uint64_t>("seed", sim.seed);
   sim.camera_fps = positive(m, "camera_fps", sim.camera_fps);
   sim.bit_depth = m.get<int>("bit_depth", sim.bit_depth);
@@ -187,7 +220,7 @@ void parseSim(const YamlMap& m, drivers::SimConfig& sim) {
     l.done();
   }
   optics.done();
-  sim.scene = parseScene(m);
+  sim.scene = parseScene(m, base_dir);
   parseSimMotionAndCameras(m, sim);
   m.done();
 }
@@ -364,7 +397,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
                             "' (supported: sim, hardware, fake_gige, replay)");
   // fake_gige renders with the simulator; replay plays a recording.
   const bool simulated = config.sensor == "sim" || config.sensor == "fake_gige";
-  if (simulated) parseSim(root.map("sim"), config.sim);
+  if (simulated) parseSim(root.map("sim"), base_dir, config.sim);
   const bool replay = config.sensor == "replay";
   double replay_fps = 0;
   if (replay) replay_fps = parseReplay(root.map("replay"), base_dir, config.replay);

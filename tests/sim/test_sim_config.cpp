@@ -2,7 +2,9 @@
 // parse into SimConfig, and mistakes name the file, line and key.
 #include <catch2/catch.hpp>
 
+#include <filesystem>
 #include <fstream>
+#include <unistd.h>
 #include <sstream>
 #include <string>
 
@@ -115,4 +117,82 @@ TEST_CASE("sim config: optics keys", "[sim][config]") {
   INFO("message: " << message);
   CHECK(message.rfind("test.yaml:", 0) == 0);
   CHECK(message.find(c.expected) != std::string::npos);
+}
+
+namespace {
+
+// The shipped config with its scene list replaced by `scene_items` (lines
+// indented for the list under sim.scene).
+std::string withScene(const std::string& scene_items) {
+  std::string text = shippedSimConfig();
+  const auto begin = text.find("  scene:\n");
+  REQUIRE(begin != std::string::npos);
+  auto end = text.find("\n\n", begin);
+  REQUIRE(end != std::string::npos);
+  return text.replace(begin, end - begin, "  scene:\n" + scene_items);
+}
+
+}  // namespace
+
+TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
+          "[sim][config][mesh]") {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("sl_sim_config_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir / "meshes");
+  {
+    std::ofstream ply(dir / "meshes" / "tri.ply");
+    ply << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+           "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+           "end_header\n0 0 0\n0.1 0 0\n0 0.1 0\n3 0 1 2\n";
+  }
+  const std::string scene =
+      "    - plane: {point_mm: [0, 0, 700], normal: [0, 0, -1]}\n"
+      "    - mesh: {file: meshes/tri.ply, scale: 1000, rotation_deg: [0, 0, 90],\n"
+      "             translation_mm: [0, 0, 500], albedo: 0.5}\n"
+      "    - group:\n"
+      "        translation_mm: [10, 0, 600]\n"
+      "        rotation_deg: [0, 0, 90]\n"
+      "        items:\n"
+      "          - sphere: {center_mm: [20, 0, 0], radius_mm: 5}\n"
+      "          - mesh: {file: meshes/tri.ply}\n";
+  {
+    std::ofstream out(dir / "scene.yaml");
+    out << withScene(scene);
+  }
+  const auto config = sl::daemon::loadConfig((dir / "scene.yaml").string());
+  const auto& s = config.sim.scene;
+  REQUIRE(s.meshes.size() == 2);
+  REQUIRE(s.spheres.size() == 1);
+  CHECK(s.meshes[0].vertices.size() == 3);
+  CHECK(s.meshes[0].vertices[1].x() == Approx(100));  // scaled to mm
+  CHECK(s.meshes[0].albedo == 0.5);
+  CHECK((s.meshes[0].pose * Eigen::Vector3d(100, 0, 0) - Eigen::Vector3d(0, 100, 500)).norm() <
+        1e-9);
+  // The group's pose moves its members: (20, 0, 0) turned 90 deg about z, + (10, 0, 600).
+  CHECK((s.spheres[0].center - Eigen::Vector3d(10, 20, 600)).norm() < 1e-9);
+  CHECK((s.meshes[1].pose.translation() - Eigen::Vector3d(10, 0, 600)).norm() < 1e-9);
+
+  struct Case {
+    std::string items, expected;
+  };
+  const auto c = GENERATE_COPY(
+      Case{"    - mesh: {file: meshes/none.ply}\n",
+           "key 'sim.scene[0].mesh.file': PLY file"},
+      Case{"    - mesh: {file: " + (dir / "meshes" / "tri.ply").string() + ", colour: red}\n",
+           "unknown key 'sim.scene[0].mesh.colour'"},
+      Case{"    - group: {translation_mm: [0, 0, 1]}\n", "key 'sim.scene[0].group.items' is required"},
+      Case{"    - group: {items: [{cube: {}}]}\n", "exactly one of 'plane' or 'sphere'"},
+      Case{"    - group: {items: [{sphere: {center_mm: [0, 0, 1], radius_mm: -1}}]}\n",
+           "key 'sim.scene[0].group.items[0].sphere.radius_mm': must be > 0"});
+  INFO("scene: " << c.items);
+  std::string message;
+  try {
+    sl::daemon::parseConfig(withScene(c.items), "test.yaml");
+  } catch (const sl::daemon::ConfigError& e) {
+    message = e.what();
+  }
+  INFO("message: " << message);
+  CHECK(message.rfind("test.yaml:", 0) == 0);
+  CHECK(message.find(c.expected) != std::string::npos);
+  std::filesystem::remove_all(dir);
 }

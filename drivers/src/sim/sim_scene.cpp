@@ -287,6 +287,7 @@ SceneGeometry::SceneGeometry(const SimScene& scene) : scene_(scene) {
     f.max_height = static_cast<float>(hi);
     height_fields_.push_back(f);
   }
+  for (const SimMesh& mesh : scene.meshes) meshes_.emplace_back(mesh);
 }
 
 std::optional<SurfaceHit> SceneGeometry::intersect(const Eigen::Vector3d& origin,
@@ -308,6 +309,12 @@ std::optional<SurfaceHit> SceneGeometry::intersect(const Eigen::Vector3d& origin
   for (const SimBox& box : scene_.boxes) intersectBox(box, origin, direction, min_s, max_s, best);
   for (const HeightFieldFrame& f : height_fields_)
     intersectHeightField(f, origin, direction, min_s, max_s, best);
+  for (const MeshBvh& mesh : meshes_) {
+    double s = 0;
+    Eigen::Vector3d normal;
+    if (mesh.intersect(origin, direction, min_s, best ? best->distance : max_s, s, normal))
+      keepNearest(best, s, min_s, max_s, normal, mesh.mesh().albedo, &mesh.mesh());
+  }
   return best;
 }
 
@@ -656,3 +663,45 @@ cv::Mat projectorDepthMap(const SceneGeometry& scene,
 }
 
 }  // namespace sl::drivers::sim
+
+namespace sl::drivers {
+
+void appendTransformed(SimScene& scene, const SimScene& group, const Eigen::Isometry3d& pose) {
+  const Eigen::Matrix3d r = pose.linear();
+  for (const SimPlane& source : group.planes) {
+    SimPlane& p = scene.planes.emplace_back(source);
+    p.point = pose * p.point;
+    p.normal = r * p.normal;
+    if (p.checkerboard) {
+      p.checkerboard->origin = pose * p.checkerboard->origin;
+      p.checkerboard->x_axis = r * p.checkerboard->x_axis;
+      p.checkerboard->y_axis = r * p.checkerboard->y_axis;
+    }
+  }
+  for (SimSphere s : group.spheres) {
+    s.center = pose * s.center;
+    scene.spheres.push_back(s);
+  }
+  for (SimCone c : group.cones) {
+    c.base_center = pose * c.base_center;
+    c.axis = r * c.axis;
+    scene.cones.push_back(c);
+  }
+  for (SimBox b : group.boxes) {
+    b.center = pose * b.center;
+    b.rotation = r * b.rotation;
+    scene.boxes.push_back(b);
+  }
+  for (SimHeightField h : group.height_fields) {
+    h.origin = pose * h.origin;
+    h.normal = r * h.normal;
+    h.x_axis = r * h.x_axis;
+    scene.height_fields.push_back(h);
+  }
+  for (SimMesh m : group.meshes) {
+    m.pose = pose * m.pose;
+    scene.meshes.push_back(std::move(m));
+  }
+}
+
+}  // namespace sl::drivers

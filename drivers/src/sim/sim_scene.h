@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "sim_mesh.h"
 #include "sl/drivers/sim.h"
 
 namespace sl::drivers::sim {
@@ -49,6 +50,7 @@ class SceneGeometry {
   const SimScene& scene_;
   std::vector<Eigen::Vector3d> plane_normals_;  // unit
   std::vector<HeightFieldFrame> height_fields_;
+  std::vector<MeshBvh> meshes_;
 };
 
 // One-off intersection (prepares the scene on each call: for tests and tools).

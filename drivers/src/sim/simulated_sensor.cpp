@@ -170,6 +170,21 @@ void validateConfig(const SimConfig& c) {
     }
     requireAlbedo(h.albedo, name + ".albedo");
   }
+  for (std::size_t i = 0; i < c.scene.meshes.size(); ++i) {
+    const SimMesh& m = c.scene.meshes[i];
+    const std::string name = "scene.meshes[" + std::to_string(i) + "]";
+    if (m.triangles.empty()) fail(name, "has no triangles");
+    for (const Eigen::Vector3f& v : m.vertices)
+      if (!v.allFinite()) fail(name + ".vertices", "must be finite");
+    for (const auto& t : m.triangles)
+      for (std::int32_t v : t)
+        if (v < 0 || static_cast<std::size_t>(v) >= m.vertices.size())
+          fail(name + ".triangles", "index " + std::to_string(v) + " out of range");
+    if (!m.pose.matrix().allFinite() ||
+        !(m.pose.linear().transpose() * m.pose.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-6))
+      fail(name + ".pose", "must be a finite rigid transform");
+    requireAlbedo(m.albedo, name + ".albedo");
+  }
   if (c.second_camera) {
     const SimCamera& s = *c.second_camera;
     if (s.camera_id.empty() || s.camera_id == c.camera_id)

@@ -13,6 +13,7 @@
 // camera rays undistorted once).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -112,13 +113,37 @@ struct SimHeightField {
   double albedo = 0.8;
 };
 
+// A triangle mesh (e.g. from a PLY file): vertices in the mesh's own frame,
+// placed in the camera frame by pose (X = pose * vertex, mm). Triangles are
+// two-sided and flat-shaded (the face normal); the mesh need not be closed.
+// Ray casting uses a bounding volume hierarchy, so meshes of a few million
+// triangles stay interactive.
+struct SimMesh {
+  std::vector<Eigen::Vector3f> vertices;                 // mm, mesh frame
+  std::vector<std::array<std::int32_t, 3>> triangles;   // vertex indices
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  double albedo = 0.8;
+};
+
+// Reads a PLY file (ascii or binary_little_endian): the x, y, z properties
+// of the `vertex` element, times `scale` (e.g. 1000 for a file in metres),
+// and the `vertex_indices` (or `vertex_index`) lists of the `face` element,
+// polygons split into triangle fans. Other elements and properties are
+// skipped. Throws std::runtime_error naming the file and the problem.
+SimMesh loadPlyMesh(const std::string& path, double scale = 1.0);
+
 struct SimScene {
   std::vector<SimPlane> planes;
   std::vector<SimSphere> spheres;
   std::vector<SimCone> cones;
   std::vector<SimBox> boxes;
   std::vector<SimHeightField> height_fields;
+  std::vector<SimMesh> meshes;
 };
+
+// A composite: appends every object of `group` (given in the group's own
+// frame) to `scene`, moved by `pose` (X_scene = pose * X_group).
+void appendTransformed(SimScene& scene, const SimScene& group, const Eigen::Isometry3d& pose);
 
 // Motion of the sensor during a pattern sequence. The scene is given in the
 // camera frame of the sequence's first image (frame 0); image i of every

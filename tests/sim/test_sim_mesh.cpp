@@ -1,0 +1,303 @@
+// Tests of the simulator's triangle meshes (PLY files, BVH ray casting,
+// ground truth and projector shadows) and composites: a mesh of a box must
+// be indistinguishable from the analytic box, a finely tessellated sphere
+// close to the analytic sphere, and a group placed by a pose the same as its
+// members placed one by one.
+#include <Eigen/Geometry>
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <numbers>
+#include <opencv2/core.hpp>
+#include <string>
+#include <unistd.h>
+
+#include "sl/drivers/sim.h"
+
+namespace {
+
+using sl::drivers::SimBox;
+using sl::drivers::SimConfig;
+using sl::drivers::SimMesh;
+using sl::drivers::SimPlane;
+using sl::drivers::SimScene;
+using sl::drivers::SimSphere;
+using sl::drivers::SimulatedSensor;
+
+constexpr double kPi = std::numbers::pi;
+
+sl::pipeline::CameraProjectorCalibration defaultRig() {
+  sl::pipeline::CameraProjectorCalibration rig;
+  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
+  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
+  rig.R = Eigen::AngleAxisd(15.25 * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
+  return rig;
+}
+
+SimConfig baseConfig() {
+  SimConfig c;
+  c.rig = defaultRig();
+  sl::pipeline::PhaseShift33Pattern p;
+  p.name = "3+3";
+  c.patterns = {p};
+  c.gain_dn_per_electron = 0;
+  c.read_noise_dn = 0;
+  return c;
+}
+
+// The 8 corners and 12 outward-wound triangles of a box of `size` centred
+// at the origin of its own frame.
+SimMesh boxMesh(const Eigen::Vector3d& size) {
+  SimMesh m;
+  for (int k = 0; k < 8; ++k)
+    m.vertices.emplace_back(static_cast<float>((k & 1 ? 0.5 : -0.5) * size.x()),
+                            static_cast<float>((k & 2 ? 0.5 : -0.5) * size.y()),
+                            static_cast<float>((k & 4 ? 0.5 : -0.5) * size.z()));
+  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& q : quads) {
+    m.triangles.push_back({q[0], q[1], q[2]});
+    m.triangles.push_back({q[0], q[2], q[3]});
+  }
+  return m;
+}
+
+// An icosphere: the icosahedron subdivided `levels` times, on the unit sphere.
+SimMesh unitIcosphere(int levels) {
+  const double t = (1 + std::sqrt(5.0)) / 2;
+  std::vector<Eigen::Vector3d> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                                    {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                                    {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  for (auto& p : v) p.normalize();
+  std::vector<std::array<std::int32_t, 3>> f = {
+      {0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+      {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+      {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+  for (int level = 0; level < levels; ++level) {
+    std::map<std::pair<int, int>, int> midpoints;
+    auto midpoint = [&](int a, int b) {
+      const auto key = std::minmax(a, b);
+      const auto it = midpoints.find(key);
+      if (it != midpoints.end()) return it->second;
+      v.push_back((v[std::size_t(a)] + v[std::size_t(b)]).normalized());
+      return midpoints[key] = int(v.size() - 1);
+    };
+    std::vector<std::array<std::int32_t, 3>> next;
+    for (const auto& tri : f) {
+      const int a = midpoint(tri[0], tri[1]), b = midpoint(tri[1], tri[2]),
+                c = midpoint(tri[2], tri[0]);
+      next.push_back({tri[0], a, c});
+      next.push_back({tri[1], b, a});
+      next.push_back({tri[2], c, b});
+      next.push_back({a, b, c});
+    }
+    f = next;
+  }
+  SimMesh m;
+  for (const auto& p : v) m.vertices.push_back(p.cast<float>());
+  m.triangles = f;
+  return m;
+}
+
+std::string tempPath(const std::string& name) {
+  return (std::filesystem::temp_directory_path() /
+          ("sl_sim_mesh_" + std::to_string(::getpid()) + "_" + name))
+      .string();
+}
+
+// Compares two sensors' ground truth: validity, lit mask and depth.
+struct GroundTruthDifference {
+  int valid_mismatch = 0, lit_mismatch = 0, valid = 0, lit = 0;
+  double max_depth_error = 0;
+};
+GroundTruthDifference compare(const SimulatedSensor& a, const SimulatedSensor& b) {
+  GroundTruthDifference d;
+  const auto& ga = a.groundTruth();
+  const auto& gb = b.groundTruth();
+  for (int r = 0; r < ga.depth_mm.rows; ++r)
+    for (int c = 0; c < ga.depth_mm.cols; ++c) {
+      const float za = ga.depth_mm.at<float>(r, c), zb = gb.depth_mm.at<float>(r, c);
+      if (std::isnan(za) != std::isnan(zb)) {
+        ++d.valid_mismatch;
+        continue;
+      }
+      if (std::isnan(za)) continue;
+      ++d.valid;
+      d.max_depth_error = std::max(d.max_depth_error, double(std::abs(za - zb)));
+      const bool la = ga.lit.at<std::uint8_t>(r, c) != 0, lb = gb.lit.at<std::uint8_t>(r, c) != 0;
+      d.lit_mismatch += la != lb;
+      d.lit += la;
+    }
+  return d;
+}
+
+}  // namespace
+
+TEST_CASE("PLY: ascii and binary little-endian, extra properties skipped, polygons split",
+          "[sim][mesh]") {
+  const SimMesh box = boxMesh({40, 30, 20});
+  const std::string ascii = tempPath("box_ascii.ply");
+  {
+    std::ofstream out(ascii);
+    out << "ply\nformat ascii 1.0\ncomment a box in metres\nelement vertex 8\n"
+           "property float x\nproperty float y\nproperty float z\nproperty uchar red\n"
+           "element face 12\nproperty list uchar int vertex_indices\nend_header\n";
+    for (const auto& v : box.vertices)
+      out << v.x() / 1000 << " " << v.y() / 1000 << " " << v.z() / 1000 << " 200\n";
+    for (const auto& t : box.triangles) out << "3 " << t[0] << " " << t[1] << " " << t[2] << "\n";
+  }
+  const std::string binary = tempPath("box_binary.ply");
+  {
+    // Quads, double coordinates, a normal per vertex and an int count type.
+    std::ofstream out(binary, std::ios::binary);
+    out << "ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty double x\n"
+           "property double y\nproperty double z\nproperty float nx\nelement face 6\n"
+           "property list int uint vertex_index\nproperty uchar flags\nend_header\n";
+    for (const auto& v : box.vertices) {
+      const double xyz[3] = {v.x(), v.y(), v.z()};
+      const float nx = 0;
+      out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+      out.write(reinterpret_cast<const char*>(&nx), sizeof(nx));
+    }
+    for (std::size_t q = 0; q < 12; q += 2) {
+      const std::int32_t n = 4;
+      const std::uint32_t quad[4] = {std::uint32_t(box.triangles[q][0]), std::uint32_t(box.triangles[q][1]),
+                                     std::uint32_t(box.triangles[q][2]), std::uint32_t(box.triangles[q + 1][2])};
+      const std::uint8_t flags = 7;
+      out.write(reinterpret_cast<const char*>(&n), sizeof(n));
+      out.write(reinterpret_cast<const char*>(quad), sizeof(quad));
+      out.write(reinterpret_cast<const char*>(&flags), sizeof(flags));
+    }
+  }
+  const SimMesh from_ascii = sl::drivers::loadPlyMesh(ascii, 1000.0);
+  const SimMesh from_binary = sl::drivers::loadPlyMesh(binary);
+  for (const SimMesh* m : {&from_ascii, &from_binary}) {
+    REQUIRE(m->vertices.size() == 8);
+    REQUIRE(m->triangles.size() == 12);
+    for (std::size_t i = 0; i < 8; ++i)
+      CHECK((m->vertices[i] - box.vertices[i]).norm() < 1e-4f);
+    CHECK(m->triangles == box.triangles);
+  }
+
+  const std::string broken = tempPath("broken.ply");
+  {
+    std::ofstream out(broken);
+    out << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+           "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+           "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n";
+  }
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(broken), Catch::Contains("out of range") &&
+                                                          Catch::Contains(broken));
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(tempPath("missing.ply")),
+                    Catch::Contains("cannot be opened"));
+  for (const std::string& path : {ascii, binary, broken}) std::remove(path.c_str());
+}
+
+TEST_CASE("mesh of a box = the analytic box: depth, validity and projector shadow",
+          "[sim][mesh]") {
+  // A tilted box in front of a wall, casting a projector shadow on it.
+  Eigen::Matrix3d rotation =
+      (Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  const Eigen::Vector3d center{-20, 10, 480}, size{60, 50, 40};
+  SimConfig analytic = baseConfig();
+  analytic.scene.planes = {SimPlane{{0, 0, 620}, {0, 0, -1}, 0.8}};
+  analytic.scene.boxes = {SimBox{center, size, rotation, 0.7}};
+  SimConfig meshed = baseConfig();
+  meshed.scene.planes = analytic.scene.planes;
+  SimMesh mesh = boxMesh(size);
+  mesh.pose.linear() = rotation;
+  mesh.pose.translation() = center;
+  mesh.albedo = 0.7;
+  meshed.scene.meshes = {mesh};
+  const auto a = SimulatedSensor::create(analytic);
+  const auto b = SimulatedSensor::create(meshed);
+  const GroundTruthDifference d = compare(*a, *b);
+  const int shadowed = d.valid - d.lit;
+  INFO("valid " << d.valid << ", shadowed " << shadowed << ", validity mismatches "
+                << d.valid_mismatch << ", lit mismatches " << d.lit_mismatch
+                << ", max depth error " << d.max_depth_error << " mm");
+  CHECK(shadowed > 20000);              // the box shadows a visible part of the wall
+  CHECK(d.valid_mismatch == 0);         // the wall is behind everything
+  CHECK(d.lit_mismatch < 50);           // at most a few pixels exactly on a shadow edge
+  CHECK(d.max_depth_error < 1e-3);
+  // Rendered images agree too (same albedo and normals).
+  const cv::Mat ia = a->render("3+3", 1, 0), ib = b->render("3+3", 1, 0);
+  CHECK(cv::countNonZero(cv::abs(ia - ib) > 1) < 100);
+}
+
+TEST_CASE("tessellated sphere (20480 triangles) within the tessellation error of the sphere",
+          "[sim][mesh]") {
+  const double radius = 60;
+  const Eigen::Vector3d center{30, -10, 520};
+  SimConfig config = baseConfig();
+  SimMesh sphere = unitIcosphere(5);
+  REQUIRE(sphere.triangles.size() == 20480);
+  // Every surface point lies between the sphere and the nearest triangle plane.
+  double sagitta = 0;
+  for (const auto& t : sphere.triangles) {
+    const Eigen::Vector3d a = sphere.vertices[std::size_t(t[0])].cast<double>();
+    const Eigen::Vector3d b = sphere.vertices[std::size_t(t[1])].cast<double>();
+    const Eigen::Vector3d c = sphere.vertices[std::size_t(t[2])].cast<double>();
+    const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+    sagitta = std::max(sagitta, radius * (1 - std::abs(n.dot(a))));
+  }
+  for (auto& v : sphere.vertices) v *= static_cast<float>(radius);
+  sphere.pose.translation() = center;
+  config.scene.meshes = {sphere};
+  config.scene.planes = {SimPlane{{0, 0, 700}, {0, 0, -1}, 0.8}};
+  const auto sensor = SimulatedSensor::create(config);
+  const cv::Mat& xyz = sensor->groundTruth().xyz_mm;
+  double worst = 0;
+  int on_sphere = 0;
+  for (int r = 0; r < xyz.rows; r += 3)
+    for (int c = 0; c < xyz.cols; c += 3) {
+      const cv::Vec3f p = xyz.at<cv::Vec3f>(r, c);
+      if (std::isnan(p[2]) || p[2] > 650) continue;  // the wall
+      const double distance = (Eigen::Vector3d(p[0], p[1], p[2]) - center).norm();
+      worst = std::max(worst, std::abs(distance - radius));
+      ++on_sphere;
+    }
+  INFO("pixels on the sphere " << on_sphere << ", worst |distance - r| " << worst
+                               << " mm (sagitta bound " << sagitta << ")");
+  CHECK(on_sphere > 10000);
+  CHECK(worst <= sagitta + 1e-4);
+}
+
+TEST_CASE("composite: a group placed by one pose = its members placed one by one",
+          "[sim][mesh][composite]") {
+  SimScene group;
+  group.spheres = {SimSphere{{0, 0, 0}, 25, 0.6}};
+  group.boxes = {SimBox{{50, 0, 10}, {20, 30, 40}, Eigen::Matrix3d::Identity(), 0.7}};
+  SimMesh mesh = boxMesh({15, 15, 15});
+  mesh.pose.translation() = Eigen::Vector3d(-45, 5, 0);
+  group.meshes = {mesh};
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d(0.2, 1, 0.1).normalized()).toRotationMatrix();
+  pose.translation() = Eigen::Vector3d(10, -5, 500);
+
+  SimConfig grouped = baseConfig();
+  grouped.scene.planes = {SimPlane{{0, 0, 650}, {0, 0.1, -1}, 0.8}};
+  sl::drivers::appendTransformed(grouped.scene, group, pose);
+  REQUIRE(grouped.scene.spheres.size() == 1);
+  REQUIRE(grouped.scene.meshes.size() == 1);
+
+  SimConfig placed = baseConfig();
+  placed.scene.planes = grouped.scene.planes;
+  placed.scene.spheres = {SimSphere{pose * Eigen::Vector3d(0, 0, 0), 25, 0.6}};
+  placed.scene.boxes = {SimBox{pose * Eigen::Vector3d(50, 0, 10), {20, 30, 40}, pose.linear(), 0.7}};
+  SimMesh moved = mesh;
+  moved.pose = pose * mesh.pose;
+  placed.scene.meshes = {moved};
+
+  const GroundTruthDifference d =
+      compare(*SimulatedSensor::create(grouped), *SimulatedSensor::create(placed));
+  CHECK(d.valid > 1000000);
+  CHECK(d.valid_mismatch == 0);
+  CHECK(d.lit_mismatch == 0);
+  CHECK(d.max_depth_error < 1e-6);
+}
