@@ -35,13 +35,18 @@ struct EvalResult {
 EvalResult runPrecision(const EvalOptions& options);
 
 // 4.3 motion: a relief (spheres and cones on a plate) at ~500 mm, the sensor
-// moving 2 mm per image to the right, vertical 3+3 pattern on a rig with a
+// moving 2 mm per image to the right, and accelerating (one pose per image,
+// steps growing from 1 to 3 mm), vertical 3+3 pattern on a rig with a
 // vertical camera-projector baseline ("top" camera). Depth against the ground
 // truth at the compensation's reference image, without and with
 // MotionCompensator (axis x). Metrics per condition (prefix "static_",
-// "moving_", "compensated_"): rms_mm, ripple_mm (half the 1..99 % spread of
-// the error along the cross-section), valid_fraction; and
-// ripple_reduction, rms_reduction. Plot: motion_cross_section.png.
+// "moving_", "compensated_", "compensated_no_window_", "accelerating_",
+// "accelerating_compensated_"): rms_mm, relief_rms_mm, inlier_rms_mm,
+// outlier_fraction, systematic_rms_mm, ripple_mm (half the 1..99 % spread of
+// the scan-mean error along the cross-section), valid_fraction; and
+// ripple_reduction, rms_reduction, accelerating_ripple_reduction,
+// accelerating_rms_reduction. Plots: motion_cross_section.png,
+// motion_accelerating_cross_section.png.
 EvalResult runMotion(const EvalOptions& options);
 
 // 4.1 accuracy: 6 cones on a plate at ~500 mm seen by the "top" camera
