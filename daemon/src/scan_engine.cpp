@@ -6,8 +6,10 @@
 #include <condition_variable>
 #include <deque>
 #include <optional>
+#include <limits>
 #include <map>
 #include <set>
+#include <utility>
 #include <variant>
 
 #include "recorder.h"
@@ -64,10 +66,20 @@ struct PatternEvent {  // a new schedule: reset the synchroniser
   // Frames and triggers stamped before this belong to an earlier schedule
   // (possibly another pattern) and are never grouped into this one's sets.
   pipeline::TimestampNs not_before_ns = 0;
+  // A pattern switch within a continuous request: frames and triggers
+  // stamped before this sequence boundary still complete the previous
+  // pattern's last sequence (0 = a new request: nothing carries over).
+  pipeline::TimestampNs previous_until_ns = 0;
+};
+// A pattern switch is pending at this sequence boundary: until its
+// PatternEvent, what is stamped at or after it belongs to no set (the
+// projector may still start the old pattern's next sequence).
+struct BoundaryEvent {
+  pipeline::TimestampNs at_ns = 0;
 };
 struct Event {
   std::uint64_t generation = 0;
-  std::variant<FrameEvent, TriggerEvent, PatternEvent> payload;
+  std::variant<FrameEvent, TriggerEvent, PatternEvent, BoundaryEvent> payload;
 };
 
 struct SetItem {
@@ -189,6 +201,18 @@ struct ScanEngine::Impl {
   // kWaiting: the request to begin at launch_at_ns (system clock); guarded by mutex.
   pipeline::TimestampNs launch_at_ns = 0;
   int pending_count = 0;
+  // A pattern switch of a continuous hardware-triggered scan, carried out
+  // by the control thread at switch_at_ns, the end of the sequence in
+  // progress ("" = none); guarded by mutex.
+  std::string switch_pattern;
+  pipeline::TimestampNs switch_at_ns = 0;
+  // After the projector stopped at the boundary: the new schedule starts once
+  // every camera delivered the old pattern's last frame (a restart may
+  // discard frames not yet read out), or at drain_until at the latest.
+  bool switch_draining = false;
+  Clock::time_point drain_until;
+  // Per camera: the stamp of the latest frame its thread received.
+  std::unique_ptr<std::atomic<pipeline::TimestampNs>[]> last_frame_ns;
   // Wakes the control thread (delayed starts, software-trigger runs); with mutex.
   std::condition_variable control_cv;
   // Camera frames received (all cameras), and the rate derived from them in
@@ -210,6 +234,9 @@ struct ScanEngine::Impl {
   // Set by the sync thread: when the last trigger of a finite request arrived.
   std::atomic<std::uint64_t> triggers_seen{0};
   std::atomic<std::uint64_t> frames_unmatched{0};
+  // Stamp of the latest trigger grouped for the running schedule (0: none
+  // yet); set by the sync thread, reset by launchLocked().
+  std::atomic<pipeline::TimestampNs> last_trigger_ns{0};
   std::atomic<std::uint64_t> sets_incomplete{0};
 
   std::atomic<bool> running{true};
@@ -227,6 +254,7 @@ struct ScanEngine::Impl {
   void finishRequestLocked(const std::string& error);
   void launchLocked(const std::string& name, int frame_count, int count);
   void beginLocked();
+  void switchLocked();
   void recordError(const std::string& error);
   std::vector<std::string> camerasFor(const std::string& pattern,
                                       const RequestOptions& options) const {
@@ -262,6 +290,7 @@ void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
     }
     if (frame) {
       ++frames_received;
+      last_frame_ns[index] = frame->stamp_ns;
       events.push({generation.load(), FrameEvent{index, std::move(*frame)}});
     }
   }
@@ -306,6 +335,37 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
       } else {
         control_cv.wait_for(lock, std::min<std::chrono::nanoseconds>(
                                       100ms, std::chrono::nanoseconds(launch_at_ns - now)));
+      }
+      continue;
+    }
+    if (state == ScanState::kScanning && !switch_pattern.empty()) {
+      const pipeline::TimestampNs now = systemNowNs();
+      if (switch_draining) {
+        bool drained = true;
+        // The old pattern's last frame is exposed one image interval before
+        // the boundary (half an interval of slack for stamp jitter).
+        const pipeline::TimestampNs last_frame =
+            switch_at_ns - 3 * config.synchroniser.image_interval_ns / 2;
+        for (std::size_t i = 0; i < devices.cameras.size(); ++i)
+          drained = drained && last_frame_ns[i].load() >= last_frame;
+        if (drained || Clock::now() >= drain_until) {
+          switchLocked();
+        } else {
+          control_cv.wait_for(lock, 2ms);
+        }
+      } else if (now >= switch_at_ns) {
+        try {
+          devices.projector->stop();
+        } catch (const std::exception& e) {
+          switch_pattern.clear();
+          finishRequestLocked(std::string("projector: ") + e.what());
+          continue;
+        }
+        switch_draining = true;
+        drain_until = Clock::now() + 300ms;
+      } else {
+        control_cv.wait_for(lock, std::min<std::chrono::nanoseconds>(
+                                      100ms, std::chrono::nanoseconds(switch_at_ns - now)));
       }
       continue;
     }
@@ -388,35 +448,75 @@ void ScanEngine::Impl::triggerLoop(Heartbeat& hb) {
 void ScanEngine::Impl::syncLoop(Heartbeat& hb) {
   std::vector<std::string> camera_ids;
   for (const auto& c : devices.cameras) camera_ids.push_back(c->id());
-  pipeline::Synchroniser synchroniser(camera_ids, config.synchroniser);
+  // One synchroniser per schedule; after a pattern switch the previous one
+  // keeps what is stamped before the switch's sequence boundary, so the
+  // sequence in progress at the switch still completes (with its pattern).
+  struct Stage {
+    pipeline::Synchroniser synchroniser;
+    pipeline::SynchroniserCounters reported{};
+  };
+  auto fresh = [&] { return Stage{pipeline::Synchroniser(camera_ids, config.synchroniser), {}}; };
+  Stage current = fresh();
+  std::optional<Stage> previous;
+  pipeline::TimestampNs previous_until_ns = 0;
   std::uint64_t active_generation = 0;
   pipeline::TimestampNs not_before_ns = 0;
-  pipeline::SynchroniserCounters reported{};
+  pipeline::TimestampNs hold_from_ns = std::numeric_limits<pipeline::TimestampNs>::max();
+  auto collect = [&](Stage& stage) {
+    for (auto& set : stage.synchroniser.takeCompleted()) sets.push({active_generation, std::move(set)});
+    const auto& counters = stage.synchroniser.counters();
+    frames_unmatched += counters.frames_unmatched - stage.reported.frames_unmatched;
+    sets_incomplete += counters.triggers_incomplete - stage.reported.triggers_incomplete;
+    stage.reported = counters;
+  };
+  // Counts what a synchroniser still holds (setPattern drops and counts it).
+  auto retire = [&](std::optional<Stage>& stage) {
+    if (!stage) return;
+    stage->synchroniser.setPattern("retired", 1);
+    collect(*stage);
+    stage.reset();
+  };
   while (running) {
     hb.beat();
     std::optional<Event> event = events.pop(50ms);
     if (!event) continue;
     if (auto* pattern = std::get_if<PatternEvent>(&event->payload)) {
+      retire(previous);
+      if (pattern->previous_until_ns != 0 && event->generation == active_generation) {
+        previous.emplace(std::move(current));
+        current = fresh();
+        previous_until_ns = pattern->previous_until_ns;
+      }
       active_generation = event->generation;
       not_before_ns = pattern->not_before_ns;
-      synchroniser.setPattern(pattern->name, pattern->frame_count);
+      hold_from_ns = std::numeric_limits<pipeline::TimestampNs>::max();
+      current.synchroniser.setPattern(pattern->name, pattern->frame_count);
       continue;
     }
     if (event->generation != active_generation) continue;  // from a stopped request
+    if (auto* boundary = std::get_if<BoundaryEvent>(&event->payload)) {
+      hold_from_ns = boundary->at_ns;
+      continue;
+    }
+    const pipeline::TimestampNs stamp =
+        std::holds_alternative<FrameEvent>(event->payload)
+            ? std::get<FrameEvent>(event->payload).frame.stamp_ns
+            : std::get<TriggerEvent>(event->payload).stamp_ns;
+    Stage* stage = previous && stamp < previous_until_ns         ? &*previous
+                   : stamp >= not_before_ns && stamp < hold_from_ns ? &current
+                                                                    : nullptr;
+    if (!stage) continue;  // between the switch's boundary and the new schedule
+    if (previous && stage == &current &&
+        stamp > previous_until_ns + config.synchroniser.max_age_ns) {
+      retire(previous);  // its last sequence is long complete or lost
+    }
     if (auto* frame = std::get_if<FrameEvent>(&event->payload)) {
-      if (frame->frame.stamp_ns < not_before_ns) continue;
-      synchroniser.pushFrame(frame->camera, std::move(frame->frame));
-    } else if (auto* trigger = std::get_if<TriggerEvent>(&event->payload)) {
-      if (trigger->stamp_ns < not_before_ns) continue;
-      synchroniser.pushTrigger(trigger->stamp_ns);
+      stage->synchroniser.pushFrame(frame->camera, std::move(frame->frame));
+    } else {
+      stage->synchroniser.pushTrigger(stamp);
+      if (stage == &current) last_trigger_ns = stamp;
     }
-    for (auto& set : synchroniser.takeCompleted()) {
-      sets.push({active_generation, std::move(set)});
-    }
-    const auto& counters = synchroniser.counters();
-    frames_unmatched += counters.frames_unmatched - reported.frames_unmatched;
-    sets_incomplete += counters.triggers_incomplete - reported.triggers_incomplete;
-    reported = counters;
+    collect(*stage);
   }
 }
 
@@ -566,6 +666,7 @@ void ScanEngine::Impl::launchLocked(const std::string& name, int frame_count, in
   const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(
                        std::chrono::system_clock::now().time_since_epoch())
                        .count();
+  last_trigger_ns = 0;
   events.push({next, PatternEvent{name, frame_count, now}});
   generation = next;
   devices.projector->start(count);
@@ -609,6 +710,29 @@ void ScanEngine::Impl::beginLocked() {
   ++status_version;
 }
 
+// Carries out the pending pattern switch of a continuous hardware-triggered
+// scan at the boundary after the sequence in progress: the projector starts
+// the new pattern's schedule in the same request; the synchroniser lets the
+// old pattern's last sequence complete (PatternEvent::previous_until_ns).
+// Caller holds the mutex.
+void ScanEngine::Impl::switchLocked() {
+  const std::string name = std::exchange(switch_pattern, std::string());
+  const pipeline::TimestampNs boundary = std::exchange(switch_at_ns, 0);
+  switch_draining = false;
+  try {
+    devices.projector->select(name);
+    current_pattern = name;
+    last_trigger_ns = 0;
+    events.push({generation.load(), PatternEvent{name, config.findPattern(name)->frameCount(),
+                                                 systemNowNs(), boundary}});
+    devices.projector->start(0);
+  } catch (const std::exception& e) {
+    finishRequestLocked(std::string("projector: ") + e.what());
+    return;
+  }
+  ++status_version;
+}
+
 // Ends the current request; caller holds the mutex.
 void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   try {
@@ -619,6 +743,8 @@ void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   generation++;
   state = ScanState::kIdle;
   launch_at_ns = 0;
+  switch_pattern.clear();
+  switch_draining = false;
   recorder.stop();
   recording_name.clear();
   if (!error.empty()) last_error = error;
@@ -635,6 +761,8 @@ ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, Output
     : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output))) {
   Impl& d = *impl_;
   d.heartbeats = std::vector<Heartbeat>(d.devices.cameras.size() + 5);
+  d.last_frame_ns = std::make_unique<std::atomic<pipeline::TimestampNs>[]>(d.devices.cameras.size());
+  for (std::size_t i = 0; i < d.devices.cameras.size(); ++i) d.last_frame_ns[i] = 0;
   for (std::size_t i = 0; i < d.devices.cameras.size(); ++i)
     d.threads.emplace_back([&d, i] { d.cameraLoop(i, d.heartbeats[i]); });
   const std::size_t k = d.devices.cameras.size();
@@ -817,19 +945,32 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
     ++d.status_version;
     return {};
   }
-  try {
-    if (scanning) {
-      // Continuous scan: end the schedule and start the new pattern's. The
-      // sequence in progress is abandoned; no set mixes the two patterns
-      // (see PatternEvent::not_before_ns).
-      d.devices.projector->stop();
-      d.launchLocked(name, pattern->frameCount(), 0);
-    } else {
-      d.devices.projector->select(name);
-      d.current_pattern = name;
+  if (scanning) {
+    // Continuous hardware-triggered scan: the control thread switches at the
+    // end of the sequence in progress (a sequence of the running pattern
+    // starts every frame_count image intervals from the last trigger).
+    // Before the first trigger there is nothing to finish: switch now. A
+    // later request replaces a switch still pending.
+    if (d.switch_draining) {  // the projector already stopped at the boundary
+      d.switch_pattern = name;
+      return {};
     }
+    d.switch_pattern.clear();
+    if (name == d.current_pattern) return {};
+    const pipeline::TimestampNs period = d.config.findPattern(d.current_pattern)->frameCount() *
+                                         d.config.synchroniser.image_interval_ns;
+    const pipeline::TimestampNs last = d.last_trigger_ns.load();
+    const pipeline::TimestampNs now = systemNowNs();
+    d.switch_at_ns = last > 0 && now >= last ? last + ((now - last) / period + 1) * period : now;
+    d.switch_pattern = name;
+    d.events.push({d.generation.load(), BoundaryEvent{d.switch_at_ns}});
+    d.control_cv.notify_all();
+    return {};
+  }
+  try {
+    d.devices.projector->select(name);
+    d.current_pattern = name;
   } catch (const std::exception& e) {
-    if (scanning) d.finishRequestLocked(std::string("projector: ") + e.what());
     return {Code::kDeviceError, std::string("projector: ") + e.what()};
   }
   ++d.status_version;

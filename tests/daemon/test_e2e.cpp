@@ -307,7 +307,10 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
 // horizontal through the request topic. Every published projector-map sample
 // must come from exactly one pattern: a horizontal scan encodes only columns
 // (vp all NaN), a 'both' scan columns and rows; the patterns appear in the
-// requested order, each at least twice.
+// requested order, each at least twice. The switch takes effect at the next
+// sequence boundary: the sequence in progress when the request is sent (it
+// began less than one sequence period earlier) is still published with the
+// old pattern, and no sequence is left incomplete.
 TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   sl::test::useLoopbackDds();
   const std::string ns = sl::test::uniqueNamespace("switch");
@@ -327,6 +330,7 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   struct Sample {
     std::string pattern;
     double up_valid, vp_valid;  // fractions of pixels
+    std::int64_t stamp_ns;
   };
   std::vector<Sample> samples;
   // Collects maps until `count` samples of `pattern` arrived (bounded).
@@ -346,7 +350,7 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
         for (std::uint32_t k = 0; k < m.up._length; ++k) up += std::isfinite(m.up._buffer[k]);
         for (std::uint32_t k = 0; k < m.vp._length; ++k) vp += std::isfinite(m.vp._buffer[k]);
         const double n = double(m.width) * m.height;
-        samples.push_back({m.pattern, up / n, vp / n});
+        samples.push_back({m.pattern, up / n, vp / n, m.header.stamp.sec * 1'000'000'000LL + m.header.stamp.nanosec});
         seen += samples.back().pattern == pattern;
       }
     }
@@ -357,10 +361,15 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   REQUIRE(reply);
   REQUIRE(reply->accepted);
   CHECK(collect("3+3_horizontal", 2));
+  const auto incomplete_before = client.status(3s)->sets_incomplete;
+  // When each switch was requested, and how many samples preceded it.
+  std::vector<std::pair<std::int64_t, std::size_t>> switches;
+  switches.emplace_back(sl::test::nowNs(), samples.size());
   reply = client.request(Command::kSetPattern, "3+3_both", 0, 5s);
   REQUIRE(reply);
   CHECK(reply->accepted);
   CHECK(collect("3+3_both", 2));
+  switches.emplace_back(sl::test::nowNs(), samples.size());
   reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, 5s);
   REQUIRE(reply);
   CHECK(reply->accepted);
@@ -369,6 +378,31 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   reply = client.request(Command::kStop, "", 0, 5s);
   REQUIRE(reply);
   CHECK(reply->accepted);
+  const auto status = client.status(3s);
+  REQUIRE(status);
+
+  // The sequence running at each switch request completed with the old
+  // pattern: its sample (stamped with its first trigger) is less than one
+  // sequence period (frame count x image interval) older than the request. Frames or sets dropped by a
+  // full queue (a loaded machine) would excuse a miss, so the checks hold
+  // when none were.
+  const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(config_path);
+  const bool nothing_lost = status->frames_overflow == 0 && status->sets_overflow == 0;
+  for (const auto& [requested_ns, index] : switches) {
+    REQUIRE(index >= 1);
+    std::size_t last = index - 1;  // the last sample of the old pattern
+    while (last + 1 < samples.size() && samples[last + 1].pattern == samples[index - 1].pattern)
+      ++last;
+    const std::int64_t last_old = samples[last].stamp_ns;
+    const std::int64_t period_ns = config.findPattern(samples[last].pattern)->frameCount() *
+                                   config.synchroniser.image_interval_ns;
+    INFO("switch requested " << (requested_ns - last_old) * 1e-6
+                             << " ms after the last old-pattern sequence began");
+    if (nothing_lost) CHECK(requested_ns - last_old < period_ns);
+  }
+  INFO("frames dropped " << status->frames_overflow << " (queue), " << status->frames_unmatched
+                          << " (unmatched); sets dropped " << status->sets_overflow << " (queue)");
+  if (nothing_lost) CHECK(status->sets_incomplete == incomplete_before);
 
   // Patterns appear in the requested order: h+, both+, h+.
   std::vector<std::string> runs;

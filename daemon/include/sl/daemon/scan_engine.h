@@ -8,8 +8,9 @@
 //   trigger thread  --triggers--+                                     |
 //                          output thread <- result queue <- processing thread
 //
-// A control thread starts delayed requests at their time and, in software-
-// trigger mode, acquires the image sets itself (projector stepped pattern by
+// A control thread starts delayed requests at their time, carries out
+// pattern switches at sequence boundaries and, in software-trigger mode,
+// acquires the image sets itself (projector stepped pattern by
 // pattern, one grab per camera) straight into the set queue; the camera
 // threads are parked meanwhile.
 #pragma once
@@ -131,8 +132,9 @@ class ScanEngine {
   // Ends a scan, or cancels a start that is still waiting for its time.
   CommandResult stop();
   // Selects the pattern for the next start(); during a continuous scan it
-  // switches at once (the sequence in progress is abandoned; no image set
-  // ever mixes two patterns). Busy during a finite request.
+  // switches at the next sequence boundary (the sequence in progress
+  // completes with the old pattern; no image set ever mixes two patterns).
+  // Busy during a finite request.
   CommandResult selectPattern(const std::string& pattern);
   std::vector<std::string> patterns() const;
   const DaemonConfig& config() const;  // as loaded at start-up
