@@ -234,8 +234,16 @@ struct ScanEngine::Impl {
   // Set by the sync thread: when the last trigger of a finite request arrived.
   std::atomic<std::uint64_t> triggers_seen{0};
   std::atomic<std::uint64_t> frames_unmatched{0};
+  // Pattern and boundary events for the sync thread (never dropped, unlike
+  // the frame queue).
+  std::mutex control_mutex;
+  std::deque<Event> control_events;  // guarded by control_mutex
+  void pushControl(Event event) {
+    std::lock_guard lock(control_mutex);
+    control_events.push_back(std::move(event));
+  }
   // Stamp of the latest trigger grouped for the running schedule (0: none
-  // yet); set by the sync thread, reset by launchLocked().
+  // yet); set by the sync thread, reset with each PatternEvent.
   std::atomic<pipeline::TimestampNs> last_trigger_ns{0};
   std::atomic<std::uint64_t> sets_incomplete{0};
 
@@ -476,28 +484,41 @@ void ScanEngine::Impl::syncLoop(Heartbeat& hb) {
     collect(*stage);
     stage.reset();
   };
+  // Schedule changes come on their own channel (never dropped), taken before
+  // any frame or trigger queued after them.
+  auto takeControl = [&] {
+    for (;;) {
+      Event control;
+      {
+        std::lock_guard lock(control_mutex);
+        if (control_events.empty()) return;
+        control = std::move(control_events.front());
+        control_events.pop_front();
+      }
+      if (auto* pattern = std::get_if<PatternEvent>(&control.payload)) {
+        retire(previous);
+        if (pattern->previous_until_ns != 0 && control.generation == active_generation) {
+          previous.emplace(std::move(current));
+          current = fresh();
+          previous_until_ns = pattern->previous_until_ns;
+        }
+        active_generation = control.generation;
+        not_before_ns = pattern->not_before_ns;
+        hold_from_ns = std::numeric_limits<pipeline::TimestampNs>::max();
+        last_trigger_ns = 0;
+        current.synchroniser.setPattern(pattern->name, pattern->frame_count);
+      } else if (auto* boundary = std::get_if<BoundaryEvent>(&control.payload)) {
+        if (control.generation == active_generation) hold_from_ns = boundary->at_ns;
+      }
+    }
+  };
   while (running) {
     hb.beat();
+    takeControl();
     std::optional<Event> event = events.pop(50ms);
+    takeControl();
     if (!event) continue;
-    if (auto* pattern = std::get_if<PatternEvent>(&event->payload)) {
-      retire(previous);
-      if (pattern->previous_until_ns != 0 && event->generation == active_generation) {
-        previous.emplace(std::move(current));
-        current = fresh();
-        previous_until_ns = pattern->previous_until_ns;
-      }
-      active_generation = event->generation;
-      not_before_ns = pattern->not_before_ns;
-      hold_from_ns = std::numeric_limits<pipeline::TimestampNs>::max();
-      current.synchroniser.setPattern(pattern->name, pattern->frame_count);
-      continue;
-    }
     if (event->generation != active_generation) continue;  // from a stopped request
-    if (auto* boundary = std::get_if<BoundaryEvent>(&event->payload)) {
-      hold_from_ns = boundary->at_ns;
-      continue;
-    }
     const pipeline::TimestampNs stamp =
         std::holds_alternative<FrameEvent>(event->payload)
             ? std::get<FrameEvent>(event->payload).frame.stamp_ns
@@ -666,8 +687,7 @@ void ScanEngine::Impl::launchLocked(const std::string& name, int frame_count, in
   const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(
                        std::chrono::system_clock::now().time_since_epoch())
                        .count();
-  last_trigger_ns = 0;
-  events.push({next, PatternEvent{name, frame_count, now}});
+  pushControl({next, PatternEvent{name, frame_count, now}});
   generation = next;
   devices.projector->start(count);
 }
@@ -722,8 +742,7 @@ void ScanEngine::Impl::switchLocked() {
   try {
     devices.projector->select(name);
     current_pattern = name;
-    last_trigger_ns = 0;
-    events.push({generation.load(), PatternEvent{name, config.findPattern(name)->frameCount(),
+    pushControl({generation.load(), PatternEvent{name, config.findPattern(name)->frameCount(),
                                                  systemNowNs(), boundary}});
     devices.projector->start(0);
   } catch (const std::exception& e) {
@@ -955,7 +974,14 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
       d.switch_pattern = name;
       return {};
     }
-    d.switch_pattern.clear();
+    if (!d.switch_pattern.empty() && name == d.current_pattern) {
+      // Back to the running pattern before the pending switch happened:
+      // cancel it and release the boundary hold.
+      d.switch_pattern.clear();
+      d.pushControl(
+          {d.generation.load(), BoundaryEvent{std::numeric_limits<pipeline::TimestampNs>::max()}});
+      return {};
+    }
     if (name == d.current_pattern) return {};
     const pipeline::TimestampNs period = d.config.findPattern(d.current_pattern)->frameCount() *
                                          d.config.synchroniser.image_interval_ns;
@@ -963,7 +989,7 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
     const pipeline::TimestampNs now = systemNowNs();
     d.switch_at_ns = last > 0 && now >= last ? last + ((now - last) / period + 1) * period : now;
     d.switch_pattern = name;
-    d.events.push({d.generation.load(), BoundaryEvent{d.switch_at_ns}});
+    d.pushControl({d.generation.load(), BoundaryEvent{d.switch_at_ns}});
     d.control_cv.notify_all();
     return {};
   }
