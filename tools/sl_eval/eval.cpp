@@ -79,6 +79,7 @@ EvalResult runPrecision(const EvalOptions& requested) {
   // period is ~35 mm of depth here.
   constexpr double kPeriodErrorMm = 5.0;
   double error_sum = 0, error_sq = 0, inlier_sum = 0, inlier_sq = 0;
+  double a_sum = 0, b_sum = 0, sigma_i_sum = 0, dz_sum = 0;  // for the worked example
   long long gross = 0;
   std::vector<double> abs_errors;
   for (int r = 0; r < size.height; ++r)
@@ -92,6 +93,10 @@ EvalResult runPrecision(const EvalOptions& requested) {
       const double sigma_i = std::sqrt(config.gain_dn_per_electron * a +
                                        config.read_noise_dn * config.read_noise_dn + 1.0 / 12.0);
       const double sigma_phi = std::sqrt(2.0 / steps) * sigma_i / b;
+      a_sum += a;
+      b_sum += b;
+      sigma_i_sum += sigma_i;
+      dz_sum += std::abs(dz_dup);
       const double theory = std::abs(dz_dup) * sigma_phi * period / (2 * std::numbers::pi);
       const double s = std::sqrt(variance);
       std_map.at<float>(r, c) = static_cast<float>(s);
@@ -129,6 +134,10 @@ EvalResult runPrecision(const EvalOptions& requested) {
   m["systematic_rms_mm"] = std::sqrt(error_sq / valid);
   m["systematic_p99_mm"] = percentile(abs_errors, 0.99);
   m["period_error_fraction"] = double(gross) / double(valid);
+  m["offset_mean_dn"] = a_sum / valid;
+  m["modulation_mean_dn"] = b_sum / valid;
+  m["sigma_i_mean_dn"] = sigma_i_sum / valid;
+  m["dz_dup_mean_mm_per_px"] = dz_sum / valid;
   m["systematic_inlier_mean_mm"] = inlier_sum / double(std::max<long long>(valid - gross, 1));
   m["systematic_inlier_rms_mm"] =
       std::sqrt(inlier_sq / double(std::max<long long>(valid - gross, 1)));
@@ -144,7 +153,11 @@ EvalResult runPrecision(const EvalOptions& requested) {
      << "| paper, SL Sensor (real) | 0.070 | 0.251 | |\n\n"
      << "Measured / floor (RMS over " << valid << " pixels valid in every scan, "
      << fmt(100 * m["valid_fraction"], 1) << " % of the image): " << fmt(m["ratio_rms"], 3)
-     << ". (Max of a per-pixel std over " << n << " scans is a sampling extreme; the floor's "
+     << ". Mean over the pixels: offset A " << fmt(m["offset_mean_dn"], 1) << " DN, modulation B "
+     << fmt(m["modulation_mean_dn"], 1) << " DN, sigma_I " << fmt(m["sigma_i_mean_dn"], 3)
+     << " DN, |dz/du_p| " << fmt(m["dz_dup_mean_mm_per_px"], 3) << " mm per projector px, period "
+     << fmt(period, 1) << " projector px. (Max of a per-pixel std over " << n
+     << " scans is a sampling extreme; the floor's "
      << "max is not.)\n\n"
      << "Systematic error (per-pixel mean of the " << n << " scans minus the true depth): mean "
      << fmt(m["systematic_mean_mm"], 4) << " mm, RMS " << fmt(m["systematic_rms_mm"], 4)
@@ -933,7 +946,7 @@ EvalResult runGamma(const EvalOptions& requested) {
   const std::vector<Row> rows = {
       {"precision", "systematic_mean_mm", "precision: mean depth error (signed)", 4},
       {"precision", "systematic_rms_mm", "precision: RMS of the scan-mean depth error", 4},
-      {"precision", "systematic_p99_mm", "precision: 99th percentile of that |error|", 4},
+      {"precision", "systematic_p99_mm", "precision: 99th percentile of that error, absolute", 4},
       {"precision", "std_mean_mm", "precision: mean per-pixel depth std (noise)", 4},
       {"precision", "period_error_fraction",
        "precision: fraction of pixels with a period error (> 5 mm)", 4},
@@ -951,12 +964,12 @@ EvalResult runGamma(const EvalOptions& requested) {
        4},
       {"vdi2634", "sphere_gross_fraction", "vdi2634: fraction of sphere points off by > 1 mm", 4},
       {"vdi2634", "sphere_size_mean_mm", "vdi2634: P_S mean (signed)", 4},
-      {"vdi2634", "sphere_size_max_abs_mm", "vdi2634: P_S max |.|", 4},
+      {"vdi2634", "sphere_size_max_abs_mm", "vdi2634: P_S, largest absolute", 4},
       {"vdi2634", "sphere_deviation_mean_mm",
        "vdi2634: mean radial deviation from the true spheres", 4},
       {"vdi2634", "sphere_form997_max_mm", "vdi2634: P_F (99.7 %) max", 3},
       {"vdi2634", "spacing_mean_mm", "vdi2634: S_D mean (signed)", 4},
-      {"vdi2634", "spacing_max_abs_mm", "vdi2634: S_D max |.|", 4},
+      {"vdi2634", "spacing_max_abs_mm", "vdi2634: S_D, largest absolute", 4},
       {"vdi2634", "plane_deviation_mean_mm", "vdi2634: mean deviation from the true planes", 4},
       {"vdi2634", "flatness997_max_mm", "vdi2634: F (99.7 %) max", 3},
       {"vdi2634", "plane_gross_fraction", "vdi2634: fraction of plane points off by > 1 mm", 4}};
