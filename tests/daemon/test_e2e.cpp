@@ -27,6 +27,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <map>
+#include <thread>
 
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -41,6 +43,7 @@
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/client.h"
 #include "sl/daemon/dds.h"
+#include "sl_msgs/msg/CommandReply.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/recording.h"
@@ -239,6 +242,55 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, 5s);
     REQUIRE(reply);
     CHECK(reply->accepted);
+  }
+
+  SECTION("several clients at once each get exactly one reply, their own") {
+    // A raw reader of the reply topic sees every reply of every client.
+    sl::dds::Participant participant(0);
+    sl::dds::Topic<sl_msgs_msg_CommandReply> topic(participant, "rr/" + ns + "/commandReply",
+                                                   sl_msgs_msg_CommandReply_desc);
+    sl::dds::Reader<sl_msgs_msg_CommandReply> replies(participant, topic,
+                                                      sl::dds::Qos().reliable().keepLast(256));
+    REQUIRE(replies.waitForWriters(1, DDS_SECS(10)));
+    constexpr int kClients = 3, kRequests = 5;
+    std::vector<std::unique_ptr<sl::daemon::SensorClient>> clients;
+    for (int c = 0; c < kClients; ++c) clients.push_back(connect(ns, /*points=*/false));
+    // Each client asks for a pattern only it names; every request id is
+    // used by every client (ids count from 1 per client).
+    std::vector<std::thread> threads;
+    std::atomic<int> own_replies{0};
+    for (int c = 0; c < kClients; ++c)
+      threads.emplace_back([&, c] {
+        for (int r = 0; r < kRequests; ++r) {
+          const std::string name = "client" + std::to_string(c) + "_request" + std::to_string(r);
+          const auto reply = clients[c]->request(Command::kStart, name, 1, 5s);
+          if (reply && reply->code == sl::daemon::CommandResult::Code::kUnknownPattern &&
+              reply->reason.find("'" + name + "'") != std::string::npos)
+            ++own_replies;
+        }
+      });
+    for (auto& t : threads) t.join();
+    CHECK(own_replies == kClients * kRequests);
+    // Exactly one reply per (client, request id) on the wire.
+    // (Until all arrived, then a little longer to catch duplicates.)
+    std::map<std::pair<std::string, std::uint64_t>, int> seen;
+    auto deadline = std::chrono::steady_clock::now() + 5s;
+    bool all = false;
+    while (std::chrono::steady_clock::now() < deadline) {
+      if (!all && seen.size() == std::size_t(kClients * kRequests)) {
+        all = true;
+        deadline = std::chrono::steady_clock::now() + 300ms;
+      }
+      auto loan = replies.take(64);
+      for (std::size_t i = 0; i < loan.size(); ++i)
+        if (loan.isValid(i)) ++seen[{loan[i].client_id, loan[i].request_id}];
+      if (loan.empty()) std::this_thread::sleep_for(20ms);
+    }
+    CHECK(seen.size() == std::size_t(kClients * kRequests));
+    for (const auto& [key, count] : seen) {
+      INFO("client " << key.first << " request " << key.second);
+      CHECK(count == 1);
+    }
   }
 
   // SIGTERM: a clean exit within 2 s.
