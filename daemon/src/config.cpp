@@ -241,9 +241,12 @@ void parsePatterns(const YamlMap& root, const pipeline::PinholeModel& projector,
         cameras.push_back(id.Scalar());
       }
     }
+    // `intensity_camera`: a camera whose view gives the clouds' intensity.
+    const std::string intensity_camera = m.get<std::string>("intensity_camera", "");
     pipeline::PatternSpec p = parsePattern(m, "", &projector, base_dir.string());
     if (!names.insert(p.name).second) m.fail("name", "duplicate pattern name '" + p.name + "'");
     if (!cameras.empty()) config.pattern_cameras[p.name] = cameras;
+    if (!intensity_camera.empty()) config.pattern_intensity_camera[p.name] = intensity_camera;
     config.patterns.push_back(p);
   }
 }

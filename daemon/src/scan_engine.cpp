@@ -12,6 +12,7 @@
 #include <utility>
 #include <variant>
 
+#include "intensity_transfer.h"
 #include "recorder.h"
 #include "software_trigger.h"
 #include "sl/daemon/bounded_queue.h"
@@ -139,6 +140,18 @@ struct ScanEngine::Impl {
       }
       pattern_cameras[p.name] = ids;
     }
+    // Calibrations by camera id (for intensity cameras): the first camera's
+    // and those of `calibrations:`.
+    calibrations[this->devices.cameras.front()->id()] = config.calibration;
+    for (const auto& [id, calibration] : config.extra_calibrations) calibrations[id] = calibration;
+    for (const auto& [pattern, id] : config.pattern_intensity_camera) {
+      const bool exists = std::any_of(this->devices.cameras.begin(), this->devices.cameras.end(),
+                                      [&](const auto& c) { return c->id() == id; });
+      if (!exists || !calibrations.count(id))
+        throw std::runtime_error(config.source_path + ": pattern '" + pattern +
+                                 "' takes its intensity from camera '" + id +
+                                 "', which the sensor lacks or which has no calibration");
+    }
     if (config.runtime.trigger == TriggerMode::kSoftware) {
       const std::string why = software.unsupportedReason();
       if (!why.empty())
@@ -168,7 +181,23 @@ struct ScanEngine::Impl {
   // Per camera id (processing thread); built from the calibrations.
   std::map<std::string, pipeline::Triangulator> triangulators;
   std::map<std::string, std::vector<std::string>> pattern_cameras;  // immutable after construction
+  std::map<std::string, pipeline::CameraProjectorCalibration> calibrations;  // immutable, by camera id
   void buildTriangulators(const DaemonConfig& settings);
+  // A copy of `cloud` (triangulated by `camera_id`) with the intensity seen
+  // by the pattern's intensity camera; nullptr when the pattern has none.
+  std::shared_ptr<const pipeline::PointCloud> colouredCopy(const pipeline::ImageSet& set,
+                                                           const std::string& camera_id,
+                                                           const pipeline::PointCloud& cloud) const {
+    const auto other = config.pattern_intensity_camera.find(set.pattern_name);
+    if (other == config.pattern_intensity_camera.end() || other->second == camera_id) return nullptr;
+    const auto images = std::find_if(set.cameras.begin(), set.cameras.end(),
+                                     [&](const auto& c) { return c.camera_id == other->second; });
+    if (images == set.cameras.end())
+      throw std::runtime_error("no images of intensity camera '" + other->second + "' in the set");
+    auto coloured = std::make_shared<pipeline::PointCloud>(cloud);
+    transferIntensity(*coloured, calibrations.at(camera_id), calibrations.at(other->second), *images);
+    return coloured;
+  }
   // dds.frame_id for the first camera, "<id>_optical_frame" for the others.
   std::string frameIdOf(const std::string& camera_id) const {
     return camera_id == devices.cameras.front()->id() ? config.dds.frame_id
@@ -583,6 +612,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
         auto [maps, cloud] =
             processor.process(decoder->second.codec(), triangulators.at(camera_id), *images,
                               set.trigger_stamp_ns, frameIdOf(camera_id));
+        if (auto coloured = colouredCopy(set, camera_id, *cloud)) cloud = std::move(coloured);
         ScanResult r;
         r.pattern = set.pattern_name;
         r.camera_id = camera_id;

@@ -186,3 +186,12 @@ TEST_CASE("software trigger is refused when the projector cannot show single pat
                                            [](const sl::daemon::ScanResult&) {}),
                     Catch::Contains("runtime.trigger is software, but projector"));
 }
+
+TEST_CASE("an intensity camera the sensor lacks stops the daemon at start-up") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  config.pattern_intensity_camera["3+3_horizontal"] = "nope";
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  CHECK_THROWS_WITH(sl::daemon::ScanEngine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                           [](const sl::daemon::ScanResult&) {}),
+                    Catch::Contains("takes its intensity from camera 'nope'"));
+}

@@ -84,6 +84,10 @@ struct DaemonConfig {
   // Cameras that triangulate each pattern (`patterns[].cameras`), by pattern
   // name; a pattern without an entry is triangulated by the first camera.
   std::map<std::string, std::vector<std::string>> pattern_cameras;
+  // Optional camera whose view colours each pattern's clouds
+  // (`patterns[].intensity_camera`): every point's intensity is the mean of
+  // that camera's frames where the point projects into it.
+  std::map<std::string, std::string> pattern_intensity_camera;
   pipeline::DecoderOptions decoder;
   pipeline::TriangulatorOptions triangulator;
   pipeline::SynchroniserOptions synchroniser;
