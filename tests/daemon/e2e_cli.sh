@@ -102,6 +102,16 @@ grep -q "^starts in: *[23][0-9]\.[0-9] s" "$work/status.log" || fail "delayed st
 "$bin/tools/slctl" --ns "$ns" stop > /dev/null
 echo "ok: software trigger, option rejection, delayed start"
 
+# Rates in the status while scanning continuously: the simulated camera runs
+# at 30 Hz, 6-pattern sequences give 5 scans/s.
+"$bin/tools/slctl" --ns "$ns" start > /dev/null
+sleep 2.5
+"$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
+"$bin/tools/slctl" --ns "$ns" stop > /dev/null
+grep -E "^(scan|frame) rate" "$work/status.log"
+grep -Eq "^frame rate: *(2[6-9]|3[0-4])\.[0-9] Hz" "$work/status.log" || fail "frame rate: $(cat "$work/status.log")"
+grep -Eq "^scan rate: *(4\.[3-9]|5\.[0-7])[0-9] Hz" "$work/status.log" || fail "scan rate: $(cat "$work/status.log")"
+
 kill -TERM "$daemon_pid"
 for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
 kill -0 "$daemon_pid" 2>/dev/null && fail "daemon still running 2 s after SIGTERM"
