@@ -43,6 +43,18 @@ Eigen::Isometry3d poseOf(const YamlMap& m) {
   return pose;
 }
 
+// An albedo image from the file named by `key` (relative to base_dir).
+cv::Mat loadTexture(const YamlMap& m, const std::string& key,
+                    const std::filesystem::path& base_dir) {
+  std::filesystem::path file = m.get<std::string>(key);
+  if (file.is_relative()) file = base_dir / file;
+  try {
+    return drivers::loadAlbedoTexture(file.string());
+  } catch (const std::runtime_error& e) {
+    m.fail(key, e.what());
+  }
+}
+
 // The items of a scene list (sim.scene or a group's items) into `scene`.
 // Files (mesh PLY) are relative to base_dir.
 void parseSceneItems(const std::vector<YamlMap>& items, const std::filesystem::path& base_dir,
@@ -63,6 +75,20 @@ void parseSceneItems(const std::vector<YamlMap>& items, const std::filesystem::p
       s.normal = vec3(p, "normal", s.normal);
       if (s.normal.norm() == 0) p.fail("normal", "must not be zero");
       s.albedo = albedo(p, s.albedo);
+      if (p.has("texture")) {
+        const YamlMap t = p.map("texture");
+        drivers::SimPlaneTexture texture;
+        texture.albedo = loadTexture(t, "file", base_dir);
+        texture.center = vec3(t, "center_mm", s.point);
+        texture.x_axis = vec3(t, "x_axis", texture.x_axis);
+        const Eigen::Vector3d n = s.normal.normalized();
+        if ((texture.x_axis - n * n.dot(texture.x_axis)).norm() < 1e-6 * texture.x_axis.norm())
+          t.fail("x_axis", "must not be (nearly) parallel to the plane normal");
+        texture.width_mm = t.get<double>("width_mm");
+        if (!(texture.width_mm > 0)) t.fail("width_mm", "must be > 0");
+        t.done();
+        s.texture = texture;
+      }
       scene.planes.push_back(s);
     } else if (kind == "sphere") {
       drivers::SimSphere s;
@@ -104,6 +130,7 @@ void parseSceneItems(const std::vector<YamlMap>& items, const std::filesystem::p
       rough.seed = r.get<std::uint64_t>("seed", rough.seed);
       r.done();
       s.roughness = rough;
+      if (p.has("albedo_texture")) s.albedo_texture = loadTexture(p, "albedo_texture", base_dir);
       scene.height_fields.push_back(s);
     } else if (kind == "mesh") {
       std::filesystem::path file = p.get<std::string>("file");

@@ -15,7 +15,7 @@ target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
 
 # Config loading and its error messages.
 sl_add_test(test_config daemon/test_config.cpp sim/test_sim_config.cpp)
-target_link_libraries(test_config PRIVATE sl_daemon)
+target_link_libraries(test_config PRIVATE sl_daemon opencv_imgcodecs)
 
 # End to end through slctl and the plain C subscriber.
 add_test(NAME e2e_cli COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/e2e_cli.sh

@@ -8,6 +8,8 @@
 #include <sstream>
 #include <string>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "sl/daemon/config.h"
 #include "sl/drivers/sim.h"
 
@@ -145,8 +147,14 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
            "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
            "end_header\n0 0 0\n0.1 0 0\n0 0.1 0\n3 0 1 2\n";
   }
+  cv::Mat image(30, 40, CV_8UC1, cv::Scalar(51));
+  image.at<std::uint8_t>(0, 0) = 255;
+  REQUIRE(cv::imwrite((dir / "albedo.png").string(), image));
   const std::string scene =
-      "    - plane: {point_mm: [0, 0, 700], normal: [0, 0, -1]}\n"
+      "    - plane: {point_mm: [0, 0, 700], normal: [0, 0, -1],\n"
+      "              texture: {file: albedo.png, width_mm: 200, x_axis: [1, 1, 0]}}\n"
+      "    - height_field: {origin_mm: [0, 0, 650], width_mm: 10, length_mm: 10, cell_mm: 1,\n"
+      "                     roughness: {rms_mm: 0.1}, albedo_texture: albedo.png}\n"
       "    - mesh: {file: meshes/tri.ply, scale: 1000, rotation_deg: [0, 0, 90],\n"
       "             translation_mm: [0, 0, 500], albedo: 0.5}\n"
       "    - group:\n"
@@ -161,6 +169,16 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
   }
   const auto config = sl::daemon::loadConfig((dir / "scene.yaml").string());
   const auto& s = config.sim.scene;
+  REQUIRE(s.planes.size() == 1);
+  REQUIRE(s.planes[0].texture);
+  CHECK(s.planes[0].texture->albedo.size() == cv::Size(40, 30));
+  CHECK(s.planes[0].texture->albedo.at<float>(0, 0) == 1.0f);
+  CHECK(s.planes[0].texture->albedo.at<float>(1, 1) == Approx(0.2));
+  CHECK(s.planes[0].texture->width_mm == 200);
+  CHECK(s.planes[0].texture->center == Eigen::Vector3d(0, 0, 700));  // defaults to point_mm
+  CHECK(s.planes[0].texture->x_axis == Eigen::Vector3d(1, 1, 0));
+  REQUIRE(s.height_fields.size() == 1);
+  CHECK(s.height_fields[0].albedo_texture.size() == cv::Size(40, 30));
   REQUIRE(s.meshes.size() == 2);
   REQUIRE(s.spheres.size() == 1);
   CHECK(s.meshes[0].vertices.size() == 3);
@@ -181,6 +199,14 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
       Case{"    - mesh: {file: " + (dir / "meshes" / "tri.ply").string() + ", colour: red}\n",
            "unknown key 'sim.scene[0].mesh.colour'"},
       Case{"    - group: {translation_mm: [0, 0, 1]}\n", "key 'sim.scene[0].group.items' is required"},
+      Case{"    - plane: {point_mm: [0, 0, 1], texture: {file: /nonexistent.png, width_mm: 5}}\n",
+           "key 'sim.scene[0].plane.texture.file': albedo texture '/nonexistent.png': cannot be opened"},
+      Case{"    - plane: {point_mm: [0, 0, 1], texture: {file: " + (dir / "albedo.png").string() +
+               "}}\n",
+           "key 'sim.scene[0].plane.texture.width_mm' is required"},
+      Case{"    - plane: {point_mm: [0, 0, 1], texture: {file: " + (dir / "albedo.png").string() +
+               ", width_mm: 5, x_axis: [0, 0, 1]}}\n",
+           "key 'sim.scene[0].plane.texture.x_axis': must not be (nearly) parallel"},
       Case{"    - group: {items: [{cube: {}}]}\n", "exactly one of 'plane' or 'sphere'"},
       Case{"    - group: {items: [{sphere: {center_mm: [0, 0, 1], radius_mm: -1}}]}\n",
            "key 'sim.scene[0].group.items[0].sphere.radius_mm': must be > 0"});

@@ -301,3 +301,120 @@ TEST_CASE("composite: a group placed by one pose = its members placed one by one
   CHECK(d.lit_mismatch == 0);
   CHECK(d.max_depth_error < 1e-6);
 }
+
+namespace {
+
+// A smooth albedo image: a ramp along x times a slow wave along y, in [0.1, 0.9].
+cv::Mat smoothAlbedo(int cols, int rows) {
+  cv::Mat image(rows, cols, CV_32FC1);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c)
+      image.at<float>(r, c) = static_cast<float>(
+          0.1 + 0.8 * (double(c) / (cols - 1)) * (0.75 + 0.25 * std::cos(2 * kPi * r / rows)));
+  return image;
+}
+
+// Bilinear sample with pixel centres at integers (x, y inside the image).
+double bilinear(const cv::Mat& image, double x, double y) {
+  const int x0 = std::clamp(int(std::floor(x)), 0, image.cols - 2);
+  const int y0 = std::clamp(int(std::floor(y)), 0, image.rows - 2);
+  const double fx = std::clamp(x - x0, 0.0, 1.0), fy = std::clamp(y - y0, 0.0, 1.0);
+  auto at = [&](int r, int c) { return double(image.at<float>(r, c)); };
+  return (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1)) +
+         fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
+}
+
+// Renders ambient light only (projector dark): the image is ambient * albedo.
+SimConfig ambientOnly() {
+  SimConfig c = baseConfig();
+  c.projector_brightness_dn = 0;
+  c.ambient_dn = 200;
+  c.bit_depth = 16;
+  c.camera_lens.f_number = 0;  // no blur: each pixel sees its own point's albedo
+  return c;
+}
+
+}  // namespace
+
+TEST_CASE("textured albedo on a plane and on a height field: each pixel sees its point's texel",
+          "[sim][texture]") {
+  const cv::Mat texture = smoothAlbedo(64, 48);
+  SECTION("plane") {
+    SimConfig c = ambientOnly();
+    SimPlane plane{{0, 0, 600}, {0.1, 0, -1}, 0.05};
+    sl::drivers::SimPlaneTexture t;
+    t.albedo = texture;
+    t.center = {10, 5, 600};
+    t.x_axis = {1, 0.2, 0};
+    t.width_mm = 160;
+    plane.texture = t;
+    c.scene.planes = {plane};
+    const auto sensor = SimulatedSensor::create(c);
+    const cv::Mat image = sensor->render("3+3", 0, 0);
+    const cv::Mat& xyz = sensor->groundTruth().xyz_mm;
+    // The frame the header documents: columns along x (in the plane), rows along x cross n.
+    const Eigen::Vector3d n = plane.normal.normalized();
+    const Eigen::Vector3d x = (t.x_axis - n * n.dot(t.x_axis)).normalized(), y = x.cross(n);
+    const double px = t.width_mm / texture.cols;
+    const Eigen::Vector3d center = t.center - n * n.dot(t.center - plane.point);
+    int inside = 0, outside = 0;
+    double worst = 0;
+    for (int r = 0; r < image.rows; r += 5)
+      for (int col = 0; col < image.cols; col += 5) {
+        const cv::Vec3f p = xyz.at<cv::Vec3f>(r, col);
+        const Eigen::Vector3d rel = Eigen::Vector3d(p[0], p[1], p[2]) - center;
+        const double u = rel.dot(x) / px + texture.cols / 2.0 - 0.5;
+        const double v = rel.dot(y) / px + texture.rows / 2.0 - 0.5;
+        double albedo = plane.albedo;
+        if (u > -0.5 && v > -0.5 && u < texture.cols - 0.5 && v < texture.rows - 0.5) {
+          // Away from the border, where the camera pixel straddles it.
+          if (u < 0.5 || v < 0.5 || u > texture.cols - 1.5 || v > texture.rows - 1.5) continue;
+          albedo = bilinear(texture, u, v);
+          ++inside;
+        } else {
+          ++outside;
+        }
+        const double expected = 200 * albedo * 65535 / 255;
+        worst = std::max(worst, std::abs(image.at<std::uint16_t>(r, col) - expected) / expected);
+      }
+    INFO("inside " << inside << ", outside " << outside << ", worst relative error " << worst);
+    CHECK(inside > 10000);
+    CHECK(outside > 10000);
+    CHECK(worst < 2e-3);  // float geometry; 16-bit rounding
+  }
+  SECTION("height field") {
+    SimConfig c = ambientOnly();
+    sl::drivers::SimHeightField field;
+    field.origin = {0, 0, 580};
+    field.width_mm = 170;
+    field.length_mm = 120;
+    field.cell_mm = 1;
+    field.heights_mm = cv::Mat(121, 171, CV_32FC1, cv::Scalar(0.0));
+    for (int r = 0; r < 121; ++r)
+      for (int col = 0; col < 171; ++col)
+        field.heights_mm.at<float>(r, col) = static_cast<float>(3 * std::sin(col * 0.05) * std::cos(r * 0.07));
+    field.albedo_texture = texture;
+    c.scene.height_fields = {field};
+    const auto sensor = SimulatedSensor::create(c);
+    const cv::Mat image = sensor->render("3+3", 0, 0);
+    const cv::Mat& xyz = sensor->groundTruth().xyz_mm;
+    // Field frame: n = (0, 0, -1), x = (1, 0, 0), y = n x x = (0, -1, 0).
+    int inside = 0;
+    double worst = 0;
+    for (int r = 0; r < image.rows; r += 5)
+      for (int col = 0; col < image.cols; col += 5) {
+        const cv::Vec3f p = xyz.at<cv::Vec3f>(r, col);
+        if (std::isnan(p[2])) continue;
+        const double a = p[0] - field.origin.x(), b = -(p[1] - field.origin.y());
+        const double u = (a + field.width_mm / 2) / field.width_mm * (texture.cols - 1);
+        const double v = (b + field.length_mm / 2) / field.length_mm * (texture.rows - 1);
+        if (u < 0.5 || v < 0.5 || u > texture.cols - 1.5 || v > texture.rows - 1.5) continue;
+        const double expected = 200 * bilinear(texture, u, v) * 65535 / 255;
+        worst = std::max(worst, std::abs(image.at<std::uint16_t>(r, col) - expected) / expected);
+        ++inside;
+      }
+    INFO("inside " << inside << ", worst relative error " << worst);
+    CHECK(inside > 10000);
+    CHECK(worst < 2e-3);
+  }
+}

@@ -18,10 +18,10 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 // Keeps `candidate` in `best` when it lies in (min_s, max_s) and is nearer.
 void keepNearest(std::optional<SurfaceHit>& best, double candidate, double min_s, double max_s,
                  const Eigen::Vector3d& normal, double albedo, const void* primitive,
-                 const SimPlane* plane = nullptr) {
+                 const SimPlane* plane = nullptr, bool textured = false) {
   if (!(candidate > min_s && candidate < max_s)) return;
   if (best && best->distance <= candidate) return;
-  best = SurfaceHit{candidate, normal, albedo, plane, primitive};
+  best = SurfaceHit{candidate, normal, albedo, plane, primitive, textured};
 }
 
 // In-plane frame of a checkerboard: origin on the plane, orthonormal axes.
@@ -110,6 +110,21 @@ double monotonicFieldRadius2(const pipeline::PinholeModel& model) {
     if (1.0 + r2 * (3.0 * d[0] + r2 * (5.0 * d[1] + r2 * 7.0 * d[4])) <= 0.0) return r2;
   }
   return std::numeric_limits<double>::infinity();
+}
+
+// Bilinear sample of a CV_32FC1 image at (x, y) (pixel centres at integers),
+// or `outside` beyond the outer pixel centres' half-pixel border.
+double sampleTexture(const cv::Mat& image, double x, double y, double outside) {
+  if (!(x >= -0.5 && y >= -0.5 && x <= image.cols - 0.5 && y <= image.rows - 0.5)) return outside;
+  x = std::clamp(x, 0.0, double(image.cols - 1));
+  y = std::clamp(y, 0.0, double(image.rows - 1));
+  const int x0 = std::min(int(x), std::max(image.cols - 2, 0));
+  const int y0 = std::min(int(y), std::max(image.rows - 2, 0));
+  const int x1 = std::min(x0 + 1, image.cols - 1), y1 = std::min(y0 + 1, image.rows - 1);
+  const double fx = x - x0, fy = y - y0;
+  auto at = [&](int r, int c) { return double(image.at<float>(r, c)); };
+  return (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x1)) +
+         fy * ((1 - fx) * at(y1, x0) + fx * at(y1, x1));
 }
 
 void intersectSphere(const SimSphere& sphere, const Eigen::Vector3d& origin,
@@ -260,7 +275,16 @@ void intersectHeightField(const SceneGeometry::HeightFieldFrame& f,
       Eigen::Vector2d g;
       heightAt(f, oa + hit * da, ob + hit * db, &g);
       const Eigen::Vector3d normal = (f.n - g.x() * f.x - g.y() * f.y).normalized();
-      keepNearest(best, hit, min_s, max_s, normal, field.albedo, &field);
+      double albedo = field.albedo;
+      if (!field.albedo_texture.empty()) {
+        // Texture columns span the width, rows the length (as the heights).
+        const cv::Mat& t = field.albedo_texture;
+        const double x = (oa + hit * da - f.a0) / field.width_mm * (t.cols - 1);
+        const double y = (ob + hit * db - f.b0) / field.length_mm * (t.rows - 1);
+        albedo = sampleTexture(t, x, y, field.albedo);
+      }
+      keepNearest(best, hit, min_s, max_s, normal, albedo, &field, nullptr,
+                  !field.albedo_texture.empty());
       return;
     }
     prev_s = s;
@@ -271,7 +295,23 @@ void intersectHeightField(const SceneGeometry::HeightFieldFrame& f,
 }  // namespace
 
 SceneGeometry::SceneGeometry(const SimScene& scene) : scene_(scene) {
-  for (const SimPlane& plane : scene.planes) plane_normals_.push_back(plane.normal.normalized());
+  for (const SimPlane& plane : scene.planes) {
+    const Eigen::Vector3d n = plane.normal.normalized();
+    plane_normals_.push_back(n);
+    if (!plane.texture) {
+      plane_textures_.emplace_back();
+      continue;
+    }
+    const SimPlaneTexture& t = *plane.texture;
+    PlaneTextureFrame f;
+    f.x = (t.x_axis - n * n.dot(t.x_axis)).normalized();
+    f.y = f.x.cross(n);
+    f.mm_per_px = t.width_mm / t.albedo.cols;
+    const Eigen::Vector3d center = t.center - n * n.dot(t.center - plane.point);
+    // The image's corner; pixel c's centre lies c + 0.5 pixels from it.
+    f.corner = center - f.x * (0.5 * t.width_mm) - f.y * (0.5 * f.mm_per_px * t.albedo.rows);
+    plane_textures_.push_back(f);
+  }
   for (const SimHeightField& field : scene.height_fields) {
     HeightFieldFrame f;
     f.field = &field;
@@ -301,6 +341,14 @@ std::optional<SurfaceHit> SceneGeometry::intersect(const Eigen::Vector3d& origin
     if (along == 0.0) continue;  // ray parallel to the plane
     const double s = n.dot(plane.point - origin) / along;
     keepNearest(best, s, min_s, max_s, n, plane.albedo, &plane, &plane);
+  }
+  if (best && best->plane && best->plane->texture) {
+    const auto index = static_cast<std::size_t>(best->plane - scene_.planes.data());
+    const PlaneTextureFrame& f = *plane_textures_[index];
+    const Eigen::Vector3d rel = origin + best->distance * direction - f.corner;
+    best->albedo = sampleTexture(best->plane->texture->albedo, rel.dot(f.x) / f.mm_per_px - 0.5,
+                                 rel.dot(f.y) / f.mm_per_px - 0.5, best->plane->albedo);
+    best->textured = true;
   }
   for (const SimSphere& sphere : scene_.spheres)
     intersectSphere(sphere, origin, direction, min_s, max_s, best);
@@ -458,6 +506,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
           cv::Vec3f(float(point_camera.x()), float(point_camera.y()), float(point_camera.z()));
     }
     double albedo = hit->albedo;
+    out.textured = hit->textured;
     if (hit->plane && hit->plane->checkerboard) {
       const auto index = static_cast<std::size_t>(hit->plane - planes_scene.planes.data());
       albedo =
@@ -676,6 +725,10 @@ void appendTransformed(SimScene& scene, const SimScene& group, const Eigen::Isom
       p.checkerboard->origin = pose * p.checkerboard->origin;
       p.checkerboard->x_axis = r * p.checkerboard->x_axis;
       p.checkerboard->y_axis = r * p.checkerboard->y_axis;
+    }
+    if (p.texture) {
+      p.texture->center = pose * p.texture->center;
+      p.texture->x_axis = r * p.texture->x_axis;
     }
   }
   for (SimSphere s : group.spheres) {

@@ -21,6 +21,7 @@ struct SurfaceHit {
   double albedo;
   const SimPlane* plane = nullptr;  // the plane hit (in the scene), nullptr otherwise
   const void* primitive = nullptr;  // the primitive hit (any kind), for coherence tests
+  bool textured = false;            // albedo varies over the surface (from a texture)
 };
 
 // A scene prepared for ray casting (unit normals, height-field frames and
@@ -45,12 +46,17 @@ class SceneGeometry {
     double a0, b0;                    // local coordinates of sample (0, 0)
     float min_height, max_height;     // mm
   };
+  struct PlaneTextureFrame {
+    Eigen::Vector3d corner, x, y;  // image corner (-x, -y side) on the plane, unit axes
+    double mm_per_px;              // image pixel size on the plane
+  };
 
  private:
   const SimScene& scene_;
   std::vector<Eigen::Vector3d> plane_normals_;  // unit
   std::vector<HeightFieldFrame> height_fields_;
   std::vector<MeshBvh> meshes_;
+  std::vector<std::optional<PlaneTextureFrame>> plane_textures_;  // per plane
 };
 
 // One-off intersection (prepares the scene on each call: for tests and tools).

@@ -2,8 +2,10 @@
 // computed once, and the live camera / projector / trigger source.
 #include <Eigen/Dense>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <cmath>
 #include <deque>
+#include <fstream>
 #include <limits>
 #include <set>
 #include <stdexcept>
@@ -61,6 +63,14 @@ void validateCheckerboard(const SimCheckerboard& b, const Eigen::Vector3d& norma
     fail(name + ".y_axis", "must span the plane with x_axis");
 }
 
+void validateTexture(const cv::Mat& albedo, const std::string& field) {
+  if (albedo.empty() || albedo.type() != CV_32FC1) fail(field, "must be a non-empty CV_32FC1 image");
+  if (!cv::checkRange(albedo)) fail(field, "values must be finite");
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(albedo, &lo, &hi);
+  if (!(lo >= 0 && hi <= 1)) fail(field, "values must be in [0, 1]");
+}
+
 void validateConfig(const SimConfig& c) {
   if (c.camera_id.empty()) fail("camera_id", "must not be empty");
   validatePinhole(c.rig.camera, "rig.camera");
@@ -113,6 +123,16 @@ void validateConfig(const SimConfig& c) {
     if (!finite(p.normal) || p.normal.norm() == 0) fail(name + ".normal", "must be non-zero");
     requireAlbedo(p.albedo, name + ".albedo");
     if (p.checkerboard) validateCheckerboard(*p.checkerboard, p.normal, name + ".checkerboard");
+    if (p.texture) {
+      const SimPlaneTexture& t = *p.texture;
+      if (p.checkerboard) fail(name + ".texture", "cannot be combined with a checkerboard");
+      validateTexture(t.albedo, name + ".texture.albedo");
+      if (!finite(t.center)) fail(name + ".texture.center", "must be finite");
+      if (!(t.width_mm > 0 && std::isfinite(t.width_mm))) fail(name + ".texture.width_mm", "must be > 0");
+      const Eigen::Vector3d n = p.normal.normalized();
+      if (!finite(t.x_axis) || (t.x_axis - n * n.dot(t.x_axis)).norm() < 1e-6 * t.x_axis.norm())
+        fail(name + ".texture.x_axis", "must not be (nearly) parallel to the plane normal");
+    }
   }
   for (std::size_t i = 0; i < c.scene.spheres.size(); ++i) {
     const SimSphere& s = c.scene.spheres[i];
@@ -169,6 +189,7 @@ void validateConfig(const SimConfig& c) {
       fail(name + ".heights_mm", "must be finite");
     }
     requireAlbedo(h.albedo, name + ".albedo");
+    if (!h.albedo_texture.empty()) validateTexture(h.albedo_texture, name + ".albedo_texture");
   }
   for (std::size_t i = 0; i < c.scene.meshes.size(); ++i) {
     const SimMesh& m = c.scene.meshes[i];
@@ -462,6 +483,18 @@ class SimulatedSensorImpl final : public SimulatedSensor {
 };
 
 }  // namespace
+
+cv::Mat loadAlbedoTexture(const std::string& path) {
+  if (!std::ifstream(path)) throw std::runtime_error("albedo texture '" + path + "': cannot be opened");
+  const cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
+  if (raw.empty())
+    throw std::runtime_error("albedo texture '" + path + "': cannot be read as an image");
+  if (raw.depth() != CV_8U && raw.depth() != CV_16U)
+    throw std::runtime_error("albedo texture '" + path + "': must be 8 or 16 bit");
+  cv::Mat albedo;
+  raw.convertTo(albedo, CV_32FC1, raw.depth() == CV_8U ? 1.0 / 255 : 1.0 / 65535);
+  return albedo;
+}
 
 double SimLens::blurSigmaPx(double z_mm, double fx_px) const {
   if (f_number <= 0 || !(z_mm > 0)) return 0;

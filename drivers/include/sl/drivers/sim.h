@@ -52,11 +52,32 @@ struct SimCheckerboard {
   double light_albedo = 0.8;             // [0, 1]
 };
 
+// An albedo image (e.g. a photo of a texture) on a plane: CV_32FC1 values in
+// [0, 1], sampled bilinearly at each surface point (no averaging over a
+// camera pixel's footprint: give images no finer than the camera resolves).
+// The image is width_mm wide (its height follows its aspect ratio), centred
+// on `center` (projected onto the plane); its columns run along x_axis
+// projected into the plane, its rows along x x n (n the plane's normal), so
+// the image reads upright from the side the normal faces. Outside it the
+// plane keeps its own albedo.
+struct SimPlaneTexture {
+  cv::Mat albedo;
+  Eigen::Vector3d center{0, 0, 600};  // mm, camera frame
+  Eigen::Vector3d x_axis{1, 0, 0};
+  double width_mm = 100;
+};
+
+// Reads an albedo image (PNG or any format OpenCV reads; 8 or 16 bit; colour
+// is converted to grey) scaled to [0, 1]. Throws std::runtime_error naming
+// the file.
+cv::Mat loadAlbedoTexture(const std::string& path);
+
 struct SimPlane {
   Eigen::Vector3d point{0, 0, 600};   // mm, camera frame
   Eigen::Vector3d normal{0, 0, -1};   // need not be unit; faces the sensor
   double albedo = 0.8;                // diffuse reflectance in [0, 1]
   std::optional<SimCheckerboard> checkerboard{};  // none: constant albedo
+  std::optional<SimPlaneTexture> texture{};       // not with a checkerboard
 };
 
 struct SimSphere {
@@ -111,6 +132,11 @@ struct SimHeightField {
   cv::Mat heights_mm;
   std::optional<SimRoughness> roughness{};
   double albedo = 0.8;
+  // Optional albedo image (CV_32FC1, [0, 1]) stretched over the rectangle:
+  // column 0 at -width/2 and the last at +width/2 along x, row 0 at
+  // -length/2 and the last at +length/2 along y (as heights_mm), bilinear.
+  // Empty: constant albedo.
+  cv::Mat albedo_texture;
 };
 
 // A triangle mesh (e.g. from a PLY file): vertices in the mesh's own frame,
