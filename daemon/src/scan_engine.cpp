@@ -258,6 +258,7 @@ struct ScanEngine::Impl {
   // A finite request that has not delivered every scan by then ends with an
   // error (frames were lost); guarded by mutex.
   Clock::time_point request_deadline = Clock::time_point::max();
+  double sequence_s = 0;  // expected time per sequence of the request; guarded by mutex
   // The generation of the current request; bumped by start() and stop().
   std::atomic<std::uint64_t> generation{0};
   // Set by the sync thread: when the last trigger of a finite request arrived.
@@ -453,9 +454,9 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
       frames_received += set->cameras.size() * static_cast<std::uint64_t>(frame_count);
       sets.push({gen, std::move(set)});
     } catch (const std::exception& e) {
-      ++sets_incomplete;
       std::lock_guard relock(mutex);
-      if (generation.load() != gen) continue;
+      if (generation.load() != gen) continue;  // stopped meanwhile: not a fault
+      ++sets_incomplete;
       if (++failures >= 3) {
         finishRequestLocked(std::string(e.what()) + " (3 sequences in a row failed; request ended)");
       } else {
@@ -683,6 +684,13 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
       if (item->generation != generation.load() || state != ScanState::kScanning) continue;
       ++scans_done;
       for (auto& r : item->results) r.scan_index = scans_done;
+      // Software-triggered sets come as fast as the devices allow: the
+      // deadline follows progress (as long as a scan arrives every
+      // sequence_s + 2 s, nothing is lost).
+      if (active_trigger == TriggerMode::kSoftware && scans_requested > scans_done)
+        request_deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(
+                                                  (scans_requested - scans_done) * sequence_s + 2.0));
       // Rate over the last (up to) 10 scans: stable, and quick to follow a switch.
       recent_scans.push_back(Clock::now());
       if (recent_scans.size() > 10) recent_scans.pop_front();
@@ -734,7 +742,7 @@ void ScanEngine::Impl::beginLocked() {
   // Time per sequence: one image interval per pattern with a trigger board;
   // in software, settle plus (at least) an exposure per pattern, doubled
   // for transfer and processing.
-  double sequence_s = pattern->frameCount() * config.synchroniser.image_interval_ns * 1e-9;
+  sequence_s = pattern->frameCount() * config.synchroniser.image_interval_ns * 1e-9;
   if (active_trigger == TriggerMode::kSoftware)
     sequence_s = 2 * pattern->frameCount() *
                  (config.software_trigger.settle_s + config.synchroniser.image_interval_ns * 1e-9);

@@ -8,6 +8,8 @@
 #include <mutex>
 #include <thread>
 
+#include <opencv2/core.hpp>
+
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/drivers/sim.h"
@@ -194,4 +196,79 @@ TEST_CASE("an intensity camera the sensor lacks stops the daemon at start-up") {
   CHECK_THROWS_WITH(sl::daemon::ScanEngine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
                                            [](const sl::daemon::ScanResult&) {}),
                     Catch::Contains("takes its intensity from camera 'nope'"));
+}
+
+// Software trigger, continuous: a pattern switch takes effect at the next
+// sequence boundary. The sequence running when the switch is requested is
+// completed with the old pattern; every set after it has the new one; no set
+// mixes them (a horizontal scan decodes no rows, a 'both' scan does).
+TEST_CASE("software trigger: a switch waits for the sequence in progress, never mixing patterns") {
+  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  struct Seen {
+    std::string pattern;
+    double up_valid, vp_valid;
+    sl::pipeline::TimestampNs stamp_ns;
+  };
+  std::mutex mutex;
+  std::vector<Seen> seen;
+  auto count = [&](const std::string& pattern) {
+    std::lock_guard lock(mutex);
+    return std::count_if(seen.begin(), seen.end(), [&](const Seen& s) { return s.pattern == pattern; });
+  };
+  sl::daemon::ScanEngine engine(
+      config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+      [&](const sl::daemon::ScanResult& r) {
+        const double n = double(r.maps->up.total());
+        Seen s{r.pattern, cv::countNonZero(r.maps->up == r.maps->up) / n,
+               cv::countNonZero(r.maps->vp == r.maps->vp) / n, r.cloud->stamp_ns};
+        std::lock_guard lock(mutex);
+        seen.push_back(s);
+      });
+  StartRequest r;
+  r.pattern = "3+3_horizontal";
+  r.count = 0;
+  r.trigger = TriggerMode::kSoftware;
+  REQUIRE(engine.start(r).accepted());
+  auto waitFor = [&](const std::string& pattern, long n) {
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while (count(pattern) < n && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(5ms);
+    return count(pattern) >= n;
+  };
+  REQUIRE(waitFor("3+3_horizontal", 2));
+  std::this_thread::sleep_for(100ms);  // into the next sequence
+  const auto requested = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                             std::chrono::system_clock::now().time_since_epoch())
+                             .count();
+  REQUIRE(engine.selectPattern("3+3_both").accepted());
+  REQUIRE(waitFor("3+3_both", 1));
+  REQUIRE(engine.stop().accepted());
+  const auto status = engine.status();
+  CHECK(status.trigger == TriggerMode::kSoftware);
+  CHECK(status.sets_incomplete == 0);
+  CHECK(status.sets_dropped == 0);
+
+  std::lock_guard lock(mutex);
+  std::vector<std::string> runs;
+  for (const auto& s : seen) {
+    if (runs.empty() || runs.back() != s.pattern) runs.push_back(s.pattern);
+    INFO(s.pattern << ": up valid " << s.up_valid << ", vp valid " << s.vp_valid);
+    CHECK(s.up_valid > 0.8);
+    if (s.pattern == "3+3_horizontal") CHECK(s.vp_valid == 0.0);
+    else CHECK(s.vp_valid > 0.8);
+  }
+  CHECK(runs == std::vector<std::string>{"3+3_horizontal", "3+3_both"});
+  // The horizontal sequence in progress at the request was completed: it
+  // began after the request minus one horizontal sequence period (the gap
+  // between the first two horizontal sets).
+  std::vector<sl::pipeline::TimestampNs> horizontal;
+  for (const auto& s : seen)
+    if (s.pattern == "3+3_horizontal") horizontal.push_back(s.stamp_ns);
+  REQUIRE(horizontal.size() >= 3);
+  const auto period = horizontal[1] - horizontal[0];
+  INFO("request " << (requested - horizontal.back()) * 1e-6 << " ms after the last horizontal "
+                  "sequence began; period " << period * 1e-6 << " ms");
+  CHECK(requested - horizontal.back() < period);
+  CHECK(requested > horizontal.back());
 }
