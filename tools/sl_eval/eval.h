@@ -89,11 +89,12 @@ EvalResult runVdi2634(const EvalOptions& options);
 
 // Systematic errors (signed mean deviations from the truth) and the main
 // accuracy figures of precision, cones and vdi2634 (their default scans, or
-// `scans`), run with a linear projector and with projector gamma
+// `scans`), run with a linear projector, a mild gamma of 1.1 and gamma
 // options.projector_gamma (2.2 when that is 1): how much error an
-// uncompensated projector non-linearity adds. Metrics:
-// <experiment>.<metric>_linear / _gamma for the rows of the table,
-// systematic_max_abs_linear_mm, systematic_max_abs_gamma_mm, gamma.
+// uncompensated projector non-linearity adds, next to the model's phase
+// error. Metrics: <experiment>.<metric>_<linear|gamma_1.1|gamma_G> for the
+// rows of the table, systematic_max_abs_<...>_mm, phase_error_peak_rad_<...>,
+// gamma.
 EvalResult runGamma(const EvalOptions& options);
 
 // Names accepted by runExperiment, in the order `all` runs them.

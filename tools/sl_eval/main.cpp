@@ -1,4 +1,4 @@
-// sl_eval EXPERIMENT|all [--scans N] [--out DIR]: runs the paper's
+// sl_eval EXPERIMENT|all [--scans N] [--out DIR] [--gamma G]: runs the paper's
 // experiments on the simulated sensor and prints Markdown tables; plots go to
 // DIR (default sl_eval_out). `all` runs every experiment in turn with its
 // default scan count (or N) and reports progress on stderr.
@@ -15,9 +15,11 @@
 namespace {
 
 int usage() {
-  std::cerr << "usage: sl_eval EXPERIMENT|all [--scans N] [--out DIR]\n  experiments:";
+  std::cerr << "usage: sl_eval EXPERIMENT|all [--scans N] [--out DIR] [--gamma G]\n  experiments:";
   for (const std::string& n : sl::eval::experimentNames()) std::cerr << ' ' << n;
-  std::cerr << "\n  --scans N: scans per condition (default: each experiment's own)\n";
+  std::cerr << "\n  --scans N: scans per condition (default: each experiment's own)"
+               "\n  --gamma G: simulated projector response (level / 255)^G (default 1, linear;"
+               "\n             for `gamma`: the non-linear case, default 2.2)\n";
   return 2;
 }
 
@@ -57,10 +59,18 @@ int main(int argc, char** argv) {
   options.out_dir = "sl_eval_out";
   for (int i = 2; i < argc; ++i) {
     const std::string arg = argv[i];
-    if ((arg == "--scans" || arg == "--out") && i + 1 < argc) {
+    if ((arg == "--scans" || arg == "--out" || arg == "--gamma") && i + 1 < argc) {
       const std::string value = argv[++i];
       if (arg == "--out") {
         options.out_dir = value;
+      } else if (arg == "--gamma") {
+        try {
+          std::size_t used = 0;
+          options.projector_gamma = std::stod(value, &used);
+          if (used != value.size() || !(options.projector_gamma > 0)) return usage();
+        } catch (const std::exception&) {
+          return usage();
+        }
       } else {
         try {
           std::size_t used = 0;
