@@ -78,9 +78,15 @@ struct PatternEvent {  // a new schedule: reset the synchroniser
 struct BoundaryEvent {
   pipeline::TimestampNs at_ns = 0;
 };
+// The request ended: what the synchroniser still holds is a sequence the
+// stop cut short (not a fault, dropped silently) or, when the request ended
+// with an error, one whose frames were lost (counted as incomplete).
+struct EndEvent {
+  bool count_pending = false;
+};
 struct Event {
   std::uint64_t generation = 0;
-  std::variant<FrameEvent, TriggerEvent, PatternEvent, BoundaryEvent> payload;
+  std::variant<FrameEvent, TriggerEvent, PatternEvent, BoundaryEvent, EndEvent> payload;
 };
 
 struct SetItem {
@@ -539,6 +545,15 @@ void ScanEngine::Impl::syncLoop(Heartbeat& hb) {
         current.synchroniser.setPattern(pattern->name, pattern->frame_count);
       } else if (auto* boundary = std::get_if<BoundaryEvent>(&control.payload)) {
         if (control.generation == active_generation) hold_from_ns = boundary->at_ns;
+      } else if (auto* end = std::get_if<EndEvent>(&control.payload)) {
+        if (control.generation != active_generation) continue;
+        if (end->count_pending) {
+          retire(previous);
+          current.synchroniser.setPattern("retired", 1);
+          collect(current);
+        }
+        previous.reset();
+        current = fresh();
       }
     }
   };
@@ -797,6 +812,7 @@ void ScanEngine::Impl::finishRequestLocked(const std::string& error) {
   } catch (const std::exception& e) {
     last_error = std::string("projector stop: ") + e.what();
   }
+  pushControl({generation.load(), EndEvent{!error.empty()}});
   generation++;
   state = ScanState::kIdle;
   launch_at_ns = 0;

@@ -111,6 +111,14 @@ sleep 2.5
 grep -E "^(scan|frame) rate" "$work/status.log"
 grep -Eq "^frame rate: *(2[6-9]|3[0-4])\.[0-9] Hz" "$work/status.log" || fail "frame rate: $(cat "$work/status.log")"
 grep -Eq "^scan rate: *(4\.[3-9]|5\.[0-7])[0-9] Hz" "$work/status.log" || fail "scan rate: $(cat "$work/status.log")"
+# A sequence cut short by a stop is no fault: another start and stop leave
+# the incomplete-sequence count at 0.
+"$bin/tools/slctl" --ns "$ns" start > /dev/null
+sleep 0.5
+"$bin/tools/slctl" --ns "$ns" stop > /dev/null
+"$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
+grep -q "^sets incomplete: *0$" "$work/status.log" || fail "stops counted as incomplete: $(cat "$work/status.log")"
+echo "ok: rates, stops not counted as incomplete sequences"
 
 kill -TERM "$daemon_pid"
 for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
