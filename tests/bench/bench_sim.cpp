@@ -64,6 +64,22 @@ BENCHMARK(BM_Render)
     ->Args({8, 1, 3})
     ->Unit(benchmark::kMillisecond);
 
+// A moving sensor (60 mm/s sideways, 2 mm per image): each image ray-casts
+// its own pose. Arg: optics (see benchConfig; 0 pinhole, 1 default defocus).
+void BM_RenderMoving(benchmark::State& state) {
+  sl::drivers::SimConfig config = benchConfig(8, true, int(state.range(0)));
+  config.motion.velocity_mm_s = {60, 0, 0};  // 2 mm per image at 30 fps
+  const auto sensor = sl::drivers::SimulatedSensor::create(config);
+  std::uint64_t seed = 0;
+  int frame = 0;
+  for (auto _ : state) {
+    cv::Mat image = sensor->render("3+3_both", frame, ++seed);
+    benchmark::DoNotOptimize(image.data);
+    frame = (frame + 1) % 12;
+  }
+}
+BENCHMARK(BM_RenderMoving)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
 void BM_CreateScene(benchmark::State& state) {
   const sl::drivers::SimConfig config = benchConfig(8, true);
   for (auto _ : state) {
@@ -82,9 +98,9 @@ sl::drivers::SimMesh icosphere(int levels, double radius, const Eigen::Vector3d&
                                     {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
   for (auto& p : v) p.normalize();
   std::vector<std::array<std::int32_t, 3>> f = {
-      {0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+      {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
       {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-      {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+      {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
   for (int level = 0; level < levels; ++level) {
     std::map<std::pair<int, int>, int> midpoints;
     auto midpoint = [&](int a, int b) {

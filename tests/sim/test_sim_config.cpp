@@ -1,14 +1,13 @@
 // The `sim:` section of the daemon config: the optics and electronics keys
 // parse into SimConfig, and mistakes name the file, line and key.
-#include <catch2/catch.hpp>
+#include <unistd.h>
 
+#include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
-#include <unistd.h>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
-
-#include <opencv2/imgcodecs.hpp>
 
 #include "sl/daemon/config.h"
 #include "sl/drivers/sim.h"
@@ -47,10 +46,11 @@ TEST_CASE("sim config: projector response, exposure and gain keys", "[sim][confi
   CHECK(plain.sim.projector_gamma == 1.0);
   CHECK(plain.sim.projector_response.empty());
 
-  const auto gamma = sl::daemon::parseConfig(withRadiometry("    projector_gamma: 2.2\n"), "t.yaml");
+  const auto gamma =
+      sl::daemon::parseConfig(withRadiometry("    projector_gamma: 2.2\n"), "t.yaml");
   CHECK(gamma.sim.projector_gamma == 2.2);
-  const auto table = sl::daemon::parseConfig(
-      withRadiometry("    projector_response: [0, 0.2, 1]\n"), "t.yaml");
+  const auto table =
+      sl::daemon::parseConfig(withRadiometry("    projector_response: [0, 0.2, 1]\n"), "t.yaml");
   CHECK(table.sim.projector_response == std::vector<double>{0, 0.2, 1});
   const auto exposure = sl::daemon::parseConfig(
       withRadiometry("    exposure_ms: 8\n    reference_exposure_ms: 2\n    analog_gain: 1.5\n"),
@@ -73,7 +73,8 @@ TEST_CASE("sim config: projector response, exposure and gain keys", "[sim][confi
       Case{"    projector_response: [0, 1]\n    projector_gamma: 2\n",
            "key 'sim.radiometry.projector_gamma': must be 1"},
       Case{"    projector_gama: 2\n", "unknown key 'sim.radiometry.projector_gama'"},
-      Case{"    exposure_ms: 40\n", "key 'sim.radiometry.exposure_ms': must fit in the frame interval"},
+      Case{"    exposure_ms: 40\n",
+           "key 'sim.radiometry.exposure_ms': must fit in the frame interval"},
       Case{"    analog_gain: -1\n", "key 'sim.radiometry.analog_gain': must be > 0"},
       Case{"    reference_exposure_ms: [1]\n",
            "key 'sim.radiometry.reference_exposure_ms': expected a number"});
@@ -101,8 +102,8 @@ TEST_CASE("sim config: optics keys", "[sim][config]") {
     return text.replace(at, from.size(), to);
   };
   const std::string lens = "camera:    {focus_distance_mm: 550, f_number: 4, pixel_pitch_um: 3.45}";
-  const auto pinhole = sl::daemon::parseConfig(
-      withCameraLens(lens, "camera: {f_number: 0}"), "t.yaml");
+  const auto pinhole =
+      sl::daemon::parseConfig(withCameraLens(lens, "camera: {f_number: 0}"), "t.yaml");
   CHECK(pinhole.sim.camera_lens.f_number == 0);
 
   struct Case {
@@ -138,8 +139,8 @@ std::string withScene(const std::string& scene_items) {
 
 TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
           "[sim][config][mesh]") {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("sl_sim_config_" + std::to_string(::getpid()));
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("sl_sim_config_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir / "meshes");
   {
     std::ofstream ply(dir / "meshes" / "tri.ply");
@@ -194,13 +195,14 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
     std::string items, expected;
   };
   const auto c = GENERATE_COPY(
-      Case{"    - mesh: {file: meshes/none.ply}\n",
-           "key 'sim.scene[0].mesh.file': PLY file"},
+      Case{"    - mesh: {file: meshes/none.ply}\n", "key 'sim.scene[0].mesh.file': PLY file"},
       Case{"    - mesh: {file: " + (dir / "meshes" / "tri.ply").string() + ", colour: red}\n",
            "unknown key 'sim.scene[0].mesh.colour'"},
-      Case{"    - group: {translation_mm: [0, 0, 1]}\n", "key 'sim.scene[0].group.items' is required"},
+      Case{"    - group: {translation_mm: [0, 0, 1]}\n",
+           "key 'sim.scene[0].group.items' is required"},
       Case{"    - plane: {point_mm: [0, 0, 1], texture: {file: /nonexistent.png, width_mm: 5}}\n",
-           "key 'sim.scene[0].plane.texture.file': albedo texture '/nonexistent.png': cannot be opened"},
+           "key 'sim.scene[0].plane.texture.file': albedo texture '/nonexistent.png': cannot be "
+           "opened"},
       Case{"    - plane: {point_mm: [0, 0, 1], texture: {file: " + (dir / "albedo.png").string() +
                "}}\n",
            "key 'sim.scene[0].plane.texture.width_mm' is required"},

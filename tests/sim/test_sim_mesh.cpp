@@ -3,6 +3,8 @@
 // be indistinguishable from the analytic box, a finely tessellated sphere
 // close to the analytic sphere, and a group placed by a pose the same as its
 // members placed one by one.
+#include <unistd.h>
+
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -13,7 +15,6 @@
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <string>
-#include <unistd.h>
 
 #include "sl/drivers/sim.h"
 
@@ -74,9 +75,9 @@ SimMesh unitIcosphere(int levels) {
                                     {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
   for (auto& p : v) p.normalize();
   std::vector<std::array<std::int32_t, 3>> f = {
-      {0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+      {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
       {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-      {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+      {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
   for (int level = 0; level < levels; ++level) {
     std::map<std::pair<int, int>, int> midpoints;
     auto midpoint = [&](int a, int b) {
@@ -165,8 +166,9 @@ TEST_CASE("PLY: ascii and binary little-endian, extra properties skipped, polygo
     }
     for (std::size_t q = 0; q < 12; q += 2) {
       const std::int32_t n = 4;
-      const std::uint32_t quad[4] = {std::uint32_t(box.triangles[q][0]), std::uint32_t(box.triangles[q][1]),
-                                     std::uint32_t(box.triangles[q][2]), std::uint32_t(box.triangles[q + 1][2])};
+      const std::uint32_t quad[4] = {
+          std::uint32_t(box.triangles[q][0]), std::uint32_t(box.triangles[q][1]),
+          std::uint32_t(box.triangles[q][2]), std::uint32_t(box.triangles[q + 1][2])};
       const std::uint8_t flags = 7;
       out.write(reinterpret_cast<const char*>(&n), sizeof(n));
       out.write(reinterpret_cast<const char*>(quad), sizeof(quad));
@@ -178,8 +180,7 @@ TEST_CASE("PLY: ascii and binary little-endian, extra properties skipped, polygo
   for (const SimMesh* m : {&from_ascii, &from_binary}) {
     REQUIRE(m->vertices.size() == 8);
     REQUIRE(m->triangles.size() == 12);
-    for (std::size_t i = 0; i < 8; ++i)
-      CHECK((m->vertices[i] - box.vertices[i]).norm() < 1e-4f);
+    for (std::size_t i = 0; i < 8; ++i) CHECK((m->vertices[i] - box.vertices[i]).norm() < 1e-4f);
     CHECK(m->triangles == box.triangles);
   }
 
@@ -190,19 +191,18 @@ TEST_CASE("PLY: ascii and binary little-endian, extra properties skipped, polygo
            "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
            "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n";
   }
-  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(broken), Catch::Contains("out of range") &&
-                                                          Catch::Contains(broken));
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(broken),
+                    Catch::Contains("out of range") && Catch::Contains(broken));
   CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(tempPath("missing.ply")),
                     Catch::Contains("cannot be opened"));
   for (const std::string& path : {ascii, binary, broken}) std::remove(path.c_str());
 }
 
-TEST_CASE("mesh of a box = the analytic box: depth, validity and projector shadow",
-          "[sim][mesh]") {
+TEST_CASE("mesh of a box = the analytic box: depth, validity and projector shadow", "[sim][mesh]") {
   // A tilted box in front of a wall, casting a projector shadow on it.
-  Eigen::Matrix3d rotation =
-      (Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()))
-          .toRotationMatrix();
+  Eigen::Matrix3d rotation = (Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitY()) *
+                              Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()))
+                                 .toRotationMatrix();
   const Eigen::Vector3d center{-20, 10, 480}, size{60, 50, 40};
   SimConfig analytic = baseConfig();
   analytic.scene.planes = {SimPlane{{0, 0, 620}, {0, 0, -1}, 0.8}};
@@ -219,11 +219,11 @@ TEST_CASE("mesh of a box = the analytic box: depth, validity and projector shado
   const GroundTruthDifference d = compare(*a, *b);
   const int shadowed = d.valid - d.lit;
   INFO("valid " << d.valid << ", shadowed " << shadowed << ", validity mismatches "
-                << d.valid_mismatch << ", lit mismatches " << d.lit_mismatch
-                << ", max depth error " << d.max_depth_error << " mm");
-  CHECK(shadowed > 20000);              // the box shadows a visible part of the wall
-  CHECK(d.valid_mismatch == 0);         // the wall is behind everything
-  CHECK(d.lit_mismatch < 50);           // at most a few pixels exactly on a shadow edge
+                << d.valid_mismatch << ", lit mismatches " << d.lit_mismatch << ", max depth error "
+                << d.max_depth_error << " mm");
+  CHECK(shadowed > 20000);       // the box shadows a visible part of the wall
+  CHECK(d.valid_mismatch == 0);  // the wall is behind everything
+  CHECK(d.lit_mismatch < 50);    // at most a few pixels exactly on a shadow edge
   CHECK(d.max_depth_error < 1e-3);
   // Rendered images agree too (same albedo and normals).
   const cv::Mat ia = a->render("3+3", 1, 0), ib = b->render("3+3", 1, 0);
@@ -277,7 +277,8 @@ TEST_CASE("composite: a group placed by one pose = its members placed one by one
   mesh.pose.translation() = Eigen::Vector3d(-45, 5, 0);
   group.meshes = {mesh};
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d(0.2, 1, 0.1).normalized()).toRotationMatrix();
+  pose.linear() =
+      Eigen::AngleAxisd(0.5, Eigen::Vector3d(0.2, 1, 0.1).normalized()).toRotationMatrix();
   pose.translation() = Eigen::Vector3d(10, -5, 500);
 
   SimConfig grouped = baseConfig();
@@ -289,7 +290,8 @@ TEST_CASE("composite: a group placed by one pose = its members placed one by one
   SimConfig placed = baseConfig();
   placed.scene.planes = grouped.scene.planes;
   placed.scene.spheres = {SimSphere{pose * Eigen::Vector3d(0, 0, 0), 25, 0.6}};
-  placed.scene.boxes = {SimBox{pose * Eigen::Vector3d(50, 0, 10), {20, 30, 40}, pose.linear(), 0.7}};
+  placed.scene.boxes = {
+      SimBox{pose * Eigen::Vector3d(50, 0, 10), {20, 30, 40}, pose.linear(), 0.7}};
   SimMesh moved = mesh;
   moved.pose = pose * mesh.pose;
   placed.scene.meshes = {moved};
@@ -392,7 +394,8 @@ TEST_CASE("textured albedo on a plane and on a height field: each pixel sees its
     field.heights_mm = cv::Mat(121, 171, CV_32FC1, cv::Scalar(0.0));
     for (int r = 0; r < 121; ++r)
       for (int col = 0; col < 171; ++col)
-        field.heights_mm.at<float>(r, col) = static_cast<float>(3 * std::sin(col * 0.05) * std::cos(r * 0.07));
+        field.heights_mm.at<float>(r, col) =
+            static_cast<float>(3 * std::sin(col * 0.05) * std::cos(r * 0.07));
     field.albedo_texture = texture;
     c.scene.height_fields = {field};
     const auto sensor = SimulatedSensor::create(c);

@@ -110,7 +110,8 @@ double modelThirdHarmonic(double gamma) {
   for (int i = 0; i < 3600; ++i) {
     const double p = wrap(2 * kPi * (i + 0.5) / 3600);
     double light[3];
-    for (int k = 0; k < 3; ++k) light[k] = std::pow(0.5 + 0.5 * std::cos(p - 2 * kPi * k / 3), gamma);
+    for (int k = 0; k < 3; ++k)
+      light[k] = std::pow(0.5 + 0.5 * std::cos(p - 2 * kPi * k / 3), gamma);
     phi.push_back(p);
     error.push_back(wrap(threeStepPhase(light[0], light[1], light[2]) - p));
   }
@@ -298,8 +299,8 @@ TEST_CASE("projector defocus: fringe modulation falls as the Gaussian MTF of the
   double max_sigma = 0;
   const MtfComparison m = compareMtf(*sharp, *blurred, [&](int r, int c) {
     const cv::Vec3f p = xyz.at<cv::Vec3f>(r, c);
-    const Eigen::Vector3d in_projector = config.rig.R * Eigen::Vector3d(p[0], p[1], p[2]) +
-                                         config.rig.t;
+    const Eigen::Vector3d in_projector =
+        config.rig.R * Eigen::Vector3d(p[0], p[1], p[2]) + config.rig.t;
     const double sigma = lens.blurSigmaPx(in_projector.z(), fx);
     max_sigma = std::max(max_sigma, sigma);
     return std::exp(-2 * kPi * kPi * sigma * sigma / (period * period));
@@ -360,5 +361,6 @@ TEST_CASE("default lenses: a wall near the focus keeps its modulation; f_number 
   CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("camera_lens.f_number"));
   bad = fineWall();
   bad.projector_lens = {10, 2, 5.4};  // focus inside twice the focal length (11.9 mm)
-  CHECK_THROWS_WITH(SimulatedSensor::create(bad), Catch::Contains("projector_lens.focus_distance_mm"));
+  CHECK_THROWS_WITH(SimulatedSensor::create(bad),
+                    Catch::Contains("projector_lens.focus_distance_mm"));
 }

@@ -18,9 +18,8 @@ constexpr std::int32_t kLeafSize = 4;
 
 // Slab test: the entry parameter of the ray into [lo, hi] if it enters
 // before `limit` (and leaves after min_s), else infinity.
-double boxEntry(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi,
-                const Eigen::Vector3d& origin, const Eigen::Vector3d& inverse, double min_s,
-                double limit) {
+double boxEntry(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, const Eigen::Vector3d& origin,
+                const Eigen::Vector3d& inverse, double min_s, double limit) {
   double enter = min_s, leave = limit;
   for (int k = 0; k < 3; ++k) {
     double a = (lo[k] - origin[k]) * inverse[k], b = (hi[k] - origin[k]) * inverse[k];
@@ -67,7 +66,8 @@ void MeshBvh::build(std::size_t node, std::vector<std::int32_t>& order, std::int
   for (std::int32_t i = first; i < first + count; ++i) {
     const auto k = static_cast<std::size_t>(order[static_cast<std::size_t>(i)]);
     const Triangle& t = triangles[k];
-    for (const Eigen::Vector3d& p : {t.a, Eigen::Vector3d(t.a + t.ab), Eigen::Vector3d(t.a + t.ac)}) {
+    for (const Eigen::Vector3d& p :
+         {t.a, Eigen::Vector3d(t.a + t.ab), Eigen::Vector3d(t.a + t.ac)}) {
       lo = lo.cwiseMin(p);
       hi = hi.cwiseMax(p);
     }
@@ -89,7 +89,8 @@ void MeshBvh::build(std::size_t node, std::vector<std::int32_t>& order, std::int
   const std::int32_t half = count / 2;
   auto begin = order.begin() + first;
   std::nth_element(begin, begin + half, begin + count, [&](std::int32_t x, std::int32_t y) {
-    return centroids[static_cast<std::size_t>(x)][axis] < centroids[static_cast<std::size_t>(y)][axis];
+    return centroids[static_cast<std::size_t>(x)][axis] <
+           centroids[static_cast<std::size_t>(y)][axis];
   });
   const auto left = static_cast<std::int32_t>(nodes_.size());
   nodes_[node].first = left;
@@ -139,12 +140,12 @@ bool MeshBvh::intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& di
     }
     // Inner node: push the farther child first so the nearer is visited first.
     const std::int32_t left = node.first, right = node.first + 1;
-    const double enter_left = boxEntry(nodes_[static_cast<std::size_t>(left)].lo,
-                                       nodes_[static_cast<std::size_t>(left)].hi, origin, inverse,
-                                       min_s, best);
-    const double enter_right = boxEntry(nodes_[static_cast<std::size_t>(right)].lo,
-                                        nodes_[static_cast<std::size_t>(right)].hi, origin,
-                                        inverse, min_s, best);
+    const double enter_left =
+        boxEntry(nodes_[static_cast<std::size_t>(left)].lo,
+                 nodes_[static_cast<std::size_t>(left)].hi, origin, inverse, min_s, best);
+    const double enter_right =
+        boxEntry(nodes_[static_cast<std::size_t>(right)].lo,
+                 nodes_[static_cast<std::size_t>(right)].hi, origin, inverse, min_s, best);
     const bool left_first = enter_left <= enter_right;
     const double near_entry = left_first ? enter_left : enter_right;
     const double far_entry = left_first ? enter_right : enter_left;
@@ -167,14 +168,22 @@ enum class PlyType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, 
 
 bool plyType(const std::string& name, PlyType& type) {
   static const std::array<std::pair<const char*, PlyType>, 16> kNames = {{
-      {"char", PlyType::kInt8},      {"int8", PlyType::kInt8},
-      {"uchar", PlyType::kUint8},    {"uint8", PlyType::kUint8},
-      {"short", PlyType::kInt16},    {"int16", PlyType::kInt16},
-      {"ushort", PlyType::kUint16},  {"uint16", PlyType::kUint16},
-      {"int", PlyType::kInt32},      {"int32", PlyType::kInt32},
-      {"uint", PlyType::kUint32},    {"uint32", PlyType::kUint32},
-      {"float", PlyType::kFloat32},  {"float32", PlyType::kFloat32},
-      {"double", PlyType::kFloat64}, {"float64", PlyType::kFloat64},
+      {"char", PlyType::kInt8},
+      {"int8", PlyType::kInt8},
+      {"uchar", PlyType::kUint8},
+      {"uint8", PlyType::kUint8},
+      {"short", PlyType::kInt16},
+      {"int16", PlyType::kInt16},
+      {"ushort", PlyType::kUint16},
+      {"uint16", PlyType::kUint16},
+      {"int", PlyType::kInt32},
+      {"int32", PlyType::kInt32},
+      {"uint", PlyType::kUint32},
+      {"uint32", PlyType::kUint32},
+      {"float", PlyType::kFloat32},
+      {"float32", PlyType::kFloat32},
+      {"double", PlyType::kFloat64},
+      {"float64", PlyType::kFloat64},
   }};
   for (const auto& [n, t] : kNames)
     if (name == n) {
@@ -217,14 +226,22 @@ class PlyReader {
       return static_cast<double>(value);
     };
     switch (type) {
-      case PlyType::kInt8: return bytes(std::int8_t{});
-      case PlyType::kUint8: return bytes(std::uint8_t{});
-      case PlyType::kInt16: return bytes(std::int16_t{});
-      case PlyType::kUint16: return bytes(std::uint16_t{});
-      case PlyType::kInt32: return bytes(std::int32_t{});
-      case PlyType::kUint32: return bytes(std::uint32_t{});
-      case PlyType::kFloat32: return bytes(float{});
-      case PlyType::kFloat64: return bytes(double{});
+      case PlyType::kInt8:
+        return bytes(std::int8_t{});
+      case PlyType::kUint8:
+        return bytes(std::uint8_t{});
+      case PlyType::kInt16:
+        return bytes(std::int16_t{});
+      case PlyType::kUint16:
+        return bytes(std::uint16_t{});
+      case PlyType::kInt32:
+        return bytes(std::int32_t{});
+      case PlyType::kUint32:
+        return bytes(std::uint32_t{});
+      case PlyType::kFloat32:
+        return bytes(float{});
+      case PlyType::kFloat64:
+        return bytes(double{});
     }
     return 0;
   }

@@ -3,10 +3,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <vector>
-
-#include <opencv2/imgproc.hpp>
 
 namespace sl::drivers::sim {
 
@@ -139,8 +138,8 @@ void renderInto(const RenderMaps& maps, const ProjectorFrame& frame, const Senso
     else if (projector.linear)
       signalRow<std::uint8_t, true>(maps, frame.image.ptr<std::uint8_t>(), nullptr, row, signal);
     else
-      signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(),
-                                     projector.light.data(), row, signal);
+      signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(), projector.light.data(),
+                                     row, signal);
   };
   NormalSource normals(noise_seed);
   std::vector<float> z(kNoise ? width : 0);
@@ -202,7 +201,8 @@ ProjectorResponse makeProjectorResponse(double gamma, const std::vector<double>&
     if (samples.size() < 2)
       throw std::invalid_argument("projector_response needs at least 2 samples");
     for (double v : samples)
-      if (!(v >= 0 && v <= 1)) throw std::invalid_argument("projector_response values must be in [0, 1]");
+      if (!(v >= 0 && v <= 1))
+        throw std::invalid_argument("projector_response values must be in [0, 1]");
   }
   for (int level = 0; level < 256; ++level) {
     double fraction = level / 255.0;
@@ -274,7 +274,8 @@ BlurLevels chooseBlurLevels(double min_sigma, double max_sigma, double ratio, in
   // else at 1 px and growing by `ratio`, enough that max_levels suffice.
   std::vector<double> all{0.0, std::min(max_sigma, kFirstMax)};
   ratio = std::max(ratio, std::pow(max_sigma / all.back(), 1.0 / std::max(max_levels - 2, 1)));
-  while (all.back() < max_sigma * (1 - 1e-9)) all.push_back(std::min(all.back() * ratio, max_sigma));
+  while (all.back() < max_sigma * (1 - 1e-9))
+    all.push_back(std::min(all.back() * ratio, max_sigma));
   // Keep the levels that bracket [min_sigma, max_sigma].
   std::size_t first = 0;
   while (first + 2 < all.size() && all[first + 1] <= min_sigma) ++first;

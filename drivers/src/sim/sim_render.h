@@ -4,8 +4,8 @@
 
 #include <array>
 #include <cstdint>
-#include <vector>
 #include <opencv2/core/mat.hpp>
+#include <vector>
 
 #include "sim_scene.h"
 

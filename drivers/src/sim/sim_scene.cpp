@@ -49,8 +49,8 @@ double boardAlbedoAt(const SimCheckerboard& board, double margin_albedo, double 
 
 // A checkerboard plane in the camera frame of the current view.
 struct BoardInCamera {
-  Eigen::Vector3d n;      // unit normal
-  double plane_offset;    // n . X on the plane
+  Eigen::Vector3d n;    // unit normal
+  double plane_offset;  // n . X on the plane
   BoardFrame frame;
 };
 
@@ -70,8 +70,7 @@ double footprintAlbedo(const SimPlane& plane, const BoardInCamera& board_cam,
   // Conservative reach of the footprint (mm): twice the pinhole estimate,
   // which covers the lens's local magnification.
   const double cos_view = std::abs(n.dot(ray.normalized()));
-  const double reach =
-      2.0 * point.z() / std::min(camera.fx, camera.fy) / std::max(cos_view, 0.05);
+  const double reach = 2.0 * point.z() / std::min(camera.fx, camera.fy) / std::max(cos_view, 0.05);
   const double to_edge_a = std::abs(a - s * std::round(a / s));
   const double to_edge_b = std::abs(b - s * std::round(b / s));
   if (std::min(to_edge_a, to_edge_b) > reach) return boardAlbedoAt(board, plane.albedo, a, b);
@@ -153,9 +152,9 @@ void intersectCone(const SimCone& cone, const Eigen::Vector3d& origin,
                    std::optional<SurfaceHit>& best) {
   const Eigen::Vector3d u = cone.axis.normalized();  // base -> apex
   const Eigen::Vector3d apex = cone.base_center + cone.height * u;
-  const Eigen::Vector3d v = -u;                      // apex -> base
-  const double cos2 = cone.height * cone.height /
-                      (cone.height * cone.height + cone.radius * cone.radius);
+  const Eigen::Vector3d v = -u;  // apex -> base
+  const double cos2 =
+      cone.height * cone.height / (cone.height * cone.height + cone.radius * cone.radius);
   // Lateral surface: ((P - apex) . v)^2 = cos^2 |P - apex|^2, 0 <= (P - apex) . v <= height.
   const Eigen::Vector3d w = origin - apex;
   const double dv = direction.dot(v), wv = w.dot(v);
@@ -234,9 +233,9 @@ double heightAt(const SceneGeometry::HeightFieldFrame& f, double a, double b,
 
 // Marches the ray through the height field's bounding slab in steps of half
 // a cell and refines the first crossing from above to below by bisection.
-void intersectHeightField(const SceneGeometry::HeightFieldFrame& f,
-                          const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
-                          double min_s, double max_s, std::optional<SurfaceHit>& best) {
+void intersectHeightField(const SceneGeometry::HeightFieldFrame& f, const Eigen::Vector3d& origin,
+                          const Eigen::Vector3d& direction, double min_s, double max_s,
+                          std::optional<SurfaceHit>& best) {
   const SimHeightField& field = *f.field;
   const Eigen::Vector3d o = origin - f.origin;
   const double oa = o.dot(f.x), ob = o.dot(f.y), oh = o.dot(f.n);
@@ -331,8 +330,8 @@ SceneGeometry::SceneGeometry(const SimScene& scene) : scene_(scene) {
 }
 
 std::optional<SurfaceHit> SceneGeometry::intersect(const Eigen::Vector3d& origin,
-                                                   const Eigen::Vector3d& direction,
-                                                   double min_s, double max_s) const {
+                                                   const Eigen::Vector3d& direction, double min_s,
+                                                   double max_s) const {
   std::optional<SurfaceHit> best;
   for (std::size_t i = 0; i < scene_.planes.size(); ++i) {
     const SimPlane& plane = scene_.planes[i];
@@ -414,9 +413,8 @@ CameraRays computeCameraRays(const pipeline::PinholeModel& camera) {
 }
 
 SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
-                           const pipeline::CameraProjectorCalibration& rig,
-                           const CameraRays& rays, const Eigen::Isometry3d& camera_to_scene,
-                           bool with_ground_truth) {
+                           const pipeline::CameraProjectorCalibration& rig, const CameraRays& rays,
+                           const Eigen::Isometry3d& camera_to_scene, bool with_ground_truth) {
   SceneView view;
   computeSceneViewInto(config, scene, rig, rays, camera_to_scene, with_ground_truth, view);
   return view;
@@ -527,8 +525,7 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
     const Eigen::Vector2d projector_px = rig.projector.project(point_in_projector);
     const double up = projector_px.x(), vp = projector_px.y();
     // A projector pixel covers [c - 0.5, c + 0.5) around its centre c.
-    if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5))
-      return out;
+    if (!(up >= -0.5 && up < proj_width - 0.5 && vp >= -0.5 && vp < proj_height - 0.5)) return out;
     const Eigen::Vector3d to_projector = projector_center - point;
     const double distance = to_projector.norm();
     const double cos_incidence = normal.dot(to_projector) / distance;
@@ -616,9 +613,8 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
       if (smooth && (c1 - c0 > 1 || r1 - r0 > 1)) {
         const int cc = (c0 + c1) / 2, rc = (r0 + r1) / 2;
         const Sample exact = castPixel(cc, rc);
-        const Sample predicted =
-            blend(s00, s01, s10, s11, double(cc - c0) / std::max(c1 - c0, 1),
-                  double(rc - r0) / std::max(r1 - r0, 1));
+        const Sample predicted = blend(s00, s01, s10, s11, double(cc - c0) / std::max(c1 - c0, 1),
+                                       double(rc - r0) / std::max(r1 - r0, 1));
         smooth = exact.primitive == s00.primitive && exact.lit &&
                  std::abs(exact.up - predicted.up) < 0.01 &&
                  std::abs(exact.vp - predicted.vp) < 0.01 &&
@@ -638,7 +634,8 @@ void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,
           const float p0 = left.per_level, dp = (right.per_level - left.per_level) * inv_w;
           const float u0 = float(left.up), du = float(right.up - left.up) * inv_w;
           const float v0 = float(left.vp), dv = float(right.vp - left.vp) * inv_w;
-          const float zc0 = float(left.camera_z), dzc = float(right.camera_z - left.camera_z) * inv_w;
+          const float zc0 = float(left.camera_z),
+                      dzc = float(right.camera_z - left.camera_z) * inv_w;
           const std::size_t base = static_cast<std::size_t>(row) * width;
           for (int col = c0; col < col_end; ++col) {
             const float k = float(col - c0);

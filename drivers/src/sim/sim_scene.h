@@ -120,9 +120,8 @@ CameraRays computeCameraRays(const pipeline::PinholeModel& camera);
 // pixel by pixel. The fast path of a moving sensor: ~35 ms per 1440 x 1080
 // image for a plane and a sphere filling 10 % of the view (exact: ~200 ms).
 SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
-                           const pipeline::CameraProjectorCalibration& rig,
-                           const CameraRays& rays, const Eigen::Isometry3d& camera_to_scene,
-                           bool with_ground_truth);
+                           const pipeline::CameraProjectorCalibration& rig, const CameraRays& rays,
+                           const Eigen::Isometry3d& camera_to_scene, bool with_ground_truth);
 // The same into `view`, reusing its buffers when the sizes match (no page
 // faults on a fresh 30 MB per image).
 void computeSceneViewInto(const SimConfig& config, const SceneGeometry& scene,

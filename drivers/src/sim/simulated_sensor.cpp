@@ -1,12 +1,12 @@
 // SimulatedSensor::create: validation of the configuration, the scene view
 // computed once, and the live camera / projector / trigger source.
 #include <Eigen/Dense>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <cmath>
 #include <deque>
 #include <fstream>
 #include <limits>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -64,7 +64,8 @@ void validateCheckerboard(const SimCheckerboard& b, const Eigen::Vector3d& norma
 }
 
 void validateTexture(const cv::Mat& albedo, const std::string& field) {
-  if (albedo.empty() || albedo.type() != CV_32FC1) fail(field, "must be a non-empty CV_32FC1 image");
+  if (albedo.empty() || albedo.type() != CV_32FC1)
+    fail(field, "must be a non-empty CV_32FC1 image");
   if (!cv::checkRange(albedo)) fail(field, "values must be finite");
   double lo = 0, hi = 0;
   cv::minMaxLoc(albedo, &lo, &hi);
@@ -90,7 +91,7 @@ void validateConfig(const SimConfig& c) {
   requireNonNegative(c.gain_dn_per_electron, "gain_dn_per_electron");
   requireNonNegative(c.read_noise_dn, "read_noise_dn");
   for (const auto& [lens, name] : {std::pair{&c.camera_lens, std::string("camera_lens")},
-                                    std::pair{&c.projector_lens, std::string("projector_lens")}}) {
+                                   std::pair{&c.projector_lens, std::string("projector_lens")}}) {
     requireNonNegative(lens->f_number, name + ".f_number");
     if (!(lens->pixel_pitch_um > 0 && std::isfinite(lens->pixel_pitch_um)))
       fail(name + ".pixel_pitch_um", "must be > 0");
@@ -128,7 +129,8 @@ void validateConfig(const SimConfig& c) {
       if (p.checkerboard) fail(name + ".texture", "cannot be combined with a checkerboard");
       validateTexture(t.albedo, name + ".texture.albedo");
       if (!finite(t.center)) fail(name + ".texture.center", "must be finite");
-      if (!(t.width_mm > 0 && std::isfinite(t.width_mm))) fail(name + ".texture.width_mm", "must be > 0");
+      if (!(t.width_mm > 0 && std::isfinite(t.width_mm)))
+        fail(name + ".texture.width_mm", "must be > 0");
       const Eigen::Vector3d n = p.normal.normalized();
       if (!finite(t.x_axis) || (t.x_axis - n * n.dot(t.x_axis)).norm() < 1e-6 * t.x_axis.norm())
         fail(name + ".texture.x_axis", "must not be (nearly) parallel to the plane normal");
@@ -155,7 +157,8 @@ void validateConfig(const SimConfig& c) {
     const SimBox& b = c.scene.boxes[i];
     const std::string name = "scene.boxes[" + std::to_string(i) + "]";
     if (!finite(b.center)) fail(name + ".center", "must be finite");
-    if (!finite(b.size_mm) || (b.size_mm.array() <= 0).any()) fail(name + ".size_mm", "must be > 0");
+    if (!finite(b.size_mm) || (b.size_mm.array() <= 0).any())
+      fail(name + ".size_mm", "must be > 0");
     if (!b.rotation.allFinite() ||
         !(b.rotation.transpose() * b.rotation).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
         b.rotation.determinant() <= 0)
@@ -179,7 +182,8 @@ void validateConfig(const SimConfig& c) {
       if (!h.roughness) fail(name, "needs heights_mm or roughness");
       const SimRoughness& r = *h.roughness;
       requireNonNegative(r.rms_mm, name + ".roughness.rms_mm");
-      if (!(r.correlation_length_mm > 0)) fail(name + ".roughness.correlation_length_mm", "must be > 0");
+      if (!(r.correlation_length_mm > 0))
+        fail(name + ".roughness.correlation_length_mm", "must be > 0");
       if (!(r.hurst > 0 && r.hurst <= 1)) fail(name + ".roughness.hurst", "must be in (0, 1]");
     } else if (h.heights_mm.type() != CV_32FC1 || h.heights_mm.rows != rows ||
                h.heights_mm.cols != cols) {
@@ -201,8 +205,8 @@ void validateConfig(const SimConfig& c) {
       for (std::int32_t v : t)
         if (v < 0 || static_cast<std::size_t>(v) >= m.vertices.size())
           fail(name + ".triangles", "index " + std::to_string(v) + " out of range");
-    if (!m.pose.matrix().allFinite() ||
-        !(m.pose.linear().transpose() * m.pose.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-6))
+    if (!m.pose.matrix().allFinite() || !(m.pose.linear().transpose() * m.pose.linear())
+                                             .isApprox(Eigen::Matrix3d::Identity(), 1e-6))
       fail(name + ".pose", "must be a finite rigid transform");
     requireAlbedo(m.albedo, name + ".albedo");
   }
@@ -355,8 +359,8 @@ class SceneRenderer {
     cv::Mat sigma;
     if (config_.projector_lens.f_number > 0) {
       constexpr int kDepthStep = 4;  // ray-cast every 4th projector pixel
-      sigma = sim::projectorDepthMap(geometry_, config_.rig, Eigen::Isometry3d::Identity(),
-                                     kDepthStep);
+      sigma =
+          sim::projectorDepthMap(geometry_, config_.rig, Eigen::Isometry3d::Identity(), kDepthStep);
       const double fx = meanFocalPx(config_.rig.projector);
       double lo = std::numeric_limits<double>::infinity(), hi = 0;
       for (int r = 0; r < sigma.rows; ++r) {
@@ -422,7 +426,7 @@ class SceneRenderer {
   sim::ProjectorResponse projector_response_;
   std::vector<std::string> names_;
   std::vector<std::vector<cv::Mat>> images_;  // per pattern, projector images in order
-  std::deque<sim::ProjectorFrame> storage_;  // distinct frames (stable addresses)
+  std::deque<sim::ProjectorFrame> storage_;   // distinct frames (stable addresses)
   std::vector<std::vector<const sim::ProjectorFrame*>> frames_;  // per pattern, in order
 };
 
@@ -443,8 +447,8 @@ class SimulatedSensorImpl final : public SimulatedSensor {
           return renderer->render(camera, pattern, frame, seed);
         },
         renderer_->cameraCount());
-    cameras_.push_back(sim::makeLiveCamera(schedule_, 0, c.camera_id, c.rig.camera.width,
-                                           c.rig.camera.height));
+    cameras_.push_back(
+        sim::makeLiveCamera(schedule_, 0, c.camera_id, c.rig.camera.width, c.rig.camera.height));
     if (c.second_camera)
       cameras_.push_back(sim::makeLiveCamera(schedule_, 1, c.second_camera->camera_id,
                                              c.second_camera->rig.camera.width,
@@ -485,7 +489,8 @@ class SimulatedSensorImpl final : public SimulatedSensor {
 }  // namespace
 
 cv::Mat loadAlbedoTexture(const std::string& path) {
-  if (!std::ifstream(path)) throw std::runtime_error("albedo texture '" + path + "': cannot be opened");
+  if (!std::ifstream(path))
+    throw std::runtime_error("albedo texture '" + path + "': cannot be opened");
   const cv::Mat raw = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
   if (raw.empty())
     throw std::runtime_error("albedo texture '" + path + "': cannot be read as an image");

@@ -1,16 +1,20 @@
 // The simulated sensor: one or two cameras and a projector addressed like the
-// LightCrafter 4500, looking at a scene of planes, spheres, cones, boxes and
-// height fields, optionally while the sensor moves. It renders what
-// the camera would see for each projected pattern (Lambertian shading,
-// projector shadows, ambient light, shot and read noise, quantisation) and
-// plays the trigger schedule of the real sensor in real time: the camera
-// exposes every dt_img = 1/fps, each sequence of frame_count patterns starts
-// with a trigger event.
+// LightCrafter 4500, looking at a scene of planes, spheres, cones, boxes,
+// height fields and triangle meshes (constant, checkerboard or textured
+// albedo), optionally while the sensor moves. It renders what the camera
+// would see for each projected pattern (projector intensity response,
+// thin-lens defocus of projector and camera, Lambertian shading, projector
+// shadows, ambient light, exposure and gain, shot and read noise,
+// quantisation and saturation) and plays the trigger schedule of the real
+// sensor in real time: the camera exposes every dt_img = 1/fps, each sequence
+// of frame_count patterns starts with a trigger event.
 //
 // Rendering is cheap because the projector coordinate seen by a camera pixel
 // does not depend on the pattern: it is computed once per sensor pose (once
 // per scene for a static sensor; once per image when the sensor moves, from
-// camera rays undistorted once).
+// camera rays undistorted once). The projector's defocus is baked into the
+// pattern images once (blurred per projector pixel for the depth it lights);
+// the camera's is a few cheap per-pixel filter passes per image.
 #pragma once
 
 #include <array>
