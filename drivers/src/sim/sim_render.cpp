@@ -283,11 +283,30 @@ BlurLevels chooseBlurLevels(double min_sigma, double max_sigma, double ratio, in
   return levels;
 }
 
+ProjectorBlur makeProjectorBlur(const BlurLevels& levels, const cv::Mat& sigma_px) {
+  ProjectorBlur blur;
+  blur.levels = levels;
+  if (!levels.active()) return blur;
+  blur.level.create(sigma_px.size(), CV_8UC1);
+  blur.weight.create(sigma_px.size(), CV_32FC1);
+  for (int r = 0; r < sigma_px.rows; ++r) {
+    const float* sigma = sigma_px.ptr<float>(r);
+    std::uint8_t* level = blur.level.ptr<std::uint8_t>(r);
+    float* weight = blur.weight.ptr<float>(r);
+    for (int c = 0; c < sigma_px.cols; ++c) {
+      int k = 0;
+      levels.locate(sigma[c], k, weight[c]);
+      level[c] = static_cast<std::uint8_t>(k);
+    }
+  }
+  return blur;
+}
+
 ProjectorFrame makeProjectorFrame(const cv::Mat& pattern_image, const ProjectorResponse& response,
-                                  const BlurLevels& levels, const cv::Mat& sigma_px) {
+                                  const ProjectorBlur& blur) {
   ProjectorFrame frame;
   frame.image = pattern_image;
-  if (!levels.active()) return frame;
+  if (!blur.levels.active()) return frame;
   cv::Mat light(pattern_image.size(), CV_32FC1);
   for (int r = 0; r < pattern_image.rows; ++r) {
     const std::uint8_t* in = pattern_image.ptr<std::uint8_t>(r);
@@ -295,7 +314,7 @@ ProjectorFrame makeProjectorFrame(const cv::Mat& pattern_image, const ProjectorR
     for (int c = 0; c < pattern_image.cols; ++c) out[c] = response.light[in[c]];
   }
   std::vector<cv::Mat> copies;
-  for (double sigma : levels.sigma_px) {
+  for (double sigma : blur.levels.sigma_px) {
     copies.emplace_back();
     // No light comes from outside the DMD: the border is dark.
     if (sigma > 0)
@@ -307,15 +326,19 @@ ProjectorFrame makeProjectorFrame(const cv::Mat& pattern_image, const ProjectorR
   std::vector<const float*> rows(copies.size());
   for (int r = 0; r < pattern_image.rows; ++r) {
     for (std::size_t k = 0; k < copies.size(); ++k) rows[k] = copies[k].ptr<float>(r);
-    const float* sigma = sigma_px.ptr<float>(r);
+    const std::uint8_t* level = blur.level.ptr<std::uint8_t>(r);
+    const float* weight = blur.weight.ptr<float>(r);
     std::uint16_t* out = frame.light.ptr<std::uint16_t>(r);
+    if (copies.size() == 2) {  // the common case: one blend for the whole image
+      const float* a = rows[0];
+      const float* b = rows[1];
+      for (int c = 0; c < pattern_image.cols; ++c)
+        out[c] = static_cast<std::uint16_t>(256.0f * (a[c] + weight[c] * (b[c] - a[c])) + 0.5f);
+      continue;
+    }
     for (int c = 0; c < pattern_image.cols; ++c) {
-      int k = 0;
-      float w = 0;
-      levels.locate(sigma[c], k, w);
-      const float a = rows[static_cast<std::size_t>(k)][c];
-      const float b = rows[static_cast<std::size_t>(k) + 1][c];
-      out[c] = cv::saturate_cast<std::uint16_t>(256.0f * (a + w * (b - a)));
+      const float a = rows[level[c]][c], b = rows[level[c] + 1u][c];
+      out[c] = static_cast<std::uint16_t>(256.0f * (a + weight[c] * (b - a)) + 0.5f);
     }
   }
   return frame;

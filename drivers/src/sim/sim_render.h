@@ -77,11 +77,19 @@ struct ProjectorFrame {
 
 // The projector's defocus in projector space: the light of each pixel p is
 // the pattern blurred by a Gaussian of sigma(p), the sigma for the depth of
-// the surface p lights (depth_mm, projector size; 0: no surface, no blur).
-// Blurred copies are made at each of `levels` and blended per pixel,
-// linear in variance. Inactive levels: no light image (the pattern itself).
+// the surface p lights. Blurred copies are made at each of the levels and
+// blended per pixel, linear in variance: the per-pixel blend is computed
+// once (level k and the weight of k + 1) and serves every pattern image.
+struct ProjectorBlur {
+  BlurLevels levels;  // inactive: no blur
+  cv::Mat level;      // CV_8UC1, projector size
+  cv::Mat weight;     // CV_32FC1
+};
+// sigma_px: CV_32FC1 of the projector's size (0 where nothing is lit).
+ProjectorBlur makeProjectorBlur(const BlurLevels& levels, const cv::Mat& sigma_px);
+// Inactive blur: a frame without light image (the pattern is sampled).
 ProjectorFrame makeProjectorFrame(const cv::Mat& pattern_image, const ProjectorResponse& response,
-                                  const BlurLevels& levels, const cv::Mat& sigma_px);
+                                  const ProjectorBlur& blur);
 
 // Camera blur: passes of a per-pixel 3-tap kernel [a, 1 - 2a, a] along x
 // and y (variance 2a each), repeated often enough that a <= 0.32: a Gaussian

@@ -2,6 +2,7 @@
 // computed once, and the live camera / projector / trigger source.
 #include <Eigen/Dense>
 #include <cmath>
+#include <cstring>
 #include <deque>
 #include <fstream>
 #include <limits>
@@ -252,6 +253,14 @@ void validateConfig(const SimConfig& c) {
   }
 }
 
+// Byte-equal 8-bit images (stops at the first difference).
+bool sameImage(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  for (int r = 0; r < a.rows; ++r)
+    if (std::memcmp(a.ptr(r), b.ptr(r), a.cols * a.elemSize()) != 0) return false;
+  return true;
+}
+
 // Camera k's frame in the first camera's frame (the sensor frame): both rigs
 // place the same projector, X_p = R_k X_k + t_k.
 Eigen::Isometry3d cameraToFirst(const pipeline::CameraProjectorCalibration& first,
@@ -375,6 +384,7 @@ class SceneRenderer {
       constexpr int kMaxLevels = 10;
       projector_blur = sim::chooseBlurLevels(lo, hi, std::pow(2.0, 0.25), kMaxLevels);
     }
+    const sim::ProjectorBlur blur = sim::makeProjectorBlur(projector_blur, sigma);
 
     // Distinct pattern images (patterns often share frames) get one frame each.
     std::vector<const cv::Mat*> distinct;
@@ -382,11 +392,11 @@ class SceneRenderer {
       frames_.emplace_back();
       for (const cv::Mat& image : images_[p]) {
         std::size_t k = 0;
-        while (k < distinct.size() && cv::norm(*distinct[k], image, cv::NORM_INF) != 0) ++k;
+        while (k < distinct.size() && !sameImage(*distinct[k], image)) ++k;
         if (k == distinct.size()) {
           distinct.push_back(&image);
           storage_.push_back(
-              sim::makeProjectorFrame(image, projector_response_, projector_blur, sigma));
+              sim::makeProjectorFrame(image, projector_response_, blur));
         }
         frames_.back().push_back(&storage_[k]);
       }
