@@ -122,14 +122,29 @@ void parseSceneItems(const std::vector<YamlMap>& items, const std::filesystem::p
       s.length_mm = positive(p, "length_mm", s.length_mm);
       s.cell_mm = positive(p, "cell_mm", s.cell_mm);
       s.albedo = albedo(p, s.albedo);
-      const YamlMap r = p.map("roughness");
-      drivers::SimRoughness rough;
-      rough.rms_mm = nonNegative(r, "rms_mm", rough.rms_mm);
-      rough.correlation_length_mm = positive(r, "correlation_length_mm", rough.correlation_length_mm);
-      rough.hurst = positive(r, "hurst", rough.hurst);
-      rough.seed = r.get<std::uint64_t>("seed", rough.seed);
-      r.done();
-      s.roughness = rough;
+      if (p.has("roughness") == p.has("height_map"))
+        p.fail("roughness", "give exactly one of 'roughness' and 'height_map'");
+      if (p.has("height_map")) {
+        // An image (grey, 8/16 bit) resampled to the field's grid, black = min_mm.
+        const YamlMap h = p.map("height_map");
+        const double min_mm = h.get<double>("min_mm", 0.0), max_mm = h.get<double>("max_mm");
+        if (!(max_mm > min_mm)) h.fail("max_mm", "must exceed min_mm");
+        const cv::Mat unit = loadTexture(h, "file", base_dir);
+        s.heights_mm = drivers::heightsFromImage(unit, min_mm, max_mm,
+                                                 int(std::lround(s.length_mm / s.cell_mm)) + 1,
+                                                 int(std::lround(s.width_mm / s.cell_mm)) + 1);
+        h.done();
+      } else {
+        const YamlMap r = p.map("roughness");
+        drivers::SimRoughness rough;
+        rough.rms_mm = nonNegative(r, "rms_mm", rough.rms_mm);
+        rough.correlation_length_mm =
+            positive(r, "correlation_length_mm", rough.correlation_length_mm);
+        rough.hurst = positive(r, "hurst", rough.hurst);
+        rough.seed = r.get<std::uint64_t>("seed", rough.seed);
+        r.done();
+        s.roughness = rough;
+      }
       if (p.has("albedo_texture")) s.albedo_texture = loadTexture(p, "albedo_texture", base_dir);
       scene.height_fields.push_back(s);
     } else if (kind == "mesh") {

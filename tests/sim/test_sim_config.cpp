@@ -156,6 +156,8 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
       "              texture: {file: albedo.png, width_mm: 200, x_axis: [1, 1, 0]}}\n"
       "    - height_field: {origin_mm: [0, 0, 650], width_mm: 10, length_mm: 10, cell_mm: 1,\n"
       "                     roughness: {rms_mm: 0.1}, albedo_texture: albedo.png}\n"
+      "    - height_field: {origin_mm: [0, 0, 650], width_mm: 39, length_mm: 29, cell_mm: 1,\n"
+      "                     height_map: {file: albedo.png, min_mm: -1, max_mm: 4}}\n"
       "    - mesh: {file: meshes/tri.ply, scale: 1000, rotation_deg: [0, 0, 90],\n"
       "             translation_mm: [0, 0, 500], albedo: 0.5}\n"
       "    - group:\n"
@@ -178,8 +180,14 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
   CHECK(s.planes[0].texture->width_mm == 200);
   CHECK(s.planes[0].texture->center == Eigen::Vector3d(0, 0, 700));  // defaults to point_mm
   CHECK(s.planes[0].texture->x_axis == Eigen::Vector3d(1, 1, 0));
-  REQUIRE(s.height_fields.size() == 1);
+  REQUIRE(s.height_fields.size() == 2);
   CHECK(s.height_fields[0].albedo_texture.size() == cv::Size(40, 30));
+  // The image's grey levels 255 and 51 -> 4 and 0 mm, on the 30 x 40 grid.
+  const cv::Mat& heights = s.height_fields[1].heights_mm;
+  REQUIRE(heights.size() == cv::Size(40, 30));
+  CHECK(heights.at<float>(0, 0) == Approx(4));
+  CHECK(heights.at<float>(10, 10) == Approx(0).margin(1e-5));
+  CHECK_FALSE(s.height_fields[1].roughness);
   REQUIRE(s.meshes.size() == 2);
   REQUIRE(s.spheres.size() == 1);
   CHECK(s.meshes[0].vertices.size() == 3);
@@ -200,6 +208,11 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
            "unknown key 'sim.scene[0].mesh.colour'"},
       Case{"    - group: {translation_mm: [0, 0, 1]}\n",
            "key 'sim.scene[0].group.items' is required"},
+      Case{"    - height_field: {origin_mm: [0, 0, 600]}\n",
+           "key 'sim.scene[0].height_field.roughness': give exactly one of 'roughness' and "
+           "'height_map'"},
+      Case{"    - height_field: {origin_mm: [0, 0, 600], height_map: {file: x.png, max_mm: -1}}\n",
+           "key 'sim.scene[0].height_field.height_map.max_mm': must exceed min_mm"},
       Case{"    - plane: {point_mm: [0, 0, 1], texture: {file: /nonexistent.png, width_mm: 5}}\n",
            "key 'sim.scene[0].plane.texture.file': albedo texture '/nonexistent.png': cannot be "
            "opened"},

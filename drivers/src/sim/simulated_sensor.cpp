@@ -511,6 +511,32 @@ cv::Mat loadAlbedoTexture(const std::string& path) {
   return albedo;
 }
 
+cv::Mat heightsFromImage(const cv::Mat& unit_image, double min_mm, double max_mm, int rows,
+                         int cols) {
+  if (unit_image.empty() || unit_image.type() != CV_32FC1 || rows < 2 || cols < 2)
+    throw std::invalid_argument("heightsFromImage: needs a CV_32FC1 image and a grid >= 2 x 2");
+  cv::Mat heights(rows, cols, CV_32FC1);
+  const double sx = double(unit_image.cols - 1) / (cols - 1);
+  const double sy = double(unit_image.rows - 1) / (rows - 1);
+  for (int r = 0; r < rows; ++r) {
+    const double y = r * sy;
+    const int y0 = std::min(int(y), std::max(unit_image.rows - 2, 0));
+    const int y1 = std::min(y0 + 1, unit_image.rows - 1);
+    const double fy = y - y0;
+    for (int c = 0; c < cols; ++c) {
+      const double x = c * sx;
+      const int x0 = std::min(int(x), std::max(unit_image.cols - 2, 0));
+      const int x1 = std::min(x0 + 1, unit_image.cols - 1);
+      const double fx = x - x0;
+      auto at = [&](int yy, int xx) { return double(unit_image.at<float>(yy, xx)); };
+      const double v = (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x1)) +
+                       fy * ((1 - fx) * at(y1, x0) + fx * at(y1, x1));
+      heights.at<float>(r, c) = static_cast<float>(min_mm + (max_mm - min_mm) * v);
+    }
+  }
+  return heights;
+}
+
 double SimLens::blurSigmaPx(double z_mm, double fx_px) const {
   if (f_number <= 0 || !(z_mm > 0)) return 0;
   const double focal_mm = fx_px * pixel_pitch_um * 1e-3;

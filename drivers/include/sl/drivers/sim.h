@@ -162,6 +162,13 @@ struct SimMesh {
 // skipped. Throws std::runtime_error naming the file and the problem.
 SimMesh loadPlyMesh(const std::string& path, double scale = 1.0);
 
+// Heights (CV_32FC1, rows x cols, as SimHeightField::heights_mm) from an
+// image with values in [0, 1] (e.g. loadAlbedoTexture of a grey PNG):
+// min_mm + (max_mm - min_mm) * value, resampled bilinearly over the grid
+// (image corners on the grid's corners).
+cv::Mat heightsFromImage(const cv::Mat& unit_image, double min_mm, double max_mm, int rows,
+                         int cols);
+
 struct SimScene {
   std::vector<SimPlane> planes;
   std::vector<SimSphere> spheres;
