@@ -300,6 +300,10 @@ void AravisCamera::Impl::configure(Connection& c) {
     setEnum(c, "TriggerMode", "On");
     if (config.trigger.mode == Mode::kSoftware) {
       setEnum(c, "TriggerSource", "Software");
+      GErrorPtr support_error;
+      if (!arv_camera_is_software_trigger_supported(cam, support_error.out()) || support_error)
+        throw std::runtime_error(who() + ": TriggerSoftware: the camera has no software trigger " +
+                                 "command; use trigger mode hardware or free_run");
     } else {
       setEnum(c, "TriggerSource", config.trigger.line);
       optional(c, "TriggerActivation", edgeName(config.trigger.edge),
@@ -391,10 +395,25 @@ void AravisCamera::stop() {
   if (d.connection && !d.lost.load()) arv_camera_stop_acquisition(d.connection->camera.get(), nullptr);
 }
 
+bool AravisCamera::hasSoftwareTrigger() const {
+  return impl_->config.trigger.mode == AravisTriggerConfig::Mode::kSoftware;
+}
+
 void AravisCamera::triggerSoftware() {
   Impl& d = *impl_;
+  if (!hasSoftwareTrigger()) {
+    const bool line = d.config.trigger.mode == AravisTriggerConfig::Mode::kHardware;
+    throw std::logic_error(d.who() + ": TriggerSoftware: the camera is configured for " +
+                           (line ? "trigger mode hardware (TriggerSource " + d.config.trigger.line + ")"
+                                 : std::string("trigger mode free_run")) +
+                           "; software-triggered scans need trigger: {mode: software}");
+  }
   std::lock_guard lock(d.mutex);
-  if (!d.connection) throw std::runtime_error(d.who() + ": not connected");
+  if (!d.acquiring.load())
+    throw std::logic_error(d.who() + ": TriggerSoftware before start()");
+  if (!d.connection || d.lost.load())
+    throw std::runtime_error(d.who() + ": TriggerSoftware: the camera is not connected " +
+                             "(lost; grab() reopens it)");
   GErrorPtr error;
   arv_camera_software_trigger(d.connection->camera.get(), error.out());
   d.check(error, "TriggerSoftware failed");

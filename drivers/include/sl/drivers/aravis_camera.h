@@ -107,8 +107,17 @@ class AravisCamera final : public Camera {
   // different reconnect failure); later calls try to reopen it.
   std::optional<Frame> grab(std::chrono::milliseconds timeout) override;
 
-  // Sends TriggerSoftware (trigger mode kSoftware). Throws on failure.
-  void triggerSoftware();
+  // Software trigger: available when the camera was configured with trigger
+  // mode kSoftware (TriggerMode On, TriggerSource Software), which open()
+  // checks the camera supports. The source is fixed at open(): a camera wired
+  // to a trigger line (kHardware) or free running answers false here, and
+  // triggerSoftware() throws std::logic_error saying how to configure it.
+  bool hasSoftwareTrigger() const override;
+  // Executes the GenICam TriggerSoftware command: the camera exposes one
+  // frame, which grab() delivers. Throws std::logic_error without software
+  // trigger mode or before start(); std::runtime_error (naming the camera and
+  // the command) when the camera is lost or refuses the command.
+  void triggerSoftware() override;
   AravisCounters counters() const;
   // What configuration skipped or adapted ("camera lacks Gamma: skipped").
   std::vector<std::string> notes() const;
