@@ -63,7 +63,10 @@ class ScriptedCamera : public Camera {
     next_stamp += kPeriod;
     return f;
   }
+  bool hasSoftwareTrigger() const override { return true; }
+  void triggerSoftware() override { ++software_triggers; }
   std::int64_t next_stamp = 1'000'000'000;
+  int software_triggers = 0;
 };
 class RecordingProjector : public Projector {
  public:
@@ -72,8 +75,11 @@ class RecordingProjector : public Projector {
   void select(const std::string& n) override { selected = n; }
   void start(int) override { ++starts; }
   void stop() override {}
+  bool canProjectSingle() const override { return true; }
+  void projectSingle(int index) override { held = index; }
   std::string selected;
   int starts = 0;
+  int held = -1;
 };
 }  // namespace
 
@@ -102,4 +108,26 @@ TEST_CASE("trigger source fed by a camera tap, sequence length from a projector 
   CHECK_FALSE(source->next(5000ms));
   t.join();
   CHECK(std::chrono::steady_clock::now() - t0 < 2000ms);
+}
+
+TEST_CASE("the taps pass software triggering through; its frames start no sequence") {
+  auto source = std::make_shared<CameraStampTriggerSource>();
+  auto inner = std::make_shared<RecordingProjector>();
+  SequenceTapProjector projector(inner, source, {{"a", {2, kPeriod}}});
+  auto cam = std::make_shared<ScriptedCamera>();
+  StampTapCamera camera(cam, source);
+  CHECK(camera.hasSoftwareTrigger());
+  CHECK(projector.canProjectSingle());
+  projector.select("a");
+  for (int i = 0; i < 4; ++i) {
+    projector.projectSingle(i % 2);
+    camera.triggerSoftware();
+    REQUIRE(camera.grab(10ms));
+  }
+  CHECK(inner->held == 1);
+  CHECK(cam->software_triggers == 4);
+  CHECK_FALSE(source->next(10ms));  // software-triggered frames are no sequence starts
+  projector.start(0);               // the running sequence is numbered again
+  REQUIRE(camera.grab(10ms));
+  CHECK(source->next(10ms));
 }

@@ -165,7 +165,8 @@ TEST_CASE("a sequence the projector refuses is reported with its reason") {
   LightCrafter4500Projector p(config(), rig.factory());
   rig.state.validation_bits = 0x01 | 0x10;
   CHECK_THROWS_WITH(p.select("3+3_horizontal"),
-                    "lightcrafter4500: sequence '3+3_horizontal' refused by the projector: "
+                    "lightcrafter4500: sequence '3+3_horizontal' refused by the projector "
+                    "(DLPC350 ValidateLut, USB 0x1A1A): "
                     "selected exposure or frame period settings are invalid");
   CHECK_THROWS_AS(p.start(0), std::runtime_error);  // still refused: uploads again, fails again
   rig.state.validation_bits = 0x04;                 // a warning only
@@ -226,6 +227,131 @@ TEST_CASE("device errors name the command; unplug and reconnect") {
     const auto cmds = rig.commands(from);
     CHECK(std::count(cmds.begin(), cmds.end(), 0x1A31) == 1);
     CHECK(cmds.back() == 0x1A24);
+    CHECK(rig.state.registers[0x1A24] == Bytes{2});
+  }
+}
+
+namespace {
+
+// The 24-bit pattern LUT entries of a LutData payload.
+std::vector<dl::PatternLutEntry> lutEntries(const Bytes& payload) {
+  std::vector<dl::PatternLutEntry> out;
+  for (std::size_t at = 0; at + 3 <= payload.size(); at += 3)
+    out.push_back(dl::decodePatternLutEntry(payload[at] | (payload[at + 1] << 8) |
+                                            (payload[at + 2] << 16)));
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("projectSingle holds one pattern: one-entry LUT, internal trigger, repeat; start restores") {
+  Rig rig;
+  LightCrafter4500Projector p(config(), rig.factory());
+  REQUIRE(p.canProjectSingle());
+  CHECK_THROWS_WITH(p.projectSingle(0), Catch::Contains("lightcrafter4500: projectSingle(0)") &&
+                                            Catch::Contains("no sequence selected"));
+  p.select("3+3_horizontal");
+  const Bytes full_lut = rig.state.mailbox_writes[0];
+  const std::size_t from = rig.state.written.size();
+  const std::size_t mailbox_from = rig.state.mailbox_writes.size();
+  rig.state.validation_busy_polls = 2;
+  p.projectSingle(4);  // image 8, R plane
+  // Stop, flash source, trigger mode, exposure, LUT control, pattern LUT,
+  // image LUT, validate (polled), start.
+  CHECK(rig.commands(from) == std::vector<std::uint16_t>{0x1A24, 0x1A22, 0x1A23, 0x1A29, 0x1A31,
+                                                         0x1A33, 0x1A32, 0x1A34, 0x1A33, 0x1A33,
+                                                         0x1A32, 0x1A34, 0x1A33, 0x1A1A, 0x1A24});
+  CHECK(rig.state.registers[0x1A31] == Bytes{0, 1, 0, 0});  // 1 entry, repeat, 1 image
+  CHECK(rig.state.registers[0x1A29] == Bytes{0x1B, 0x41, 0, 0, 0x1B, 0x41, 0, 0});
+  REQUIRE(rig.state.mailbox_writes.size() == mailbox_from + 2);
+  // Internal trigger (0), pattern 1 (bits 7:2 = 0x04), 8 bits, white LEDs, buffer swap.
+  CHECK(rig.state.mailbox_writes[mailbox_from] == Bytes{0x04, 0x78, 0x04});
+  const auto entries = lutEntries(rig.state.mailbox_writes[mailbox_from]);
+  REQUIRE(entries.size() == 1);
+  CHECK(entries[0].trigger == dl::TriggerType::kInternal);
+  CHECK(entries[0].pattern_number == 1);
+  CHECK(entries[0].bit_depth == 8);
+  CHECK(entries[0].buffer_swap);
+  CHECK(rig.state.mailbox_writes[mailbox_from + 1] == Bytes{8});
+  CHECK(rig.state.registers[0x1A24] == Bytes{2});  // started
+
+  SECTION("the same pattern again sends nothing; another pattern uploads its entry") {
+    const std::size_t n = rig.state.written.size();
+    p.projectSingle(4);
+    CHECK(rig.state.written.size() == n);
+    p.projectSingle(0);
+    CHECK(rig.state.mailbox_writes.back() == Bytes{7});
+    CHECK(lutEntries(rig.state.mailbox_writes[rig.state.mailbox_writes.size() - 2]) ==
+          std::vector<dl::PatternLutEntry>{
+              {dl::TriggerType::kInternal, 0, 8, dl::kLedWhite, false, false, true, false}});
+  }
+  SECTION("stop ends it; a normal start uploads the full sequence again") {
+    p.stop();
+    CHECK(rig.state.registers[0x1A24] == Bytes{0});
+    const std::size_t before = rig.state.written.size();
+    p.start(0);
+    const auto cmds = rig.commands(before);
+    CHECK(std::count(cmds.begin(), cmds.end(), 0x1A31) == 1);
+    CHECK(cmds.back() == 0x1A24);
+    CHECK(rig.state.registers[0x1A31] == Bytes{5, 1, 5, 1});
+    CHECK(rig.state.mailbox_writes[rig.state.mailbox_writes.size() - 2] == full_lut);
+    CHECK(rig.state.mailbox_writes.back() == Bytes{8, 7});
+    CHECK(rig.state.registers[0x1A24] == Bytes{2});
+    CHECK_THROWS_WITH(p.projectSingle(0), Catch::Contains("a sequence is running"));
+    p.stop();
+    const std::size_t n = rig.state.written.size();
+    p.projectSingle(4);  // stop() ended the held pattern: shown afresh
+    CHECK(rig.state.written.size() > n);
+  }
+  SECTION("a start without stop also restores the full sequence") {
+    p.start(0);
+    CHECK(rig.state.registers[0x1A31] == Bytes{5, 1, 5, 1});
+    CHECK(rig.state.mailbox_writes[rig.state.mailbox_writes.size() - 2] == full_lut);
+  }
+  SECTION("an index outside the sequence") {
+    CHECK_THROWS_AS(p.projectSingle(6), std::out_of_range);
+    CHECK_THROWS_AS(p.projectSingle(-1), std::out_of_range);
+  }
+}
+
+TEST_CASE("projectSingle: refusals and device faults name the projector, the pattern and the command") {
+  Rig rig;
+  LightCrafter4500Projector p(config(), rig.factory());
+  p.select("3+3_horizontal");
+  SECTION("validation refuses the entry") {
+    rig.state.validation_bits = 0x02;
+    CHECK_THROWS_WITH(p.projectSingle(2),
+                      "lightcrafter4500: pattern 2 of sequence '3+3_horizontal' refused by the "
+                      "projector (DLPC350 ValidateLut, USB 0x1A1A): selected pattern numbers in the "
+                      "LUT are invalid");
+    CHECK(rig.state.registers[0x1A24] == Bytes{0});  // not started
+    rig.state.validation_bits = 0;
+    p.projectSingle(2);  // tried again: not taken for shown
+    CHECK(rig.state.registers[0x1A24] == Bytes{2});
+  }
+  SECTION("validation that never finishes") {
+    rig.state.validation_busy_polls = 1000000;
+    CHECK_THROWS_WITH(p.projectSingle(1), Catch::Contains("lightcrafter4500: validation of pattern 1") &&
+                                              Catch::Contains("ValidateLut") &&
+                                              Catch::Contains("did not finish within 200 ms"));
+  }
+  SECTION("PatternStartStop is refused") {
+    rig.state.nack.insert(0x1A24);
+    CHECK_THROWS_WITH(p.projectSingle(3),
+                      "lightcrafter4500: showing pattern 3 of sequence '3+3_horizontal': DLPC350 "
+                      "PatternStartStop (USB 0x1A24): the projector rejected the command (NACK)");
+  }
+  SECTION("unplugged: reported, then reopened by the next call") {
+    rig.state.unplugged = true;
+    CHECK_THROWS_WITH(p.projectSingle(0), Catch::Contains("lightcrafter4500: showing pattern 0") &&
+                                              Catch::Contains("unplugged"));
+    CHECK_THROWS_WITH(p.projectSingle(0), "lightcrafter4500: showing pattern 0 of sequence "
+                                          "'3+3_horizontal': LightCrafter 4500 (USB 0451:6401) "
+                                          "not found");
+    rig.state.unplugged = false;
+    p.projectSingle(0);
+    CHECK(rig.state.opens == 2);
+    CHECK(rig.state.mailbox_writes.back() == Bytes{7});
     CHECK(rig.state.registers[0x1A24] == Bytes{2});
   }
 }

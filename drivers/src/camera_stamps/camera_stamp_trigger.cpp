@@ -37,6 +37,7 @@ CameraStampTriggerSource::CameraStampTriggerSource(CameraStampTriggerConfig conf
 
 void CameraStampTriggerSource::pushFrame(pipeline::TimestampNs stamp_ns) {
   std::lock_guard lock(mutex_);
+  if (ignoring_) return;
   auto e = sequencer_.push(stamp_ns);
   if (!e) return;
   if (events_.size() >= config_.queue_depth) {
@@ -55,6 +56,12 @@ void CameraStampTriggerSource::setSequence(int frames, pipeline::TimestampNs per
 void CameraStampTriggerSource::reset() {
   std::lock_guard lock(mutex_);
   sequencer_.reset();
+  ignoring_ = false;
+}
+
+void CameraStampTriggerSource::ignoreFrames() {
+  std::lock_guard lock(mutex_);
+  ignoring_ = true;
 }
 
 std::optional<TriggerEvent> CameraStampTriggerSource::next(std::chrono::milliseconds timeout) {
@@ -98,6 +105,11 @@ void SequenceTapProjector::select(const std::string& name) {
   if (it == timing_.end())
     throw std::invalid_argument("no frame timing for projector sequence '" + name + "'");
   source_->setSequence(it->second.frames, it->second.frame_period_ns);
+}
+
+void SequenceTapProjector::projectSingle(int index) {
+  source_->ignoreFrames();
+  projector_->projectSingle(index);
 }
 
 void SequenceTapProjector::start(int count) {

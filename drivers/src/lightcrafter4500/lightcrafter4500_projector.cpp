@@ -83,6 +83,25 @@ LightCrafter4500Upload buildUpload(const LightCrafter4500Sequence& s) {
   return u;
 }
 
+LightCrafter4500Upload buildSingleUpload(const LightCrafter4500Sequence& s, int index) {
+  if (index < 0 || static_cast<std::size_t>(index) >= s.patterns.size())
+    throw std::out_of_range("sequence '" + s.name + "': pattern " + std::to_string(index) +
+                            " not in 0.." + std::to_string(s.patterns.size() - 1));
+  const LightCrafter4500Pattern& p = s.patterns[static_cast<std::size_t>(index)];
+  LightCrafter4500Upload u;
+  dl::PatternLutEntry e;
+  e.trigger = dl::TriggerType::kInternal;  // no trigger input: the timer repeats it
+  e.pattern_number = p.channel;
+  e.bit_depth = p.bit_depth;
+  e.leds = s.leds;
+  e.invert = p.invert;
+  e.buffer_swap = true;  // load its image
+  u.pattern_lut = {e};
+  u.image_lut = {static_cast<std::uint8_t>(p.image_index)};
+  u.config = dl::PatternConfig{1, true, 1, 1};
+  return u;
+}
+
 LightCrafter4500Projector::LightCrafter4500Projector(LightCrafter4500Config config,
                                                      TransportFactory open_transport)
     : config_(std::move(config)), open_transport_(std::move(open_transport)) {
@@ -132,6 +151,7 @@ auto LightCrafter4500Projector::withDevice(F&& f) -> decltype(f()) {
       transport_.reset();
       uploaded_.clear();
       running_ = false;
+      held_ = -1;
     }
     throw;
   }
@@ -176,14 +196,21 @@ void LightCrafter4500Projector::connectLocked() {
 }
 
 void LightCrafter4500Projector::uploadLocked(const LightCrafter4500Sequence& s) {
-  const LightCrafter4500Upload u = buildUpload(s);
+  sendUploadLocked(s, buildUpload(s), "sequence '" + s.name + "'");
+  uploaded_ = s.name;
+}
+
+void LightCrafter4500Projector::sendUploadLocked(const LightCrafter4500Sequence& s,
+                                                 const LightCrafter4500Upload& u,
+                                                 const std::string& what) {
   const int images = device_->imagesInFlash();
-  for (const auto& p : s.patterns)
-    if (p.image_index >= images)
-      throw std::runtime_error(config_.id + ": sequence '" + s.name + "' uses flash image " +
-                               std::to_string(p.image_index) + " but the projector's flash holds " +
+  for (const std::uint8_t image : u.image_lut)
+    if (image >= images)
+      throw std::runtime_error(config_.id + ": " + what + " uses flash image " +
+                               std::to_string(image) + " but the projector's flash holds " +
                                std::to_string(images) + " images");
   uploaded_.clear();
+  held_ = -1;
   device_->setPatternAction(dl::PatternAction::kStop);
   device_->setPatternSource(dl::PatternSource::kFlash);
   device_->setTriggerMode(dl::TriggerMode::kInternalOrExternal);
@@ -192,21 +219,21 @@ void LightCrafter4500Projector::uploadLocked(const LightCrafter4500Sequence& s) 
   device_->writePatternLut(u.pattern_lut);
   device_->writeImageLut(u.image_lut);
   device_->startValidation();
+  const std::string validate = "(DLPC350 " + dl::commandName(dl::Command::kValidate) + ", USB 0x1A1A)";
   const auto deadline = std::chrono::steady_clock::now() + config_.validation_timeout;
   dl::ValidationStatus status = device_->validationStatus();
   while (status.busy()) {
     if (std::chrono::steady_clock::now() > deadline)
-      throw std::runtime_error(config_.id + ": validation of sequence '" + s.name +
-                               "' did not finish within " +
+      throw std::runtime_error(config_.id + ": validation of " + what + " " + validate +
+                               " did not finish within " +
                                std::to_string(config_.validation_timeout.count()) + " ms");
     std::this_thread::sleep_for(config_.validation_poll);
     status = device_->validationStatus();
   }
   if (!status.valid())
-    throw std::runtime_error(config_.id + ": sequence '" + s.name +
-                             "' refused by the projector: " + status.errors());
+    throw std::runtime_error(config_.id + ": " + what + " refused by the projector " + validate +
+                             ": " + status.errors());
   warnings_ = status.warnings();
-  uploaded_ = s.name;
 }
 
 void LightCrafter4500Projector::select(const std::string& name) {
@@ -224,8 +251,9 @@ void LightCrafter4500Projector::start(int /*count*/) {
   std::lock_guard lock(mutex_);
   if (selected_.empty()) throw std::logic_error(config_.id + ": no sequence selected");
   withDevice([&] {
-    if (uploaded_ != selected_) uploadLocked(*find(selected_));
+    if (uploaded_ != selected_) uploadLocked(*find(selected_));  // also after projectSingle()
     device_->setPatternAction(dl::PatternAction::kStart);
+    held_ = -1;
     running_ = true;
   });
 }
@@ -233,7 +261,32 @@ void LightCrafter4500Projector::start(int /*count*/) {
 void LightCrafter4500Projector::stop() {
   std::lock_guard lock(mutex_);
   running_ = false;
+  held_ = -1;
   withDevice([&] { device_->setPatternAction(dl::PatternAction::kStop); });
+}
+
+void LightCrafter4500Projector::projectSingle(int index) {
+  std::lock_guard lock(mutex_);
+  const std::string call = config_.id + ": projectSingle(" + std::to_string(index) + ")";
+  if (running_) throw std::logic_error(call + ": a sequence is running; stop() first");
+  if (selected_.empty()) throw std::logic_error(call + ": no sequence selected");
+  const LightCrafter4500Sequence& s = *find(selected_);
+  if (index < 0 || static_cast<std::size_t>(index) >= s.patterns.size())
+    throw std::out_of_range(call + ": sequence '" + s.name + "' has patterns 0.." +
+                            std::to_string(s.patterns.size() - 1));
+  if (held_ == index) return;  // already shown
+  const std::string what = "pattern " + std::to_string(index) + " of sequence '" + s.name + "'";
+  try {
+    withDevice([&] {
+      sendUploadLocked(s, buildSingleUpload(s, index), what);
+      device_->setPatternAction(dl::PatternAction::kStart);
+      held_ = index;
+    });
+  } catch (const dl::Dlpc350Error& e) {  // names the command
+    throw std::runtime_error(config_.id + ": showing " + what + ": " + e.what());
+  } catch (const dl::HidError& e) {  // reopening failed
+    throw std::runtime_error(config_.id + ": showing " + what + ": " + e.what());
+  }
 }
 
 std::string LightCrafter4500Projector::firmwareVersion() const {

@@ -65,7 +65,11 @@ class CameraStampTriggerSource : public TriggerSource {
   explicit CameraStampTriggerSource(CameraStampTriggerConfig config = {});
   void pushFrame(pipeline::TimestampNs stamp_ns);
   void setSequence(int frames_per_sequence, pipeline::TimestampNs frame_period_ns);
+  // Restarts the numbering; ends ignoreFrames().
   void reset();
+  // Frames pushed from now until reset() are not sequence frames (the
+  // projector holds single patterns for software triggering): ignored.
+  void ignoreFrames();
   std::optional<TriggerEvent> next(std::chrono::milliseconds timeout) override;
   void stop() override;
   std::uint64_t dropped() const;  // events dropped because nobody called next()
@@ -78,10 +82,12 @@ class CameraStampTriggerSource : public TriggerSource {
   std::deque<TriggerEvent> events_;  // guarded by mutex_
   std::uint64_t dropped_ = 0;        // guarded by mutex_
   bool stopped_ = false;             // guarded by mutex_
+  bool ignoring_ = false;            // guarded by mutex_
 };
 
-// Camera decorator: forwards everything and feeds each grabbed frame's stamp
-// to the trigger source. Thread-safety as the wrapped camera.
+// Camera decorator: forwards everything (the software trigger too) and feeds
+// each grabbed frame's stamp to the trigger source. Thread-safety as the
+// wrapped camera.
 class StampTapCamera : public Camera {
  public:
   StampTapCamera(std::shared_ptr<Camera> camera, std::shared_ptr<CameraStampTriggerSource> source);
@@ -91,6 +97,8 @@ class StampTapCamera : public Camera {
   void start() override { camera_->start(); }
   void stop() override { camera_->stop(); }
   std::optional<Frame> grab(std::chrono::milliseconds timeout) override;
+  bool hasSoftwareTrigger() const override { return camera_->hasSoftwareTrigger(); }
+  void triggerSoftware() override { camera_->triggerSoftware(); }
 
  private:
   std::shared_ptr<Camera> camera_;
@@ -98,7 +106,8 @@ class StampTapCamera : public Camera {
 };
 
 // Projector decorator: tells the trigger source the length and frame period
-// of the selected sequence and restarts its numbering on start().
+// of the selected sequence and restarts its numbering on start(); while it
+// holds single patterns (projectSingle, forwarded) the source ignores frames.
 // Thread-safety as the wrapped projector.
 class SequenceTapProjector : public Projector {
  public:
@@ -114,6 +123,8 @@ class SequenceTapProjector : public Projector {
   void select(const std::string& name) override;
   void start(int count) override;
   void stop() override { projector_->stop(); }
+  bool canProjectSingle() const override { return projector_->canProjectSingle(); }
+  void projectSingle(int index) override;
 
  private:
   std::shared_ptr<Projector> projector_;

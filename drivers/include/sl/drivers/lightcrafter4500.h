@@ -74,6 +74,11 @@ struct LightCrafter4500Upload {
   dlpc350::PatternConfig config;
 };
 LightCrafter4500Upload buildUpload(const LightCrafter4500Sequence& sequence);
+// The upload that holds pattern `index` of a sequence (software triggering):
+// one pattern LUT entry for that image and bit plane, internal trigger, buffer
+// swap (its image is loaded), repeated until stopped; one image LUT entry.
+// Throws std::out_of_range for an index outside the sequence.
+LightCrafter4500Upload buildSingleUpload(const LightCrafter4500Sequence& sequence, int index);
 
 // Opens the device with hidapi (hidraw backend); throws dlpc350::HidError
 // ("LightCrafter 4500 (USB 0451:6401) not found") when it is missing.
@@ -104,7 +109,18 @@ class LightCrafter4500Projector : public Projector {
   // reason when validation fails.
   void select(const std::string& name) override;
   void start(int count) override;  // count is not enforced by the device: the engine stops it
-  void stop() override;
+  void stop() override;            // also ends a held pattern
+
+  // Software triggering: stops the sequencer, uploads and validates the
+  // one-entry LUT of buildSingleUpload (the selected sequence's exposure and
+  // period) and starts it, so the projector shows pattern `index` until the
+  // next call or stop(). Holding the same pattern again sends nothing. The
+  // next start() uploads the full sequence again. Throws std::logic_error
+  // while running or without a selected sequence, std::out_of_range for a bad
+  // index, std::runtime_error naming the projector, the pattern and the
+  // DLPC350 command on a device fault or a refused LUT.
+  bool canProjectSingle() const override { return true; }
+  void projectSingle(int index) override;
 
   std::string firmwareVersion() const;         // "major.minor.patch" read at open
   std::string lastValidationWarnings() const;  // warnings of the last validation, if any
@@ -112,6 +128,9 @@ class LightCrafter4500Projector : public Projector {
  private:
   void connectLocked();
   void uploadLocked(const LightCrafter4500Sequence& sequence);
+  // Stop, LUTs and validation; `what` names the upload in errors.
+  void sendUploadLocked(const LightCrafter4500Sequence& sequence,
+                        const LightCrafter4500Upload& upload, const std::string& what);
   template <typename F>
   auto withDevice(F&& f) -> decltype(f());
   const LightCrafter4500Sequence* find(const std::string& name) const;
@@ -125,6 +144,7 @@ class LightCrafter4500Projector : public Projector {
   std::string selected_;                              // guarded by mutex_
   std::string uploaded_;  // guarded by mutex_: sequence on the device, "" = unknown
   bool running_ = false;  // guarded by mutex_
+  int held_ = -1;         // guarded by mutex_: pattern shown by projectSingle(), -1 = none
   std::string version_;   // guarded by mutex_
   std::string warnings_;  // guarded by mutex_
 };
