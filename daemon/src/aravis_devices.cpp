@@ -66,6 +66,32 @@ class FakeGigeSensor {
   std::thread thread_;  // last: starts after everything it uses
 };
 
+// The fake GigE camera as the engine sees it: the AravisCamera, whose
+// software trigger is passed to the simulated camera. That renders the
+// pattern the simulated projector holds, and the feeder sends the image
+// through the fake camera with its in-process trigger, as for the schedule's
+// frames. Thread-safety as AravisCamera.
+class FakeGigeSoftwareTriggerCamera final : public drivers::Camera {
+ public:
+  FakeGigeSoftwareTriggerCamera(std::shared_ptr<drivers::Camera> camera,
+                                std::shared_ptr<drivers::Camera> simulated)
+      : camera_(std::move(camera)), simulated_(std::move(simulated)) {}
+  std::string id() const override { return camera_->id(); }
+  int width() const override { return camera_->width(); }
+  int height() const override { return camera_->height(); }
+  void start() override { camera_->start(); }
+  void stop() override { camera_->stop(); }
+  std::optional<drivers::Frame> grab(std::chrono::milliseconds timeout) override {
+    return camera_->grab(timeout);
+  }
+  bool hasSoftwareTrigger() const override { return simulated_->hasSoftwareTrigger(); }
+  void triggerSoftware() override { simulated_->triggerSoftware(); }
+
+ private:
+  const std::shared_ptr<drivers::Camera> camera_;
+  const std::shared_ptr<drivers::Camera> simulated_;
+};
+
 }  // namespace
 
 void appendAravisCameras(const DaemonConfig& config, EngineDevices& devices) {
@@ -86,6 +112,8 @@ EngineDevices openFakeGige(const DaemonConfig& config, std::shared_ptr<void>& ke
   keep_alive = sensor;
   EngineDevices devices;
   appendAravisCameras(config, devices);
+  devices.cameras.front() =
+      std::make_shared<FakeGigeSoftwareTriggerCamera>(devices.cameras.front(), sim->camera());
   devices.projector = sim->projector();
   devices.trigger = sim->triggerSource();
   return devices;

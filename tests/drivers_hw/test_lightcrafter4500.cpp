@@ -237,14 +237,15 @@ namespace {
 std::vector<dl::PatternLutEntry> lutEntries(const Bytes& payload) {
   std::vector<dl::PatternLutEntry> out;
   for (std::size_t at = 0; at + 3 <= payload.size(); at += 3)
-    out.push_back(dl::decodePatternLutEntry(payload[at] | (payload[at + 1] << 8) |
-                                            (payload[at + 2] << 16)));
+    out.push_back(
+        dl::decodePatternLutEntry(payload[at] | (payload[at + 1] << 8) | (payload[at + 2] << 16)));
   return out;
 }
 
 }  // namespace
 
-TEST_CASE("projectSingle holds one pattern: one-entry LUT, internal trigger, repeat; start restores") {
+TEST_CASE(
+    "projectSingle holds one pattern: one-entry LUT, internal trigger, repeat; start restores") {
   Rig rig;
   LightCrafter4500Projector p(config(), rig.factory());
   REQUIRE(p.canProjectSingle());
@@ -314,16 +315,18 @@ TEST_CASE("projectSingle holds one pattern: one-entry LUT, internal trigger, rep
   }
 }
 
-TEST_CASE("projectSingle: refusals and device faults name the projector, the pattern and the command") {
+TEST_CASE(
+    "projectSingle: refusals and device faults name the projector, the pattern and the command") {
   Rig rig;
   LightCrafter4500Projector p(config(), rig.factory());
   p.select("3+3_horizontal");
   SECTION("validation refuses the entry") {
     rig.state.validation_bits = 0x02;
-    CHECK_THROWS_WITH(p.projectSingle(2),
-                      "lightcrafter4500: pattern 2 of sequence '3+3_horizontal' refused by the "
-                      "projector (DLPC350 ValidateLut, USB 0x1A1A): selected pattern numbers in the "
-                      "LUT are invalid");
+    CHECK_THROWS_WITH(
+        p.projectSingle(2),
+        "lightcrafter4500: pattern 2 of sequence '3+3_horizontal' refused by the "
+        "projector (DLPC350 ValidateLut, USB 0x1A1A): selected pattern numbers in the "
+        "LUT are invalid");
     CHECK(rig.state.registers[0x1A24] == Bytes{0});  // not started
     rig.state.validation_bits = 0;
     p.projectSingle(2);  // tried again: not taken for shown
@@ -331,9 +334,10 @@ TEST_CASE("projectSingle: refusals and device faults name the projector, the pat
   }
   SECTION("validation that never finishes") {
     rig.state.validation_busy_polls = 1000000;
-    CHECK_THROWS_WITH(p.projectSingle(1), Catch::Contains("lightcrafter4500: validation of pattern 1") &&
-                                              Catch::Contains("ValidateLut") &&
-                                              Catch::Contains("did not finish within 200 ms"));
+    CHECK_THROWS_WITH(p.projectSingle(1),
+                      Catch::Contains("lightcrafter4500: validation of pattern 1") &&
+                          Catch::Contains("ValidateLut") &&
+                          Catch::Contains("did not finish within 200 ms"));
   }
   SECTION("PatternStartStop is refused") {
     rig.state.nack.insert(0x1A24);
@@ -345,9 +349,10 @@ TEST_CASE("projectSingle: refusals and device faults name the projector, the pat
     rig.state.unplugged = true;
     CHECK_THROWS_WITH(p.projectSingle(0), Catch::Contains("lightcrafter4500: showing pattern 0") &&
                                               Catch::Contains("unplugged"));
-    CHECK_THROWS_WITH(p.projectSingle(0), "lightcrafter4500: showing pattern 0 of sequence "
-                                          "'3+3_horizontal': LightCrafter 4500 (USB 0451:6401) "
-                                          "not found");
+    CHECK_THROWS_WITH(p.projectSingle(0),
+                      "lightcrafter4500: showing pattern 0 of sequence "
+                      "'3+3_horizontal': LightCrafter 4500 (USB 0451:6401) "
+                      "not found");
     rig.state.unplugged = false;
     p.projectSingle(0);
     CHECK(rig.state.opens == 2);

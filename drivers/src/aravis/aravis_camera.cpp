@@ -403,14 +403,14 @@ void AravisCamera::triggerSoftware() {
   Impl& d = *impl_;
   if (!hasSoftwareTrigger()) {
     const bool line = d.config.trigger.mode == AravisTriggerConfig::Mode::kHardware;
-    throw std::logic_error(d.who() + ": TriggerSoftware: the camera is configured for " +
-                           (line ? "trigger mode hardware (TriggerSource " + d.config.trigger.line + ")"
-                                 : std::string("trigger mode free_run")) +
-                           "; software-triggered scans need trigger: {mode: software}");
+    throw std::logic_error(
+        d.who() + ": TriggerSoftware: the camera is configured for " +
+        (line ? "trigger mode hardware (TriggerSource " + d.config.trigger.line + ")"
+              : std::string("trigger mode free_run")) +
+        "; software-triggered scans need trigger: {mode: software}");
   }
   std::lock_guard lock(d.mutex);
-  if (!d.acquiring.load())
-    throw std::logic_error(d.who() + ": TriggerSoftware before start()");
+  if (!d.acquiring.load()) throw std::logic_error(d.who() + ": TriggerSoftware before start()");
   if (!d.connection || d.lost.load())
     throw std::runtime_error(d.who() + ": TriggerSoftware: the camera is not connected " +
                              "(lost; grab() reopens it)");

@@ -219,7 +219,8 @@ void LightCrafter4500Projector::sendUploadLocked(const LightCrafter4500Sequence&
   device_->writePatternLut(u.pattern_lut);
   device_->writeImageLut(u.image_lut);
   device_->startValidation();
-  const std::string validate = "(DLPC350 " + dl::commandName(dl::Command::kValidate) + ", USB 0x1A1A)";
+  const std::string validate =
+      "(DLPC350 " + dl::commandName(dl::Command::kValidate) + ", USB 0x1A1A)";
   const auto deadline = std::chrono::steady_clock::now() + config_.validation_timeout;
   dl::ValidationStatus status = device_->validationStatus();
   while (status.busy()) {
