@@ -95,7 +95,16 @@ class FakeGigeSoftwareTriggerCamera final : public drivers::Camera {
 }  // namespace
 
 void appendAravisCameras(const DaemonConfig& config, EngineDevices& devices) {
-  for (const auto& c : config.aravis.cameras) devices.cameras.push_back(openCamera(c));
+  for (const auto& c : config.aravis.cameras) {
+    devices.cameras.push_back(openCamera(c));
+    // Its trigger source is fixed at open: only the daemon triggers it.
+    const bool software_only = c.trigger.mode == drivers::AravisTriggerConfig::Mode::kSoftware;
+    if (config.sensor == "hardware" && software_only &&
+        config.runtime.trigger == TriggerMode::kHardware)
+      logWarning("camera '" + c.name +
+                 "': trigger mode software, but runtime.trigger is hardware: "
+                 "requests without 'trigger software' will get no frames from this camera");
+  }
 }
 
 EngineDevices openFakeGige(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
