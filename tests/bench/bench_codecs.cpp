@@ -10,7 +10,8 @@
 //   the fraction of its valid points within 0.01 mm of ours (proj_iter 0):
 //   it computes the same thing, not a strawman.
 //
-// Patterns: 0 = 3+3 horizontal, 1 = 3+3 both, 2 = 12-step at 4 frequencies.
+// Patterns: 0 = 3+3 horizontal, 1 = 3+3 both, 2 = 12 steps at each of 4
+// frequencies (64, 16, 4, 1 periods; 48 frames, hierarchical unwrapping).
 // proj_iter: projector distortion iterations of the triangulator (0 = the
 // baseline's model, which ignores projector distortion).
 #include <cmath>
