@@ -41,6 +41,10 @@ enum Axis { kColumn = 0, kRow = 1 };
 // iteration with 64-byte non-temporal stores (one cache line = 4 points);
 // `out` must be 64-byte aligned. Returns the pixels written (a multiple of
 // 16); the caller writes the rest. Same products as the scalar loop.
+// GCC 12's AVX-512 shuffle/unpack intrinsics start from an undefined register
+// and trip -Wmaybe-uninitialized when inlined (a false positive).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 __attribute__((target("avx512f"))) int streamPointsAvx512(int n, const float* z_row,
                                                           const float* rx, const float* ry,
                                                           const float* intensity,
@@ -75,6 +79,7 @@ __attribute__((target("avx512f"))) int streamPointsAvx512(int n, const float* z_
   }
   return u;
 }
+#pragma GCC diagnostic pop
 
 bool cpuHasAvx512() { return __builtin_cpu_supports("avx512f"); }
 #else
