@@ -409,6 +409,8 @@ double parseReplay(const YamlMap& m, const std::filesystem::path& base_dir,
   if (dir.is_relative()) dir = base_dir / dir;
   replay.dir = dir.lexically_normal().string();
   replay.loop = m.get<bool>("loop", replay.loop);
+  replay.cache_bytes = static_cast<std::size_t>(
+      nonNegative(m, "cache_mb", double(replay.cache_bytes >> 20)) * double(1 << 20));
   m.done();
   std::vector<std::string> sets;
   try {

@@ -813,7 +813,16 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
     const bool vertical = pattern == "3+3_vertical";
     for (int i = 0; i < 2; ++i) {
       const auto cloud = client.receiveCloud(since, 10s);
-      REQUIRE(cloud);
+      if (!cloud) {
+        const auto status = client.status(1s);
+        REQUIRE(status);
+        FAIL("no " << pattern << " cloud " << i + 1 << " within 10 s; status: scans "
+                   << status->scans_done << ", frames/s " << status->frame_rate_hz
+                   << ", frames overflow " << status->frames_overflow << ", unmatched "
+                   << status->frames_unmatched << ", sets overflow " << status->sets_overflow
+                   << ", incomplete " << status->sets_incomplete << ", last error '"
+                   << status->last_error << "'");
+      }
       INFO(pattern << " cloud " << i + 1 << " frame " << cloud->frame_id);
       CHECK(cloud->frame_id == (vertical ? "left_optical_frame" : top.dds.frame_id));
       const PlaneStats s = vertical ? comparePlane(*cloud, left, sim_left->groundTruth(), true)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <list>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -194,14 +195,27 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
     return std::chrono::steady_clock::now() < deadline || nowNs() >= stamp;
   }
 
-  // Loads one frame; the last set read is cached (cameras read the same set).
+  // One frame of a set, from the cache or after reading the whole set (the
+  // cameras read the same set). The cache keeps the most recently used sets
+  // within config_.cache_bytes, and always the one just read.
   cv::Mat loadFrame(const std::string& folder, std::size_t camera, std::size_t i) {
     std::lock_guard lock(cache_mutex_);
-    if (cached_folder_ != folder) {
-      cached_ = readRecordedSet(folder);
-      cached_folder_ = folder;
+    auto it = std::find_if(cache_.begin(), cache_.end(),
+                           [&](const CachedSet& c) { return c.folder == folder; });
+    if (it != cache_.end()) {
+      cache_.splice(cache_.begin(), cache_, it);
+    } else {
+      CachedSet entry{folder, readRecordedSet(folder), 0};
+      for (const auto& c : entry.set.cameras)
+        for (const cv::Mat& f : c.frames) entry.bytes += f.total() * f.elemSize();
+      cache_bytes_ += entry.bytes;
+      cache_.push_front(std::move(entry));
+      while (cache_.size() > 1 && cache_bytes_ > config_.cache_bytes) {
+        cache_bytes_ -= cache_.back().bytes;
+        cache_.pop_back();
+      }
     }
-    return cached_.cameras.at(camera).frames.at(i);
+    return cache_.front().set.cameras.at(camera).frames.at(i);
   }
 
   const ReplayConfig config_;
@@ -222,9 +236,14 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
   std::uint64_t trigger_next_ = 0;              // guarded by mutex_
   std::uint64_t trigger_epoch_ = 0;             // guarded by mutex_
 
+  struct CachedSet {
+    std::string folder;
+    pipeline::ImageSet set;
+    std::size_t bytes = 0;
+  };
   std::mutex cache_mutex_;
-  std::string cached_folder_;     // guarded by cache_mutex_
-  pipeline::ImageSet cached_;     // guarded by cache_mutex_
+  std::list<CachedSet> cache_;    // most recently used first; guarded by cache_mutex_
+  std::size_t cache_bytes_ = 0;   // guarded by cache_mutex_
 };
 
 class ReplayCamera : public Camera {

@@ -3,6 +3,7 @@
 // recorded image sets exactly as it processed them live.
 #pragma once
 
+#include <cstddef>
 #include <memory>
 #include <string>
 #include <vector>
@@ -16,6 +17,10 @@ namespace sl::drivers {
 struct ReplayConfig {
   std::string dir;   // the recording folder
   bool loop = true;  // wrap around at the end of the recording (else stop there)
+  // Decoded sets kept in memory (least recently used dropped first), so that
+  // a looping replay decodes each image once instead of on every pass. At
+  // least the set being played is kept, whatever the bound.
+  std::size_t cache_bytes = std::size_t{256} << 20;
 };
 
 // Thread-safe, like the simulated sensor: one thread per camera grab(),
@@ -26,7 +31,8 @@ struct ReplayConfig {
 // t0 + k * period (t0 = start + 20 ms, period = the recording's trigger
 // interval for that pattern); each frame keeps its recorded offset from its
 // trigger, so grouping by trigger time sees the same timing as live. Images
-// are loaded from disk when first grabbed, never all at once.
+// are loaded from disk, a set at a time, when first grabbed, and decoded sets
+// stay in a cache bounded by ReplayConfig::cache_bytes.
 class ReplaySensor {
  public:
   // Reads the recording's metadata (not its images). Throws
