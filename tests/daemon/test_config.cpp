@@ -8,6 +8,7 @@
 
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
+#include "support/config_text.h"
 
 #include <unistd.h>
 
@@ -15,12 +16,7 @@
 
 namespace {
 
-std::string shippedConfig() {
-  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+std::string shippedConfig() { return sl::test::shippedSimConfigText(); }
 
 // The shipped config with the first occurrence of `from` replaced by `to`.
 std::string edited(const std::string& from, const std::string& to) {
@@ -30,14 +26,7 @@ std::string edited(const std::string& from, const std::string& to) {
   return text.replace(at, from.size(), to);
 }
 
-std::string errorOf(const std::string& yaml) {
-  try {
-    sl::daemon::parseConfig(yaml, "test.yaml");
-  } catch (const sl::daemon::ConfigError& e) {
-    return e.what();
-  }
-  return "";
-}
+std::string errorOf(const std::string& yaml) { return sl::test::configErrorOf(yaml); }
 
 }  // namespace
 

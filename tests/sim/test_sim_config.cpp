@@ -11,15 +11,11 @@
 
 #include "sl/daemon/config.h"
 #include "sl/drivers/sim.h"
+#include "support/config_text.h"
 
 namespace {
 
-std::string shippedSimConfig() {
-  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+std::string shippedSimConfig() { return sl::test::shippedSimConfigText(); }
 
 // The shipped config with `lines` inserted under `sim.radiometry:`.
 std::string withRadiometry(const std::string& lines) {
@@ -30,14 +26,7 @@ std::string withRadiometry(const std::string& lines) {
   return text.insert(at + anchor.size(), lines);
 }
 
-std::string errorOf(const std::string& yaml) {
-  try {
-    sl::daemon::parseConfig(yaml, "test.yaml");
-  } catch (const sl::daemon::ConfigError& e) {
-    return e.what();
-  }
-  return "";
-}
+std::string errorOf(const std::string& yaml) { return sl::test::configErrorOf(yaml); }
 
 }  // namespace
 

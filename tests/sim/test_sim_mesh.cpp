@@ -17,6 +17,7 @@
 #include <string>
 
 #include "sl/drivers/sim.h"
+#include "support/icosphere.h"
 
 namespace {
 
@@ -64,43 +65,6 @@ SimMesh boxMesh(const Eigen::Vector3d& size) {
     m.triangles.push_back({q[0], q[1], q[2]});
     m.triangles.push_back({q[0], q[2], q[3]});
   }
-  return m;
-}
-
-// An icosphere: the icosahedron subdivided `levels` times, on the unit sphere.
-SimMesh unitIcosphere(int levels) {
-  const double t = (1 + std::sqrt(5.0)) / 2;
-  std::vector<Eigen::Vector3d> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
-                                    {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
-                                    {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  for (auto& p : v) p.normalize();
-  std::vector<std::array<std::int32_t, 3>> f = {
-      {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-      {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-      {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-  for (int level = 0; level < levels; ++level) {
-    std::map<std::pair<int, int>, int> midpoints;
-    auto midpoint = [&](int a, int b) {
-      const auto key = std::minmax(a, b);
-      const auto it = midpoints.find(key);
-      if (it != midpoints.end()) return it->second;
-      v.push_back((v[std::size_t(a)] + v[std::size_t(b)]).normalized());
-      return midpoints[key] = int(v.size() - 1);
-    };
-    std::vector<std::array<std::int32_t, 3>> next;
-    for (const auto& tri : f) {
-      const int a = midpoint(tri[0], tri[1]), b = midpoint(tri[1], tri[2]),
-                c = midpoint(tri[2], tri[0]);
-      next.push_back({tri[0], a, c});
-      next.push_back({tri[1], b, a});
-      next.push_back({tri[2], c, b});
-      next.push_back({a, b, c});
-    }
-    f = next;
-  }
-  SimMesh m;
-  for (const auto& p : v) m.vertices.push_back(p.cast<float>());
-  m.triangles = f;
   return m;
 }
 
@@ -235,7 +199,7 @@ TEST_CASE("tessellated sphere (20480 triangles) within the tessellation error of
   const double radius = 60;
   const Eigen::Vector3d center{30, -10, 520};
   SimConfig config = baseConfig();
-  SimMesh sphere = unitIcosphere(5);
+  SimMesh sphere = sl::test::unitIcosphere(5);
   REQUIRE(sphere.triangles.size() == 20480);
   // Every surface point lies between the sphere and the nearest triangle plane.
   double sagitta = 0;
