@@ -25,9 +25,10 @@ void transferIntensity(pipeline::PointCloud& cloud, const pipeline::CameraProjec
   }
   mean /= double(images.frames.size());
 
-  // own camera -> projector -> other camera: X_o = R_o^T (R X + t - t_o).
-  const Eigen::Matrix3d rotation = other.R.transpose() * own.R;
-  const Eigen::Vector3d translation = other.R.transpose() * (own.t - other.t);
+  // own camera -> projector -> other camera.
+  const Eigen::Isometry3d own_to_other = pipeline::cameraToCamera(own, other);
+  const Eigen::Matrix3d rotation = own_to_other.linear();
+  const Eigen::Vector3d translation = own_to_other.translation();
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const int w = size.width, h = size.height;
   cv::parallel_for_(cv::Range(0, cloud.height), [&](const cv::Range& rows) {

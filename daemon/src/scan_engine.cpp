@@ -186,6 +186,9 @@ struct ScanEngine::Impl {
   std::map<std::string, pipeline::Decoder> decoders;               // processing thread
   // Per camera id (processing thread); built from the calibrations.
   std::map<std::string, pipeline::Triangulator> triangulators;
+  // Decode + triangulate split over row blocks on the processing thread's own
+  // workers, reusing buffers that consumers have released (processing thread).
+  pipeline::ScanProcessor processor;
   std::map<std::string, std::vector<std::string>> pattern_cameras;  // immutable after construction
   std::map<std::string, pipeline::CameraProjectorCalibration> calibrations;  // immutable, by camera id
   void buildTriangulators(const DaemonConfig& settings);
@@ -622,9 +625,6 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
                                           [&](const auto& c) { return c.camera_id == camera_id; });
         if (images == set.cameras.end())
           throw std::runtime_error("no images of camera '" + camera_id + "' in the set");
-        // Decode + triangulate split over row blocks on this processing
-        // thread's own workers, reusing buffers that consumers have released.
-        thread_local pipeline::ScanProcessor processor;
         auto [maps, cloud] =
             processor.process(decoder->second.codec(), triangulators.at(camera_id), *images,
                               set.trigger_stamp_ns, frameIdOf(camera_id));

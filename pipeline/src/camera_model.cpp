@@ -54,4 +54,12 @@ Eigen::Vector2d PinholeModel::pixelToNormalized(const Eigen::Vector2d& pixel) co
   return x;
 }
 
+Eigen::Isometry3d cameraToCamera(const CameraProjectorCalibration& from,
+                                 const CameraProjectorCalibration& to) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = to.R.transpose() * from.R;
+  pose.translation() = to.R.transpose() * (from.t - to.t);
+  return pose;
+}
+
 }  // namespace sl::pipeline

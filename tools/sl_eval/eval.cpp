@@ -574,15 +574,6 @@ ConeModel fitCone(const ConeModel& initial, const std::vector<Eigen::Vector3d>& 
   return coneFromParameters(initial, x);
 }
 
-// X_first = pose * X_camera for a camera calibrated against the same projector.
-Eigen::Isometry3d cameraToFirst(const pipeline::CameraProjectorCalibration& first,
-                                const pipeline::CameraProjectorCalibration& rig) {
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = first.R.transpose() * rig.R;
-  pose.translation() = first.R.transpose() * (rig.t - first.t);
-  return pose;
-}
-
 }  // namespace
 
 EvalResult runCones(const EvalOptions& requested) {
@@ -640,7 +631,7 @@ EvalResult runCones(const EvalOptions& requested) {
     t.min_depth_mm = 200;
     t.max_depth_mm = 1500;
     const pipeline::Triangulator triangulator(*setup.rig, t);
-    const Eigen::Isometry3d to_first = cameraToFirst(top, *setup.rig);
+    const Eigen::Isometry3d to_first = pipeline::cameraToCamera(*setup.rig, top);
     const Eigen::Isometry3d from_first = to_first.inverse();
     for (int k = 0; k < options.scans; ++k) {
       std::vector<cv::Mat> images;

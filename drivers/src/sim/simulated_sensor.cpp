@@ -261,16 +261,6 @@ bool sameImage(const cv::Mat& a, const cv::Mat& b) {
   return true;
 }
 
-// Camera k's frame in the first camera's frame (the sensor frame): both rigs
-// place the same projector, X_p = R_k X_k + t_k.
-Eigen::Isometry3d cameraToFirst(const pipeline::CameraProjectorCalibration& first,
-                                const pipeline::CameraProjectorCalibration& rig) {
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = first.R.transpose() * rig.R;
-  pose.translation() = first.R.transpose() * (rig.t - first.t);
-  return pose;
-}
-
 // Immutable after construction; render() is thread-safe. Owns the config the
 // scene geometry refers to.
 class SceneRenderer {
@@ -412,7 +402,7 @@ class SceneRenderer {
   void addCamera(const pipeline::CameraProjectorCalibration& rig) {
     CameraView c;
     c.rig = rig;
-    c.to_first = cameraToFirst(config_.rig, rig);
+    c.to_first = pipeline::cameraToCamera(rig, config_.rig);  // camera k -> sensor frame
     c.rays = sim::computeCameraRays(rig.camera);
     c.view = sim::computeSceneView(config_, geometry_, rig, c.rays, c.to_first, true);
     cameras_.push_back(std::move(c));

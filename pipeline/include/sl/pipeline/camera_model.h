@@ -5,6 +5,7 @@
 #include <array>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 namespace sl::pipeline {
 
@@ -38,5 +39,11 @@ struct CameraProjectorCalibration {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t = Eigen::Vector3d::Zero();  // mm
 };
+
+// Two cameras calibrated against the same projector: the pose taking a point
+// of `from`'s frame into `to`'s frame, X_to = pose * X_from (both map to the
+// projector: R_from X_from + t_from = R_to X_to + t_to).
+Eigen::Isometry3d cameraToCamera(const CameraProjectorCalibration& from,
+                                 const CameraProjectorCalibration& to);
 
 }  // namespace sl::pipeline
