@@ -30,21 +30,11 @@
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
+#include "support/test_rig.h"
 
 using namespace sl::pipeline;
 
 namespace {
-
-CameraProjectorCalibration rig() {
-  CameraProjectorCalibration c;
-  c.camera = {1440, 1080, 2400, 2395, 722.4, 537.9, {-0.1, 0.05, 1e-3, -5e-4, 0.0}};
-  c.projector = {1824, 1140, 2010, 1995, 905.3, 581.7, {0.06, -0.03, -6e-4, 4e-4, 0.0}};
-  const Eigen::Matrix3d to_camera =
-      Eigen::AngleAxisd(12.0 * std::numbers::pi / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  c.R = to_camera.transpose();
-  c.t = -c.R * Eigen::Vector3d(-175.0, 0.0, 0.0);
-  return c;
-}
 
 PatternSpec patternNumber(int i) {
   PatternSpec p;
@@ -58,7 +48,7 @@ PatternSpec patternNumber(int i) {
 }
 
 struct Scene {
-  CameraProjectorCalibration calibration = rig();
+  CameraProjectorCalibration calibration = sl::test::testRig();
   cv::Mat up, vp;  // CV_64FC1 projector coordinate per camera pixel, -1 = not lit
   Scene() {
     const PinholeModel& cam = calibration.camera;

@@ -19,23 +19,15 @@
 #include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
+#include "support/test_rig.h"
 
 using namespace sl::pipeline;
 
 namespace {
 
-// A 360 x 270 camera (a quarter of the real one) 175 mm right of the
-// projector, turned 12 deg towards it.
+// A 360 x 270 camera (a quarter of the real one) in the shared test rig.
 CameraProjectorCalibration smallRig() {
-  CameraProjectorCalibration c;
-  c.camera = {360, 270, 600, 599, 180.6, 134.5, {-0.1, 0.05, 1e-3, -5e-4, 0.0}};
-  c.projector = {1824, 1140, 2010, 1995, 905.3, 581.7, {0.06, -0.03, -6e-4, 4e-4, 0.0}};
-  const Eigen::Matrix3d to_camera =
-      Eigen::AngleAxisd(12.0 * std::numbers::pi / 180.0, Eigen::Vector3d::UnitY())
-          .toRotationMatrix();
-  c.R = to_camera.transpose();
-  c.t = -c.R * Eigen::Vector3d(-175.0, 0.0, 0.0);
-  return c;
+  return sl::test::testRig({360, 270, 600, 599, 180.6, 134.5, {-0.1, 0.05, 1e-3, -5e-4, 0.0}});
 }
 
 // 8-bit frames of `spec` on a tilted plane around 500 mm.
