@@ -17,6 +17,7 @@
 #include <string>
 
 #include "sl/drivers/sim.h"
+#include "support/sim_rig.h"
 #include "support/icosphere.h"
 
 namespace {
@@ -31,18 +32,11 @@ using sl::drivers::SimulatedSensor;
 
 constexpr double kPi = std::numbers::pi;
 
-sl::pipeline::CameraProjectorCalibration defaultRig() {
-  sl::pipeline::CameraProjectorCalibration rig;
-  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
-  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
-  rig.R = Eigen::AngleAxisd(15.25 * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
-  return rig;
-}
+using sl::test::simDefaultRig;
 
 SimConfig baseConfig() {
   SimConfig c;
-  c.rig = defaultRig();
+  c.rig = simDefaultRig();
   sl::pipeline::PhaseShift33Pattern p;
   p.name = "3+3";
   c.patterns = {p};

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "sl/drivers/sim.h"
+#include "support/sim_rig.h"
 
 namespace {
 
@@ -20,23 +21,14 @@ using sl::drivers::SimulatedSensor;
 constexpr double kPi = std::numbers::pi;
 constexpr int kFringes = 16;  // periods across the projector's 1824 columns
 
-// The default rig of config/sim.yaml: projector 150 mm right of the camera,
-// axes crossing at 550 mm.
-sl::pipeline::CameraProjectorCalibration defaultRig() {
-  sl::pipeline::CameraProjectorCalibration rig;
-  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
-  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
-  rig.R = Eigen::AngleAxisd(15.25 * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
-  return rig;
-}
+using sl::test::simDefaultRig;
 
 // A matte wall at 550 mm, noise off, 16-bit ADC (so quantisation does not
 // mask sub-milliradian effects), pinhole optics, one 3+3 column-encoding
 // pattern.
 SimConfig wallConfig(int fringes = kFringes) {
   SimConfig c;
-  c.rig = defaultRig();
+  c.rig = simDefaultRig();
   sl::pipeline::PhaseShift33Pattern p;
   p.name = "3+3";
   p.fringes = fringes;

@@ -9,6 +9,7 @@
 #include <opencv2/core.hpp>
 
 #include "sl/drivers/sim.h"
+#include "support/sim_rig.h"
 
 namespace {
 
@@ -24,20 +25,11 @@ using sl::drivers::SimulatedSensor;
 
 double degrees(double d) { return d * std::numbers::pi / 180.0; }
 
-// The default rig of config/sim.yaml: projector 150 mm right of the camera,
-// axes crossing at 550 mm.
-sl::pipeline::CameraProjectorCalibration defaultRig() {
-  sl::pipeline::CameraProjectorCalibration rig;
-  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
-  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
-  rig.R = Eigen::AngleAxisd(degrees(15.25), Eigen::Vector3d::UnitY()).toRotationMatrix();
-  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
-  return rig;
-}
+using sl::test::simDefaultRig;
 
 SimConfig baseConfig() {
   SimConfig c;
-  c.rig = defaultRig();
+  c.rig = simDefaultRig();
   sl::pipeline::PhaseShift33Pattern p;
   p.name = "3+3_horizontal";
   c.patterns = {p};
@@ -208,7 +200,7 @@ TEST_CASE("second camera: own rig, same projector schedule", "[sim][camera]") {
   c.scene.planes = {SimPlane{{0, 0, 600}, {0, 0, -1}, 0.8}};
   // "left" camera 100 mm left of the first (the projector 250 mm to its right).
   sl::drivers::SimCamera left;
-  left.rig = defaultRig();
+  left.rig = simDefaultRig();
   // Camera-1 frame in the first camera's frame: 100 mm to the left, turned 8 deg right.
   const Eigen::Matrix3d R_first_left =
       Eigen::AngleAxisd(degrees(8), Eigen::Vector3d::UnitY()).toRotationMatrix();
