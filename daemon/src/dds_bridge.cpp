@@ -17,12 +17,6 @@ namespace {
 
 using namespace msg;
 
-pipeline::TimestampNs nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 // Sequences in the samples we write borrow our buffers (_release = false):
 // Cyclone serializes during dds_write and never frees them.
 template <typename Seq, typename T>
@@ -299,7 +293,7 @@ void DdsBridge::Impl::publishStatus(const EngineStatus& s,
   std::string pattern = s.pattern, last_error = s.last_error, recording = s.recording;
   StringList names(patterns);
   Status msg{};
-  msg.stamp = toTime(nowNs());
+  msg.stamp = toTime(pipeline::systemClockNs());
   msg.state = toState(s.state);
   msg.pattern = pattern.data();
   msg.scans_done = s.scans_done;

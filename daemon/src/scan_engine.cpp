@@ -39,12 +39,6 @@ const char* toString(ScanState s) {
 
 namespace {
 
-pipeline::TimestampNs systemNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 // Options of the current request that the processing thread applies per set.
 struct RequestOptions {
   std::string cameras_pattern;       // the pattern `cameras` was given for
@@ -376,7 +370,7 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
     hb.beat();
     std::unique_lock lock(mutex);
     if (state == ScanState::kWaiting) {
-      const pipeline::TimestampNs now = systemNowNs();
+      const pipeline::TimestampNs now = pipeline::systemClockNs();
       if (now >= launch_at_ns) {
         beginLocked();
       } else {
@@ -386,7 +380,7 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
       continue;
     }
     if (state == ScanState::kScanning && !switch_pattern.empty()) {
-      const pipeline::TimestampNs now = systemNowNs();
+      const pipeline::TimestampNs now = pipeline::systemClockNs();
       if (switch_draining) {
         bool drained = true;
         // The old pattern's last frame is exposed one image interval before
@@ -737,9 +731,7 @@ void ScanEngine::Impl::launchLocked(const std::string& name, int frame_count, in
   const std::uint64_t next = generation.load() + 1;
   devices.projector->select(name);
   current_pattern = name;
-  const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                       std::chrono::system_clock::now().time_since_epoch())
-                       .count();
+  const auto now = pipeline::systemClockNs();
   pushControl({next, PatternEvent{name, frame_count, now}});
   generation = next;
   devices.projector->start(count);
@@ -796,7 +788,7 @@ void ScanEngine::Impl::switchLocked() {
     devices.projector->select(name);
     current_pattern = name;
     pushControl({generation.load(), PatternEvent{name, config.findPattern(name)->frameCount(),
-                                                 systemNowNs(), boundary}});
+                                                 pipeline::systemClockNs(), boundary}});
     devices.projector->start(0);
   } catch (const std::exception& e) {
     finishRequestLocked(std::string("projector: ") + e.what());
@@ -918,7 +910,7 @@ CommandResult ScanEngine::start(const StartRequest& request) {
   }
   if (!(std::isfinite(request.delay_s) && request.delay_s >= 0 && request.delay_s <= 3600))
     return {Code::kInvalidOption, "delay must be 0..3600 s, not " + std::to_string(request.delay_s)};
-  const pipeline::TimestampNs now = systemNowNs();
+  const pipeline::TimestampNs now = pipeline::systemClockNs();
   if (request.start_at_ns != 0 && request.delay_s > 0)
     return {Code::kInvalidOption, "give a delay or a start time, not both"};
   if (request.start_at_ns != 0 && request.start_at_ns < now - 1'000'000'000)
@@ -1040,7 +1032,7 @@ CommandResult ScanEngine::selectPattern(const std::string& name) {
     const pipeline::TimestampNs period = d.config.findPattern(d.current_pattern)->frameCount() *
                                          d.config.synchroniser.image_interval_ns;
     const pipeline::TimestampNs last = d.last_trigger_ns.load();
-    const pipeline::TimestampNs now = systemNowNs();
+    const pipeline::TimestampNs now = pipeline::systemClockNs();
     d.switch_at_ns = last > 0 && now >= last ? last + ((now - last) / period + 1) * period : now;
     d.switch_pattern = name;
     d.pushControl({d.generation.load(), BoundaryEvent{d.switch_at_ns}});

@@ -7,12 +7,6 @@ namespace sl::daemon {
 
 namespace {
 
-pipeline::TimestampNs nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 std::chrono::milliseconds toMs(double seconds) {
   return std::chrono::milliseconds(static_cast<long long>(seconds * 1000 + 0.5));
 }
@@ -46,10 +40,10 @@ std::shared_ptr<const pipeline::ImageSet> SoftwareTrigger::acquire(
   const auto settle = std::chrono::duration<double>(config_.settle_s);
   for (int i = 0; i < frame_count; ++i) {
     if (cancelled()) return nullptr;
-    const pipeline::TimestampNs shown_ns = nowNs();
+    const pipeline::TimestampNs shown_ns = pipeline::systemClockNs();
     projector_->projectSingle(i);
     std::this_thread::sleep_for(settle);
-    const pipeline::TimestampNs trigger_ns = nowNs();
+    const pipeline::TimestampNs trigger_ns = pipeline::systemClockNs();
     if (i == 0) set->trigger_stamp_ns = trigger_ns;
     for (const auto& camera : cameras_) camera->triggerSoftware();
     for (std::size_t c = 0; c < cameras_.size(); ++c) {

@@ -1,8 +1,15 @@
 #include "sl/pipeline/types.h"
 
+#include <chrono>
 #include <cmath>
 
 namespace sl::pipeline {
+
+TimestampNs systemClockNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
 
 std::size_t PointCloud::validCount() const {
   std::size_t count = 0;

@@ -184,12 +184,6 @@ std::chrono::milliseconds toMs(double seconds) {
   return std::chrono::milliseconds(static_cast<long long>(seconds * 1000));
 }
 
-std::int64_t nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 int noDaemon(const Args& args) {
   std::cerr << "slctl: no sl_sensord answered on 'rq/" << args.ns << "/commandRequest' (domain "
             << args.domain << ") within " << args.timeout_s
@@ -236,7 +230,8 @@ int sendStart(SensorClient& client, const Args& args, const std::string& recordi
 
 // Seconds from now until a delayed request starts (0 without a delay).
 double secondsUntilStart(const Args& args) {
-  if (args.start.start_at_ns != 0) return std::max(0.0, (args.start.start_at_ns - nowNs()) * 1e-9);
+  if (args.start.start_at_ns != 0)
+    return std::max(0.0, (args.start.start_at_ns - sl::pipeline::systemClockNs()) * 1e-9);
   return args.start.delay_s;
 }
 
@@ -258,7 +253,7 @@ int scan(SensorClient& client, const Args& args) {
               << "\n";
     return 1;
   }
-  const std::int64_t requested_at = nowNs();
+  const std::int64_t requested_at = sl::pipeline::systemClockNs();
   if (const int rc = sendStart(client, args, "", args.count)) return rc;
   // The first scan may wait for a delayed start.
   double wait_s = args.timeout_s + secondsUntilStart(args);
@@ -315,7 +310,8 @@ int printStatus(SensorClient& client, const Args& args) {
   std::printf("scans:            %llu of %s\n", static_cast<unsigned long long>(s->scans_done),
               s->scans_requested ? std::to_string(s->scans_requested).c_str() : "continuous");
   if (s->state == sl::daemon::ScanState::kWaiting)
-    std::printf("starts in:        %.1f s\n", (s->start_at_ns - nowNs()) * 1e-9);
+    std::printf("starts in:        %.1f s\n",
+                (s->start_at_ns - sl::pipeline::systemClockNs()) * 1e-9);
   std::printf("trigger:          %s\n", sl::daemon::toString(s->trigger));
   std::string cameras;
   for (const auto& id : s->cameras) cameras += (cameras.empty() ? "" : ", ") + id;

@@ -48,10 +48,7 @@ void createRecording(const std::string& dir, const std::string& note) {
   cv::FileStorage out(path, cv::FileStorage::WRITE);
   if (!out.isOpened()) throw std::runtime_error(path + ": cannot write");
   out << "format" << kFormat;
-  out << "created_ns"
-      << std::to_string(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                            std::chrono::system_clock::now().time_since_epoch())
-                            .count());
+  out << "created_ns" << std::to_string(pipeline::systemClockNs());
   out << "note" << note;
 }
 

@@ -17,12 +17,6 @@ namespace {
 
 using pipeline::TimestampNs;
 
-TimestampNs nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 constexpr TimestampNs kStartDelayNs = 20'000'000;
 
 // What the schedule needs of a set without loading its images.
@@ -99,7 +93,7 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
     period_ns_ = std::max(gaps.empty() ? 0 : gaps[gaps.size() / 2], span + frame_interval);
     const std::size_t available = config_.loop ? SIZE_MAX : playlist_.size();
     count_ = count == 0 ? available : std::min<std::size_t>(count, available);
-    t0_ns_ = nowNs() + kStartDelayNs;
+    t0_ns_ = pipeline::systemClockNs() + kStartDelayNs;
     ++generation_;
     stopped_ = false;
     std::fill(camera_next_.begin(), camera_next_.end(), 0);
@@ -127,7 +121,7 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
         if (k < count_) {
           const SetInfo& info = sets_[playlist_[k % playlist_.size()]];
           const TimestampNs stamp = t0_ns_ + TimestampNs(k) * period_ns_ + info.offsets_ns[c][i];
-          if (nowNs() >= stamp) {
+          if (pipeline::systemClockNs() >= stamp) {
             ++camera_next_[c];
             const std::string folder = info.folder;
             const int bit_depth = info.bit_depths[c];
@@ -161,7 +155,7 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
       if (trigger_epoch_ != epoch) return std::nullopt;
       if (!stopped_ && generation_ > 0 && trigger_next_ < count_) {
         const TimestampNs stamp = t0_ns_ + TimestampNs(trigger_next_) * period_ns_;
-        if (nowNs() >= stamp) return TriggerEvent{stamp, trigger_next_++};
+        if (pipeline::systemClockNs() >= stamp) return TriggerEvent{stamp, trigger_next_++};
         if (waitUntil(lock, stamp, deadline)) continue;
         return std::nullopt;
       }
@@ -189,10 +183,11 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
   // have come (re-check state), false on the deadline.
   bool waitUntil(std::unique_lock<std::mutex>& lock, TimestampNs stamp,
                  std::chrono::steady_clock::time_point deadline) {
-    const auto until_stamp = std::chrono::steady_clock::now() +
-                             std::chrono::nanoseconds(std::max<TimestampNs>(0, stamp - nowNs()));
+    const auto until_stamp =
+        std::chrono::steady_clock::now() +
+        std::chrono::nanoseconds(std::max<TimestampNs>(0, stamp - pipeline::systemClockNs()));
     cv_.wait_until(lock, std::min(until_stamp, deadline));
-    return std::chrono::steady_clock::now() < deadline || nowNs() >= stamp;
+    return std::chrono::steady_clock::now() < deadline || pipeline::systemClockNs() >= stamp;
   }
 
   // One frame of a set, from the cache or after reading the whole set (the

@@ -10,16 +10,10 @@ namespace sl::drivers::sim {
 
 namespace {
 
-std::int64_t nowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 std::int64_t deadlineAfter(std::chrono::milliseconds timeout) {
-  return nowNs() + std::chrono::duration_cast<std::chrono::nanoseconds>(
-                       std::max(timeout, std::chrono::milliseconds(0)))
-                       .count();
+  return pipeline::systemClockNs() + std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                         std::max(timeout, std::chrono::milliseconds(0)))
+                                         .count();
 }
 
 }  // namespace
@@ -93,7 +87,7 @@ void LiveSchedule::select(const std::string& name) {
     throw std::invalid_argument("projector: unknown pattern '" + name + "' (known: " + known + ")");
   }
   std::lock_guard lock(mutex_);
-  if (runningLocked(nowNs()))
+  if (runningLocked(pipeline::systemClockNs()))
     throw std::logic_error("projector: select('" + name + "') while running; stop() first");
   selected_ = static_cast<std::size_t>(it - sequences_.begin());
 }
@@ -102,7 +96,7 @@ void LiveSchedule::startProjector(int count) {
   if (count < 0) throw std::invalid_argument("projector: start count must be >= 0");
   {
     std::lock_guard lock(mutex_);
-    const std::int64_t now = nowNs();
+    const std::int64_t now = pipeline::systemClockNs();
     if (runningLocked(now)) throw std::logic_error("projector: start() while running");
     ++generation_;
     running_pattern_ = selected_;
@@ -119,7 +113,7 @@ void LiveSchedule::startProjector(int count) {
 void LiveSchedule::stopProjector() {
   {
     std::lock_guard lock(mutex_);
-    if (generation_ != 0) stop_ns_ = std::min(stop_ns_, nowNs());
+    if (generation_ != 0) stop_ns_ = std::min(stop_ns_, pipeline::systemClockNs());
     held_frame_ = -1;
   }
   cv_.notify_all();
@@ -127,7 +121,7 @@ void LiveSchedule::stopProjector() {
 
 void LiveSchedule::projectSingle(int index) {
   std::lock_guard lock(mutex_);
-  if (runningLocked(nowNs()))
+  if (runningLocked(pipeline::systemClockNs()))
     throw std::logic_error("projector: projectSingle() while a sequence runs; stop() first");
   if (index < 0 || index >= sequences_[selected_].frame_count)
     throw std::out_of_range("projector: pattern " + std::to_string(index) + " of '" +
@@ -143,7 +137,7 @@ void LiveSchedule::armCamera(int camera) {
   CameraState& c = cameras_.at(static_cast<std::size_t>(camera));
   if (c.armed) return;
   c.armed = true;
-  c.armed_ns = nowNs();
+  c.armed_ns = pipeline::systemClockNs();
   c.generation = 0;  // re-join the current schedule at the first frame after arming
 }
 
@@ -165,7 +159,7 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
   const std::uint64_t epoch = c.stop_epoch;
   while (true) {
     if (!c.armed || c.stop_epoch != epoch) return std::nullopt;
-    const std::int64_t now = nowNs();
+    const std::int64_t now = pipeline::systemClockNs();
     std::int64_t wake = deadline;
     if (!c.triggered.empty()) {  // software-triggered, ready after one frame interval
       const Exposure e = c.triggered.front();
@@ -229,7 +223,7 @@ void LiveSchedule::triggerCamera(int camera) {
     if (!c.armed) throw std::logic_error("camera: software trigger while not started");
     if (held_frame_ < 0)
       throw std::logic_error("camera: software trigger while the projector shows no pattern");
-    c.triggered.push_back({nowNs(), selected_, held_frame_});
+    c.triggered.push_back({pipeline::systemClockNs(), selected_, held_frame_});
   }
   cv_.notify_all();
 }
@@ -242,7 +236,7 @@ std::optional<TriggerEvent> LiveSchedule::nextTrigger(std::chrono::milliseconds 
   const std::uint64_t epoch = trigger_stop_epoch_;
   while (true) {
     if (triggers_stopped_ || trigger_stop_epoch_ != epoch) return std::nullopt;
-    const std::int64_t now = nowNs();
+    const std::int64_t now = pipeline::systemClockNs();
     std::int64_t wake = deadline;
     if (generation_ != 0) {
       if (trigger_generation_ != generation_) {

@@ -17,6 +17,10 @@ namespace sl::pipeline {
 
 using TimestampNs = std::int64_t;
 
+// The system (wall) clock now, in ns since the Unix epoch: the clock frames,
+// trigger times and published stamps use.
+TimestampNs systemClockNs();
+
 // One camera image as delivered by a driver.
 struct Frame {
   cv::Mat image;              // CV_8UC1 or CV_16UC1; owned by the frame
