@@ -619,9 +619,11 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
                                           [&](const auto& c) { return c.camera_id == camera_id; });
         if (images == set.cameras.end())
           throw std::runtime_error("no images of camera '" + camera_id + "' in the set");
-        auto [maps, cloud] =
-            processor.process(decoder->second.codec(), triangulators.at(camera_id), *images,
-                              set.trigger_stamp_ns, frameIdOf(camera_id));
+        auto [maps, cloud] = processor.process(decoder->second.codec(), triangulators.at(camera_id),
+                                               *images, set.trigger_stamp_ns, frameIdOf(camera_id),
+                                               config.dds.publish_projector_maps
+                                                   ? pipeline::ScanProcessor::Keep::kMapsAndCloud
+                                                   : pipeline::ScanProcessor::Keep::kCloud);
         if (auto coloured = colouredCopy(set, camera_id, *cloud)) cloud = std::move(coloured);
         ScanResult r;
         r.pattern = set.pattern_name;

@@ -24,7 +24,7 @@ struct RowWorkers::Shared {
   std::exception_ptr error;
   // The current job; written by run() under the mutex before the
   // generation bump, read by the workers after they see it.
-  const std::function<void(int, int)>* fn = nullptr;
+  const std::function<void(int, int, int)>* fn = nullptr;
   int rows = 0;
   int block = 1;
   std::atomic<int> next_block{0};
@@ -32,12 +32,12 @@ struct RowWorkers::Shared {
   std::vector<std::thread> threads;
 
   // Takes blocks until none is left; records the first exception.
-  void work() {
+  void work(int thread) {
     while (!failed.load(std::memory_order_relaxed)) {
       const int begin = next_block.fetch_add(1, std::memory_order_relaxed) * block;
       if (begin >= rows) return;
       try {
-        (*fn)(begin, std::min(begin + block, rows));
+        (*fn)(begin, std::min(begin + block, rows), thread);
       } catch (...) {
         std::lock_guard lock(mutex);
         if (!error) error = std::current_exception();
@@ -46,7 +46,7 @@ struct RowWorkers::Shared {
     }
   }
 
-  void workerLoop() {
+  void workerLoop(int thread) {
     std::uint64_t seen = 0;
     std::unique_lock lock(mutex);
     for (;;) {
@@ -54,7 +54,7 @@ struct RowWorkers::Shared {
       if (stop) return;
       seen = generation;
       lock.unlock();
-      work();
+      work(thread);
       lock.lock();
       if (--busy == 0) done.notify_one();
     }
@@ -64,7 +64,7 @@ struct RowWorkers::Shared {
 RowWorkers::RowWorkers(int threads) : shared_(std::make_unique<Shared>()) {
   if (threads < 1) throw std::invalid_argument("RowWorkers: threads must be >= 1");
   Shared* s = shared_.get();
-  for (int i = 1; i < threads; ++i) s->threads.emplace_back([s] { s->workerLoop(); });
+  for (int i = 1; i < threads; ++i) s->threads.emplace_back([s, i] { s->workerLoop(i); });
 }
 
 RowWorkers::~RowWorkers() {
@@ -82,7 +82,7 @@ int RowWorkers::defaultThreads() {
   return std::clamp(static_cast<int>(std::thread::hardware_concurrency()), 1, 8);
 }
 
-void RowWorkers::run(int rows, int block, const std::function<void(int, int)>& fn) {
+void RowWorkers::run(int rows, int block, const std::function<void(int, int, int)>& fn) {
   if (rows <= 0) return;
   if (block < 1) throw std::invalid_argument("RowWorkers::run: block must be >= 1");
   Shared& s = *shared_;
@@ -103,7 +103,7 @@ void RowWorkers::run(int rows, int block, const std::function<void(int, int)>& f
     }
   }
   if (parallel) s.wake.notify_all();
-  s.work();
+  s.work(0);
   std::unique_lock lock(s.mutex);
   s.done.wait(lock, [&] { return s.busy == 0; });
   s.fn = nullptr;

@@ -1,6 +1,8 @@
 #include "sl/pipeline/scan_processor.h"
 
 #include <atomic>
+#include <stdexcept>
+#include <string>
 
 namespace sl::pipeline {
 
@@ -23,7 +25,7 @@ bool isFree(const std::shared_ptr<T>& pool_ref) {
 
 }  // namespace
 
-ScanProcessor::ScanProcessor(int threads) : workers_(threads) {}
+ScanProcessor::ScanProcessor(int threads) : workers_(threads), bands_(workers_.threads()) {}
 
 std::shared_ptr<ProjectorMaps> ScanProcessor::freeMaps(Direction direction) {
   for (MapsSlot& slot : maps_pool_) {
@@ -51,31 +53,59 @@ std::shared_ptr<PointCloud> ScanProcessor::freeCloud() {
   return cloud;
 }
 
+// The maps the triangulator reads: without the one the pattern does not
+// encode (all NaN) where that changes nothing but the memory read, since
+// Use::kBest falls back to the other map per pixel anyway.
+ProjectorMaps triangulatorView(const ProjectorMaps& maps, Direction direction,
+                               const Triangulator& triangulator) {
+  ProjectorMaps view;
+  view.up = maps.up;
+  view.vp = maps.vp;
+  view.offset = maps.offset;
+  if (triangulator.options().use == TriangulatorOptions::Use::kBest) {
+    if (direction == Direction::kHorizontal) view.vp = cv::Mat();
+    if (direction == Direction::kVertical) view.up = cv::Mat();
+  }
+  return view;
+}
+
 ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triangulator,
                                   const CameraImages& images, TimestampNs stamp_ns,
-                                  const std::string& frame_id) {
-  std::shared_ptr<ProjectorMaps> maps = freeMaps(codec.spec().direction);
-  std::shared_ptr<PointCloud> cloud = freeCloud();
+                                  const std::string& frame_id, Keep keep) {
   const std::vector<cv::Mat>& frames = images.frames;
   const int bit_depth = images.bit_depth;
+  const Direction direction = codec.spec().direction;
+  std::shared_ptr<PointCloud> cloud = freeCloud();
+  cloud->frame_id = frame_id;
+  cloud->stamp_ns = stamp_ns;
+  if (keep == Keep::kCloud) {
+    // Checked once here rather than by the first block on some thread (each
+    // block checks again).
+    codec.checkFrames(frames, bit_depth);
+    triangulator.prepareCloud(frame_id, stamp_ns, *cloud);
+    if (frames.front().size() != cv::Size(cloud->width, cloud->height)) {
+      throw std::invalid_argument("Triangulator: frames of " + std::to_string(frames.front().cols) +
+                                  "x" + std::to_string(frames.front().rows) +
+                                  " do not fit the camera size " + std::to_string(cloud->width) +
+                                  "x" + std::to_string(cloud->height));
+    }
+    workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int thread) {
+      ProjectorMaps& band = bands_[thread];
+      codec.decodeBand(frames, bit_depth, begin, end, band);
+      triangulator.triangulateBand(triangulatorView(band, direction, triangulator), begin, end,
+                                   *cloud);
+    });
+    return ScanOutput{nullptr, std::move(cloud)};
+  }
+  std::shared_ptr<ProjectorMaps> maps = freeMaps(direction);
   codec.prepare(frames, bit_depth, *maps);
   maps->camera_id = images.camera_id;
   maps->stamp_ns = stamp_ns;
-  // The triangulator reads the maps through a view without the map the
-  // pattern does not encode (all NaN) where that changes nothing but the
-  // memory read: Use::kBest falls back to the other map per pixel anyway.
-  ProjectorMaps view;
-  view.up = maps->up;
-  view.vp = maps->vp;
-  view.offset = maps->offset;
-  if (triangulator.options().use == TriangulatorOptions::Use::kBest) {
-    if (codec.spec().direction == Direction::kHorizontal) view.vp = cv::Mat();
-    if (codec.spec().direction == Direction::kVertical) view.up = cv::Mat();
-  }
+  const ProjectorMaps view = triangulatorView(*maps, direction, triangulator);
   triangulator.prepare(view, *cloud);
   cloud->frame_id = frame_id;
   cloud->stamp_ns = stamp_ns;
-  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end) {
+  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int) {
     codec.decodeRows(frames, bit_depth, begin, end, *maps);
     triangulator.triangulateRows(view, begin, end, *cloud);
   });
@@ -91,7 +121,7 @@ std::shared_ptr<const ProjectorMaps> ScanProcessor::decode(const Codec& codec,
   codec.prepare(frames, bit_depth, *maps);
   maps->camera_id = images.camera_id;
   maps->stamp_ns = stamp_ns;
-  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end) {
+  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int) {
     codec.decodeRows(frames, bit_depth, begin, end, *maps);
   });
   return maps;

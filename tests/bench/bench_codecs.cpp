@@ -3,6 +3,9 @@
 // - BM_Decode, BM_DecodeTriangulate: ScanProcessor, the code the daemon's
 //   processing stage runs (blocks of rows decoded and triangulated on a
 //   RowWorkers pool of 1 or 2 threads, buffers recycled between scans);
+//   BM_DecodeTriangulate with maps:1 keeps the maps (a ScanOutput with maps
+//   and cloud), with maps:0 the cloud only (ScanProcessor::Keep::kCloud, what
+//   the daemon runs unless it publishes the projector maps);
 // - BM_Baseline: the same 3+3 decode and triangulation written the
 //   straightforward OpenCV way (float Mats, cv::phase / cv::magnitude, matrix
 //   expressions), single-threaded (cv::setNumThreads(1)), its buffers kept
@@ -137,15 +140,18 @@ void BM_Decode(benchmark::State& state) {
   reportScans(state);
 }
 
-// Args: pattern, projector distortion iterations, threads.
+// Args: pattern, projector distortion iterations, threads, maps kept (1) or
+// cloud only (0).
 void BM_DecodeTriangulate(benchmark::State& state) {
   const int pattern = int(state.range(0));
   const CameraImages in = images(pattern);
   const Triangulator& t = triangulator(int(state.range(1)));
   ScanProcessor processor(int(state.range(2)));
+  const auto keep =
+      state.range(3) != 0 ? ScanProcessor::Keep::kMapsAndCloud : ScanProcessor::Keep::kCloud;
   std::size_t valid = 0;
   for (auto _ : state) {
-    const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam");
+    const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam", keep);
     benchmark::DoNotOptimize(out.cloud->points.data());
     if (valid == 0) valid = out.cloud->validCount();
   }
@@ -278,8 +284,8 @@ BENCHMARK(BM_Decode)
     ->MeasureProcessCPUTime()
     ->UseRealTime();
 BENCHMARK(BM_DecodeTriangulate)
-    ->ArgsProduct({{0, 1, 2}, {0, 2}, {1, 2}})
-    ->ArgNames({"pattern", "proj_iter", "threads"})
+    ->ArgsProduct({{0, 1, 2}, {0, 2}, {1, 2}, {1, 0}})
+    ->ArgNames({"pattern", "proj_iter", "threads", "maps"})
     ->Unit(benchmark::kMillisecond)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()

@@ -59,14 +59,18 @@ TEST_CASE("the engine reports unhealthy while a device thread is stuck, and stil
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   auto camera = std::make_shared<HangingCamera>(sim->camera());
   sl::daemon::EngineDevices devices{{camera}, sim->projector(), sim->triggerSource()};
-  std::atomic<int> clouds{0};
+  std::atomic<int> clouds{0}, with_maps{0};
   {
-    sl::daemon::ScanEngine engine(config, devices, [&](const sl::daemon::ScanResult&) { ++clouds; });
+    sl::daemon::ScanEngine engine(config, devices, [&](const sl::daemon::ScanResult& r) {
+      with_maps += r.maps != nullptr;  // publish_projector_maps is off in sim.yaml
+      ++clouds;
+    });
     std::this_thread::sleep_for(300ms);
     CHECK(engine.healthy());
     REQUIRE(engine.start("", 1).accepted());
     for (int i = 0; i < 100 && clouds == 0; ++i) std::this_thread::sleep_for(50ms);
     CHECK(clouds == 1);
+    CHECK(with_maps == 0);
     CHECK(engine.healthy());
 
     camera->hang = true;  // the next grab() never returns on its own
@@ -203,7 +207,8 @@ TEST_CASE("an intensity camera the sensor lacks stops the daemon at start-up") {
 // completed with the old pattern; every set after it has the new one; no set
 // mixes them (a horizontal scan decodes no rows, a 'both' scan does).
 TEST_CASE("software trigger: a switch waits for the sequence in progress, never mixing patterns") {
-  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  config.dds.publish_projector_maps = true;  // the results then carry the maps this test reads
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   struct Seen {
     std::string pattern;

@@ -90,13 +90,21 @@ TEST_CASE("RowWorkers run every block exactly once", "[row_workers]") {
   for (const int rows : {1, 15, 16, 17, 1080}) {
     for (const int block : {1, 16, 2000}) {
       std::vector<std::atomic<int>> visits(rows);
-      std::atomic<int> bad_blocks{0};
-      workers.run(rows, block, [&](int begin, int end) {
+      std::atomic<int> bad_blocks{0}, bad_threads{0};
+      // Calls with the same thread index must not overlap.
+      std::vector<std::atomic<int>> inside(threads);
+      workers.run(rows, block, [&](int begin, int end, int thread) {
         if (begin % block != 0 || end - begin > block || end > rows || begin >= end) ++bad_blocks;
+        if (thread < 0 || thread >= threads || inside[thread]++ != 0) {
+          ++bad_threads;
+          return;
+        }
         for (int r = begin; r < end; ++r) ++visits[r];
+        --inside[thread];
       });
       CAPTURE(threads, rows, block);
       CHECK(bad_blocks == 0);
+      CHECK(bad_threads == 0);
       CHECK(std::all_of(visits.begin(), visits.end(), [](const auto& v) { return v == 1; }));
     }
   }
@@ -106,12 +114,12 @@ TEST_CASE("RowWorkers run every block exactly once", "[row_workers]") {
 TEST_CASE("RowWorkers rethrow the first exception and stay usable", "[row_workers]") {
   RowWorkers workers(2);
   CHECK_THROWS_WITH(workers.run(100, 1,
-                                [](int begin, int) {
+                                [](int begin, int, int) {
                                   if (begin == 37) throw std::runtime_error("row 37");
                                 }),
                     "row 37");
   std::atomic<int> rows{0};
-  workers.run(100, 7, [&](int begin, int end) { rows += end - begin; });
+  workers.run(100, 7, [&](int begin, int end, int) { rows += end - begin; });
   CHECK(rows == 100);
 }
 
@@ -142,6 +150,33 @@ TEST_CASE("ScanProcessor equals the single-threaded stages", "[scan_processor]")
   CHECK(out.cloud->frame_id == "cam0_optical");
   CHECK(out.cloud->stamp_ns == 42);
   CHECK(sameMaps(*processor.decode(*codec, images, 42), maps));
+
+  // Cloud only: the same cloud, no maps.
+  const ScanOutput cloud_only = processor.process(*codec, triangulator, images, 42, "cam0_optical",
+                                                  ScanProcessor::Keep::kCloud);
+  CHECK(cloud_only.maps == nullptr);
+  CHECK(sameCloud(*cloud_only.cloud, cloud));
+  CHECK(cloud_only.cloud->frame_id == "cam0_optical");
+  CHECK(cloud_only.cloud->stamp_ns == 42);
+}
+
+TEST_CASE("ScanProcessor rejects frames that do not fit the calibration", "[scan_processor]") {
+  const CameraProjectorCalibration rig = smallRig();
+  PatternSpec spec;
+  spec.name = "scan";
+  CameraImages images = render(rig, spec);
+  for (cv::Mat& f : images.frames) f = f.rowRange(0, f.rows - 8).clone();
+  const auto codec = makeCodec(spec, {});
+  const Triangulator triangulator(rig, {});
+  ScanProcessor processor(2);
+  for (const auto keep : {ScanProcessor::Keep::kMapsAndCloud, ScanProcessor::Keep::kCloud}) {
+    CHECK_THROWS_AS(processor.process(*codec, triangulator, images, 1, "f", keep),
+                    std::invalid_argument);
+  }
+  images.frames.pop_back();
+  CHECK_THROWS_WITH(
+      processor.process(*codec, triangulator, images, 1, "f", ScanProcessor::Keep::kCloud),
+      Catch::Contains("expected 6 frames"));
 }
 
 TEST_CASE("ScanProcessor recycles only released buffers", "[scan_processor]") {

@@ -95,6 +95,8 @@ struct ScanResult {
   std::string pattern;
   std::string camera_id;         // the triangulating camera
   std::shared_ptr<const pipeline::ImageSet> images;
+  // Null unless dds.publish_projector_maps: the processing then never writes
+  // the maps out (pipeline::ScanProcessor::Keep::kCloud).
   std::shared_ptr<const pipeline::ProjectorMaps> maps;
   std::shared_ptr<const pipeline::PointCloud> cloud;
 };

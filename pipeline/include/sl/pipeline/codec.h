@@ -81,6 +81,10 @@ class Codec {
   void decodeBand(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin, int row_end,
                   ProjectorMaps& band) const;
 
+  // The check of decode() and the others: throws std::invalid_argument
+  // (naming the codec and the frame) on a wrong count, type, size or depth.
+  void checkFrames(const std::vector<cv::Mat>& frames, int bit_depth) const;
+
  protected:
   Codec(PatternSpec spec, DecoderOptions options);
 
@@ -108,7 +112,6 @@ class Codec {
                            const RowOutput& out) const = 0;
 
  private:
-  void checkFrames(const std::vector<cv::Mat>& frames, int bit_depth) const;
   // Rows [row_begin, row_end) of the frames into rows from out_row of `out`.
   void decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int row_begin,
                     int row_end, ProjectorMaps& out, int out_row) const;

@@ -29,13 +29,15 @@ class RowWorkers {
 
   int threads() const;
 
-  // Calls fn(begin, end) for the blocks [0, block), [block, 2 block), ...
-  // covering rows [0, rows), each block exactly once, on the caller and the
-  // workers. Blocks are handed out one at a time in row order (a thread that
-  // is descheduled takes fewer). If fn throws, the remaining blocks are
-  // skipped and the first exception is rethrown here once all threads are
-  // idle again.
-  void run(int rows, int block, const std::function<void(int begin, int end)>& fn);
+  // Calls fn(begin, end, thread) for the blocks [0, block), [block,
+  // 2 block), ... covering rows [0, rows), each block exactly once, on the
+  // caller (thread 0) and the workers (threads 1 .. threads() - 1): calls
+  // with the same `thread` never overlap, so fn may keep per-thread state
+  // indexed by it. Blocks are handed out one at a time in row order (a
+  // thread that is descheduled takes fewer). If fn throws, the remaining
+  // blocks are skipped and the first exception is rethrown here once all
+  // threads are idle again.
+  void run(int rows, int block, const std::function<void(int begin, int end, int thread)>& fn);
 
   // Hardware threads, clamped to [1, 8].
   static int defaultThreads();

@@ -17,7 +17,7 @@
 namespace sl::pipeline {
 
 struct ScanOutput {
-  std::shared_ptr<const ProjectorMaps> maps;
+  std::shared_ptr<const ProjectorMaps> maps;  // null when not kept (ScanProcessor::Keep)
   std::shared_ptr<const PointCloud> cloud;
 };
 
@@ -32,15 +32,26 @@ class ScanProcessor {
 
   int threads() const { return workers_.threads(); }
 
+  // What process() returns besides the cloud.
+  enum class Keep {
+    kMapsAndCloud,
+    // The maps of a block live only in the decoding thread's band buffer
+    // until the block is triangulated: 13 bytes per pixel that are never
+    // written to memory (1440 x 1080: 20 MB per scan, as much memory traffic
+    // as the cloud's 25 MB). For callers that do not use the maps.
+    kCloud,
+  };
+
   // Decodes images.frames with `codec` and triangulates with `triangulator`,
   // blocks of rows at a time, each block triangulated right after it is
   // decoded (its maps rows still in cache). maps.camera_id = images.camera_id,
   // cloud.frame_id = frame_id, both stamped stamp_ns. Same results as
-  // codec.decode() then triangulator.triangulate(). Throws as those do
-  // (std::invalid_argument on frames or a calibration that do not fit).
+  // codec.decode() then triangulator.triangulate(), with either `keep`.
+  // Throws as those do (std::invalid_argument on frames or a calibration
+  // that do not fit).
   ScanOutput process(const Codec& codec, const Triangulator& triangulator,
-                     const CameraImages& images, TimestampNs stamp_ns,
-                     const std::string& frame_id);
+                     const CameraImages& images, TimestampNs stamp_ns, const std::string& frame_id,
+                     Keep keep = Keep::kMapsAndCloud);
 
   // Decoding only (maps as in process()).
   std::shared_ptr<const ProjectorMaps> decode(const Codec& codec, const CameraImages& images,
@@ -56,6 +67,8 @@ class ScanProcessor {
   std::shared_ptr<PointCloud> freeCloud();
 
   RowWorkers workers_;
+  // Keep::kCloud: per worker thread, the maps of its current block of rows.
+  std::vector<ProjectorMaps> bands_;
   // Recycled buffers; free when this pool holds the only reference.
   struct MapsSlot {
     std::shared_ptr<ProjectorMaps> maps;
