@@ -4,15 +4,18 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <random>
 #include <vector>
 
 #include <catch2/catch.hpp>
 #include <opencv2/core.hpp>
 
 #include "../../pipeline/src/fast_atan2.h"  // white-box: the error bound of the fast atan2
+#include "../../pipeline/src/two_three_step_row.h"  // white-box: AVX-512 vs portable 3+3 row
 #include "sl/pipeline/decoder.h"
 
 using namespace sl::pipeline;
@@ -111,6 +114,92 @@ TEST_CASE("fast atan2 stays within its documented bound", "[decoder]") {
   CAPTURE(max_error);
   CHECK(outside == 0);
   CHECK(max_error < detail::kFastAtan2MaxError);
+}
+
+TEST_CASE("AVX-512 3+3 row kernel matches the portable one bit for bit", "[decoder]") {
+  if (!detail::twoThreeStepAvx512Supported()) {
+    WARN("CPU without AVX-512: nothing to compare");
+    return;
+  }
+  std::mt19937 rng(20261123);
+  auto uniform = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+  const int max_width = 1000 + 13;
+  std::vector<std::vector<std::uint8_t>> frames(6, std::vector<std::uint8_t>(max_width));
+  struct Maps {
+    std::vector<float> coord, modulation, offset, scratch;
+    std::vector<std::uint8_t> status;
+    explicit Maps(int n) : coord(n), modulation(n), offset(n), scratch(n), status(n) {}
+    detail::TwoThreeStepOutput out() {
+      return {coord.data(), modulation.data(), offset.data(), status.data(), scratch.data()};
+    }
+  };
+  auto same = [](const std::vector<float>& a, const std::vector<float>& b, int n) {
+    return std::memcmp(a.data(), b.data(), sizeof(float) * n) == 0;
+  };
+  int rows = 0, differing_rows = 0;
+  std::vector<int> status_count(5, 0);
+  for (double start : {0.0, 0.3, -2.0}) {
+    for (int sign : {1, -1}) {
+      detail::TwoThreeStepParams p;
+      for (int n = 0; n < 3; ++n) {
+        const double fine_delta = start + sign * 2.0 * kPi * n / 3;
+        const double coarse_delta = 0.5 * start + sign * 2.0 * kPi * n / 3;
+        p.fine.ws[n] = static_cast<float>(std::sin(fine_delta));
+        p.fine.wc[n] = static_cast<float>(std::cos(fine_delta));
+        p.coarse.ws[n] = static_cast<float>(std::sin(coarse_delta));
+        p.coarse.wc[n] = static_cast<float>(std::cos(coarse_delta));
+      }
+      p.fine.scale2 = p.coarse.scale2 = (2.0f / 3.0f) * (2.0f / 3.0f);
+      p.offset_from_fine = sign > 0;
+      const float axis = start == 0.0 ? 1824.0f : 1140.0f;
+      p.k.ratio = start < 0 ? 8.0f : 16.0f;
+      p.k.to_px = static_cast<float>(axis / (2.0 * kPi * p.k.ratio));
+      p.k.period = axis;
+      p.k.inv_period = 1.0f / p.k.period;
+      p.k.max_coord = axis - 0.5f;
+      p.k.min_b2 = 64.0f;
+      p.k.max_err = 0.35f;
+      for (float saturation : {255.0f, std::numeric_limits<float>::infinity(), 200.5f}) {
+        p.k.saturation = saturation;
+        for (int width : {1, 15, 16, 17, 63, 64, 65, 250, max_width}) {
+          // Fringes with noise, plus stretches of: uniform noise, equal frames
+          // (no modulation), 0 / 255 extremes, saturated single frames.
+          const double fine_period = uniform(6, 40), phase0 = uniform(0, 628) / 100.0;
+          for (int x = 0; x < width; ++x) {
+            const int kind = (x / 37 + rows) % 6;
+            const int level = uniform(0, 255);
+            for (int f = 0; f < 6; ++f) {
+              const double cycles = f < 3 ? x / fine_period : x / (fine_period * p.k.ratio);
+              const double phase = 2.0 * kPi * cycles + phase0 - sign * 2.0 * kPi * (f % 3) / 3;
+              double value = 128 + 110 * std::cos(phase) + uniform(-3, 3);
+              if (kind == 1) value = uniform(0, 255);
+              if (kind == 2) value = level;
+              if (kind == 3) value = uniform(0, 1) * 255;
+              if (kind == 4 && uniform(0, 5) == 0) value = 255;
+              frames[f][x] = static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
+            }
+          }
+          const std::uint8_t* in[6];
+          for (int f = 0; f < 6; ++f) in[f] = frames[f].data();
+          Maps portable(width), avx512(width);
+          detail::twoThreeStepRow(p, in, width, portable.out());
+          detail::twoThreeStepRowAvx512(p, in, width, avx512.out());
+          ++rows;
+          const bool equal = same(portable.coord, avx512.coord, width) &&
+                             same(portable.modulation, avx512.modulation, width) &&
+                             same(portable.offset, avx512.offset, width) &&
+                             portable.status == avx512.status;
+          if (!equal) ++differing_rows;
+          for (int x = 0; x < width; ++x) ++status_count[std::min<int>(portable.status[x], 4)];
+        }
+      }
+    }
+  }
+  CAPTURE(rows, status_count);
+  CHECK(differing_rows == 0);
+  // Every status the kernel can give occurred (valid, low modulation,
+  // saturated, unwrapping error, out of range).
+  for (int count : status_count) CHECK(count > 0);
 }
 
 TEST_CASE("decoder recovers an analytic projector map (16-bit)", "[decoder]") {
