@@ -34,8 +34,10 @@ struct TriangulatorOptions {
 
 // Thread-compatible (triangulate() is const and keeps no state, so concurrent
 // calls on one instance are safe too). Construction precomputes the camera
-// rays (8 bytes per camera pixel). Arithmetic is single precision (the maps
-// and the cloud are float); test_triangulator.cpp bounds the error.
+// rays: a grid interpolated per row where that stays within 2e-7 (normalized
+// units) of every pixel's exact ray, else 8 bytes per camera pixel.
+// Arithmetic is single precision (the maps and the cloud are float);
+// test_triangulator.cpp bounds the error.
 class Triangulator {
  public:
   Triangulator(const CameraProjectorCalibration& calibration, TriangulatorOptions options);
@@ -72,6 +74,9 @@ class Triangulator {
                        PointCloud& cloud) const;
 
   const TriangulatorOptions& options() const;
+  // Spacing in pixels of the camera-ray grid (16, 8 or 4), or 0 when the rays
+  // are stored per pixel (lenses too distorted for the grid).
+  int rayGridStep() const;
 
  private:
   // Checks the maps (camera-sized, or a band of the camera's width with at
