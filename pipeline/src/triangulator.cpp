@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -555,8 +556,8 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
   const int iterations = correct_projector ? options.projector_distortion_iterations : 0;
   // Row scratch: the depth row, the pass-wise correction's state, the rays.
   const std::size_t depth_floats = (iterations > 0 ? 9 : 1) * static_cast<std::size_t>(width);
-  std::vector<float> scratch(depth_floats + rayScratch());
-  float* z_row = scratch.data();
+  const auto scratch = std::make_unique_for_overwrite<float[]>(depth_floats + rayScratch());
+  float* z_row = scratch.get();
   float* rx_row = z_row + depth_floats;
   float* ry_row = rx_row + width + ray_step;
   float* ray_nodes = ry_row + width + ray_step;
