@@ -102,29 +102,25 @@ struct Triangulator::Impl {
   // formed per row from the ray (two multiply-adds each: cheaper than
   // reading them from memory).
   //
-  // The rays are read per row from a grid of nodes every ray_step pixels,
+  // The rays are read from a grid of nodes every ray_step pixels,
   // interpolated bilinearly, when that is within kMaxRayError of the exact
   // ray at every pixel (checked by the constructor; the ray varies smoothly
-  // with the lens distortion); otherwise (ray_step 0) from per-pixel
-  // arrays. The grid replaces 8 bytes per pixel of memory reads per scan
-  // (1440 x 1080: 12 MB) with a few kB that stay in cache.
+  // with the lens distortion); otherwise (ray_step 0) from per-pixel arrays.
+  // The grid is kept as its rows (every ray_step-th camera row) already
+  // interpolated along u, so a camera row costs one interpolation between
+  // two of them per pixel. It replaces 8 bytes per pixel of memory reads per
+  // scan (1440 x 1080: 12 MB) with 1/ray_step of that, which stays in cache.
   static constexpr double kMaxRayError = 2e-7;  // 0.1 um across the ray at 500 mm
   int ray_step = 0;                             // 16, 8 or 4; 0: per-pixel arrays
-  int grid_cols = 0;                            // nodes per grid row
-  std::vector<float> grid_x, grid_y;            // grid rows of nodes, row-major
-  std::vector<float> rx, ry;                    // ray_step 0: per pixel, row-major
+  std::vector<float> grid_x, grid_y;            // grid rows x width; ray_step 0: all rows
 
-  // The rays of camera row v into rx_row, ry_row (width rounded up to
-  // ray_step floats each), using `nodes` (2 grid_cols floats) as scratch;
-  // returns pointers to the rays (the arrays themselves when ray_step is 0).
-  std::pair<const float*, const float*> rowRays(int v, float* rx_row, float* ry_row,
-                                                float* nodes) const;
-  template <int kStep>
-  void interpolateRow(int v, float* rx_row, float* ry_row, float* nodes) const;
-  // Chooses ray_step and fills the grid or the arrays.
+  // The rays of camera row v: pointers into the arrays (ray_step 0), or
+  // rx_row, ry_row (width floats each) filled from the grid.
+  std::pair<const float*, const float*> rowRays(int v, float* rx_row, float* ry_row) const;
+  // Chooses ray_step and fills the grid (or the per-pixel arrays).
   void buildRays(const PinholeModel& cam);
   // Floats of row scratch rowRays() needs.
-  int rayScratch() const { return ray_step == 0 ? 0 : 2 * (width + ray_step) + 2 * grid_cols; }
+  int rayScratch() const { return ray_step == 0 ? 0 : 2 * width; }
   float m_rows[3][3] = {};  // M[0:3][0:3]
   double m_t[2] = {0, 0};   // M1[3], M2[3]
   double m3_t = 0;          // M3[3] = t.z (mm)
@@ -354,52 +350,19 @@ void Triangulator::prepareCloud(const std::string& frame_id, TimestampNs stamp_n
   cloud.points.resize(static_cast<std::size_t>(impl_->width) * impl_->height);
 }
 
-template <int kStep>
-void Triangulator::Impl::interpolateRow(int v, float* __restrict rx_row, float* __restrict ry_row,
-                                        float* __restrict nodes) const {
-  // Between grid rows j and j + 1, then between nodes k and k + 1; the
-  // fractions i / kStep are exact in float.
-  const int j = v / kStep;
-  const float t = static_cast<float>(v - j * kStep) / kStep;
-  const std::size_t row0 = static_cast<std::size_t>(j) * grid_cols;
-  const std::size_t row1 = row0 + grid_cols;
-  float* __restrict nx = nodes;
-  float* __restrict ny = nodes + grid_cols;
-  for (int k = 0; k < grid_cols; ++k) {
-    nx[k] = grid_x[row0 + k] + t * (grid_x[row1 + k] - grid_x[row0 + k]);
-    ny[k] = grid_y[row0 + k] + t * (grid_y[row1 + k] - grid_y[row0 + k]);
-  }
-  const int spans = (width + kStep - 1) / kStep;
-  for (int k = 0; k < spans; ++k) {
-    const float ax = nx[k], dx = nx[k + 1] - nx[k];
-    const float ay = ny[k], dy = ny[k + 1] - ny[k];
-    float* __restrict ox = rx_row + k * kStep;
-    float* __restrict oy = ry_row + k * kStep;
-    for (int i = 0; i < kStep; ++i) {
-      const float w = static_cast<float>(i) / kStep;
-      ox[i] = ax + w * dx;
-      oy[i] = ay + w * dy;
-    }
-  }
-}
-
-std::pair<const float*, const float*> Triangulator::Impl::rowRays(int v, float* rx_row,
-                                                                  float* ry_row,
-                                                                  float* nodes) const {
-  switch (ray_step) {
-    case 16:
-      interpolateRow<16>(v, rx_row, ry_row, nodes);
-      break;
-    case 8:
-      interpolateRow<8>(v, rx_row, ry_row, nodes);
-      break;
-    case 4:
-      interpolateRow<4>(v, rx_row, ry_row, nodes);
-      break;
-    default: {
-      const std::size_t start = static_cast<std::size_t>(v) * width;
-      return {rx.data() + start, ry.data() + start};
-    }
+std::pair<const float*, const float*> Triangulator::Impl::rowRays(int v, float* __restrict rx_row,
+                                                                  float* __restrict ry_row) const {
+  const std::size_t start = static_cast<std::size_t>(ray_step == 0 ? v : v / ray_step) * width;
+  if (ray_step == 0) return {grid_x.data() + start, grid_y.data() + start};
+  // Between grid rows j and j + 1 (t exact in float: ray_step is a power of 2).
+  const float t = static_cast<float>(v % ray_step) / static_cast<float>(ray_step);
+  const float* __restrict x0 = grid_x.data() + start;
+  const float* __restrict y0 = grid_y.data() + start;
+  const float* __restrict x1 = x0 + width;
+  const float* __restrict y1 = y0 + width;
+  for (int u = 0; u < width; ++u) {
+    rx_row[u] = x0[u] + t * (x1[u] - x0[u]);
+    ry_row[u] = y0[u] + t * (y1[u] - y0[u]);
   }
   return {rx_row, ry_row};
 }
@@ -414,27 +377,36 @@ void Triangulator::Impl::buildRays(const PinholeModel& cam) {
       exact_y[static_cast<std::size_t>(v) * width + u] = xn.y();
     }
   }
+  std::vector<float> row_x(width), row_y(width);
   for (const int step : {16, 8, 4}) {
-    // Nodes at multiples of step up to the first at or beyond the last pixel.
+    // Nodes at multiples of step, up to the first beyond the last pixel (the
+    // interpolation reads node k + 1 even where its weight is 0); each grid
+    // row interpolated along u between its nodes.
     ray_step = step;
-    grid_cols = (width - 1 + step - 1) / step + 1;
-    const int grid_rows = (height - 1 + step - 1) / step + 1;
-    grid_x.assign(static_cast<std::size_t>(grid_cols) * grid_rows, 0.0f);
+    const int grid_cols = (width - 1) / step + 2;
+    const int grid_rows = (height - 1) / step + 2;
+    grid_x.assign(static_cast<std::size_t>(grid_rows) * width, 0.0f);
     grid_y.assign(grid_x.size(), 0.0f);
+    std::vector<float> node_x(grid_cols), node_y(grid_cols);
     for (int j = 0; j < grid_rows; ++j) {
       for (int k = 0; k < grid_cols; ++k) {
         const Eigen::Vector2d xn = cam.pixelToNormalized({double(k * step), double(j * step)});
-        grid_x[static_cast<std::size_t>(j) * grid_cols + k] = static_cast<float>(xn.x());
-        grid_y[static_cast<std::size_t>(j) * grid_cols + k] = static_cast<float>(xn.y());
+        node_x[k] = static_cast<float>(xn.x());
+        node_y[k] = static_cast<float>(xn.y());
+      }
+      float* gx = grid_x.data() + static_cast<std::size_t>(j) * width;
+      float* gy = grid_y.data() + static_cast<std::size_t>(j) * width;
+      for (int u = 0; u < width; ++u) {
+        const int k = u / step;
+        const float w = static_cast<float>(u % step) / static_cast<float>(step);
+        gx[u] = node_x[k] + w * (node_x[k + 1] - node_x[k]);
+        gy[u] = node_y[k] + w * (node_y[k + 1] - node_y[k]);
       }
     }
     // The check runs the interpolation the triangulation runs.
-    std::vector<float> scratch(rayScratch());
-    float* row_x = scratch.data();
-    float* row_y = row_x + width + step;
     double worst = 0.0;
     for (int v = 0; v < height && worst <= kMaxRayError; ++v) {
-      const auto [x, y] = rowRays(v, row_x, row_y, row_y + width + step);
+      const auto [x, y] = rowRays(v, row_x.data(), row_y.data());
       const std::size_t start = static_cast<std::size_t>(v) * width;
       for (int u = 0; u < width; ++u) {
         worst = std::max(
@@ -444,11 +416,8 @@ void Triangulator::Impl::buildRays(const PinholeModel& cam) {
     if (worst <= kMaxRayError) return;
   }
   ray_step = 0;
-  grid_cols = 0;
-  grid_x.clear();
-  grid_y.clear();
-  rx.assign(exact_x.begin(), exact_x.end());
-  ry.assign(exact_y.begin(), exact_y.end());
+  grid_x.assign(exact_x.begin(), exact_x.end());
+  grid_y.assign(exact_y.begin(), exact_y.end());
 }
 
 template <int kIterations>
@@ -559,8 +528,7 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
   const auto scratch = std::make_unique_for_overwrite<float[]>(depth_floats + rayScratch());
   float* z_row = scratch.get();
   float* rx_row = z_row + depth_floats;
-  float* ry_row = rx_row + width + ray_step;
-  float* ray_nodes = ry_row + width + ray_step;
+  float* ry_row = rx_row + width;
   const float first_is_column = first == kColumn ? 1.0f : 0.0f;
   const float second_is_column = second == kColumn ? 1.0f : 0.0f;
   for (int row = map_begin; row < map_end; ++row) {
@@ -571,7 +539,7 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
     const float* __restrict offset_row =
         maps.offset.empty() ? nullptr : maps.offset.ptr<float>(row);
     const std::size_t row_start = static_cast<std::size_t>(v) * width;
-    const auto [rx, ry] = rowRays(v, rx_row, ry_row, ray_nodes);
+    const auto [rx, ry] = rowRays(v, rx_row, ry_row);
     // The fused loop wins without correction; with it, its register pressure
     // makes row passes faster (measured: 2 iterations 22.4 vs 18.9 ms/scan).
     if (iterations == 0) {
