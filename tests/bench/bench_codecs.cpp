@@ -13,24 +13,31 @@
 //   the fraction of its valid points within 0.01 mm of ours (proj_iter 0):
 //   it computes the same thing, not a strawman.
 //
+// - BM_MemoryFloor: only the memory traffic of a 3+3 one-direction scan (the
+//   frames read, the cloud and optionally the maps written), the floor the
+//   processing cannot beat on this machine.
+//
 // Patterns: 0 = 3+3 horizontal, 1 = 3+3 both, 2 = 12 steps at each of 4
 // frequencies (64, 16, 4, 1 periods; 48 frames, hierarchical unwrapping).
 // proj_iter: projector distortion iterations of the triangulator (0 = the
 // baseline's model, which ignores projector distortion).
+#include <benchmark/benchmark.h>
+#include <emmintrin.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <map>
 #include <memory>
 #include <numbers>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
-#include <benchmark/benchmark.h>
-#include <opencv2/core.hpp>
-
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
 #include "support/test_rig.h"
@@ -159,6 +166,48 @@ void BM_DecodeTriangulate(benchmark::State& state) {
   reportScans(state);
 }
 
+// The memory traffic of a 3+3 scan alone, as a floor for BM_DecodeTriangulate
+// on this machine: reads the 6 frames and writes the cloud (16 bytes per
+// pixel, non-temporal stores as the triangulator does) and, with maps:1, the
+// maps (13 bytes per pixel), on a RowWorkers pool in the same 16-row blocks.
+// Args: threads, maps.
+void BM_MemoryFloor(benchmark::State& state) {
+  const std::vector<cv::Mat>& in = frames(0);
+  const int rows = in.front().rows, cols = in.front().cols;
+  const bool maps = state.range(1) != 0;
+  RowWorkers workers(int(state.range(0)));
+  std::vector<PointXYZI> cloud(std::size_t(rows) * cols);
+  cv::Mat up(rows, cols, CV_32FC1), modulation(rows, cols, CV_32FC1), offset(rows, cols, CV_32FC1),
+      status(rows, cols, CV_8UC1);
+  std::vector<std::uint32_t> sums(workers.threads());
+  for (auto _ : state) {
+    workers.run(rows, ScanProcessor::kBlockRows, [&](int begin, int end, int thread) {
+      std::uint32_t sum = 0;
+      for (const cv::Mat& f : in) {
+        const auto* p = reinterpret_cast<const std::uint32_t*>(f.ptr(begin));
+        for (std::size_t i = 0; i < std::size_t(end - begin) * cols / 4; ++i) sum += p[i];
+      }
+      sums[thread] += sum;
+      float* out = &cloud[std::size_t(begin) * cols].x;
+      const __m128 v = _mm_set1_ps(float(sum & 1));
+      for (std::size_t i = 0; i < std::size_t(end - begin) * cols * 4; i += 4)
+        _mm_stream_ps(out + i, v);
+      _mm_sfence();
+      if (maps) {
+        for (int r = begin; r < end; ++r) {
+          std::fill_n(up.ptr<float>(r), cols, 1.0f);
+          std::fill_n(modulation.ptr<float>(r), cols, 2.0f);
+          std::fill_n(offset.ptr<float>(r), cols, 3.0f);
+          std::fill_n(status.ptr<std::uint8_t>(r), cols, std::uint8_t(0));
+        }
+      }
+    });
+    benchmark::DoNotOptimize(sums.data());
+    benchmark::DoNotOptimize(cloud.data());
+  }
+  reportScans(state);
+}
+
 // The straightforward OpenCV way, 3+3 horizontal (as sl_sensor and SLStudio
 // do it): float conversion, cv::phase / cv::magnitude on matrix expressions,
 // unwrapping by expressions, then the determinant-tensor depth
@@ -272,6 +321,13 @@ BENCHMARK(BM_Baseline)
     ->ArgName("triangulate")
     ->Arg(0)
     ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->MinWarmUpTime(0.3)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
+BENCHMARK(BM_MemoryFloor)
+    ->ArgsProduct({{1, 2}, {1, 0}})
+    ->ArgNames({"threads", "maps"})
     ->Unit(benchmark::kMillisecond)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()
