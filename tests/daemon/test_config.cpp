@@ -94,7 +94,7 @@ TEST_CASE("config mistakes are reported with file, line and key") {
       Case{"trigger: hardware", "trigger: manual",
            "key 'runtime.trigger': must be hardware or software, not 'manual'"},
       Case{"settle_s: 0.01", "settle_s: -1", "key 'software_trigger.settle_s': must be in [0, 10]"},
-      Case{"max_unwrap_error: 0.35", "max_unwrap_error: 0.7", "key 'decoder.max_unwrap_error'"},
+      Case{"max_unwrap_error: 0.3", "max_unwrap_error: 0.7", "key 'decoder.max_unwrap_error'"},
       Case{"use: best", "use: diagonal", "key 'triangulator.use': must be best, columns or rows"},
       Case{"rotation_deg: [0, 15.25, 0],", "rotation_deg: [0, 15.25, 0], rotation: [1,0,0,0,1,0,0,0,1],",
            "give exactly one of 'rotation'"},

@@ -308,8 +308,10 @@ TEST_CASE("decoder marks each invalid reason", "[decoder]") {
   // Column bands of the camera image, one per reason; rows 0..59 use the
   // smooth ground truth, rows 60.. are constant coordinates for the range test.
   const Level offset = [](int, int) { return 30000.0; };
-  // Threshold: 8 DN at 8 bits = 2048 DN at 16 bits. B is recovered to
-  // +-0.9 DN, so 2100 must pass and 1990 must fail.
+  // Threshold (set below, not the default): 8 DN at 8 bits = 2048 DN at 16
+  // bits. B is recovered to +-0.9 DN, so 2100 must pass and 1990 must fail.
+  DecoderOptions options;
+  options.min_modulation = 8;
   const Level modulation = [](int u, int) {
     if (u >= 10 && u < 15) return 1990.0;
     if (u >= 15 && u < 20) return 2100.0;
@@ -336,7 +338,7 @@ TEST_CASE("decoder marks each invalid reason", "[decoder]") {
     return PixelStatus::kValid;
   };
 
-  const ProjectorMaps maps = PhaseShift33Decoder(pattern, {}).decode(frames, 16);
+  const ProjectorMaps maps = PhaseShift33Decoder(pattern, options).decode(frames, 16);
   int wrong_status = 0, wrong_nan = 0;
   int counts[5] = {0, 0, 0, 0, 0};
   for (int v = 0; v < size.height; ++v) {
@@ -353,9 +355,9 @@ TEST_CASE("decoder marks each invalid reason", "[decoder]") {
   for (int c : counts) CHECK(c > 0);
 
   SECTION("saturated pixels are kept when not rejected") {
-    DecoderOptions options;
-    options.reject_saturated = false;
-    const ProjectorMaps kept = PhaseShift33Decoder(pattern, options).decode(frames, 16);
+    DecoderOptions keep = options;
+    keep.reject_saturated = false;
+    const ProjectorMaps kept = PhaseShift33Decoder(pattern, keep).decode(frames, 16);
     for (int v = 0; v < size.height; ++v) {
       for (int u = 30; u < 40; ++u) CHECK(statusAt(kept, u, v) != PixelStatus::kSaturated);
     }

@@ -13,17 +13,30 @@
 
 namespace sl::pipeline {
 
+// The defaults keep wrong fringe orders (points off by a whole period) out of
+// the 40:1 3+3 patterns' output. The cue's disagreement e = (r Phi_coarse -
+// phi_fine) / (2 pi), in fine periods (r the frequency ratio), has for N-step
+// sets of modulation B and intensity noise sigma_I (DN)
+//   sigma_e = sqrt(2/N) sqrt(r^2 + 1) sigma_I / (2 pi B),
+// and a wrong order passes the consistency test when |e| > 1 -
+// max_unwrap_error. Asking 1 - max_unwrap_error >= z sigma_e gives
+//   min_modulation = z sqrt(2/N) sqrt(r^2 + 1) sigma_I / (2 pi (1 - max_unwrap_error));
+// N = 3, r = 40, sigma_I = 0.54 DN (the simulated IMX174-class camera at the
+// A ~ 25 DN of pixels near the threshold), z = 5, max_unwrap_error 0.3 ->
+// 20 DN. Patterns with a smaller ratio may lower it (r = 16: 8 DN). README,
+// "Simulated camera noise model", has the measured rates.
 struct DecoderOptions {
   // Fringe amplitude B in DN on the 8-bit scale (scaled by 2^(bit_depth-8))
-  // below which a pixel is kLowModulation. Gray code: half the white-black
-  // difference (or of a bit and its inverse without reference frames).
-  float min_modulation = 8.0f;
+  // below which a pixel is kLowModulation (phase shift: the smallest B of
+  // the frequencies). Gray code: half the white-black difference (or of a
+  // bit and its inverse without reference frames).
+  float min_modulation = 20.0f;
   bool reject_saturated = true;   // any frame at (2^bit_depth - 1) invalidates the pixel
   // Temporal unwrapping: |r * Phi_coarse - phi_fine - 2*pi*k| / (2*pi) above
   // this (periods of the finer frequency) marks kUnwrapInconsistent. Gray +
   // phase shift with the complementary bit: periods by which the phase may
   // lie outside the half stripe the code names. In (0, 0.5].
-  float max_unwrap_error = 0.35f;
+  float max_unwrap_error = 0.3f;
 };
 
 // Thread-compatible and immutable after construction: decode(), decodeRows()
