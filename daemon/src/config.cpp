@@ -313,7 +313,15 @@ void parseExtraCalibrations(const YamlMap& root, const std::filesystem::path& ba
 }
 
 void parseDecoder(const YamlMap& m, pipeline::DecoderOptions& d) {
-  d.min_modulation = static_cast<float>(nonNegative(m, "min_modulation", d.min_modulation));
+  // A number, or `auto` (the default): derived from each pattern
+  // (pipeline::derivedMinModulation).
+  if (m.has("min_modulation")) {
+    const YAML::Node min_modulation = m.raw("min_modulation");
+    if (min_modulation.IsScalar() && min_modulation.Scalar() == "auto")
+      d.min_modulation = pipeline::kDerivedMinModulation;
+    else
+      d.min_modulation = static_cast<float>(nonNegative(m, "min_modulation", 0.0));
+  }
   d.reject_saturated = m.get<bool>("reject_saturated", d.reject_saturated);
   d.max_unwrap_error = static_cast<float>(positive(m, "max_unwrap_error", d.max_unwrap_error));
   if (d.max_unwrap_error >= 0.5f) m.fail("max_unwrap_error", "must be < 0.5 (periods)");

@@ -5,10 +5,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "codec_families.h"
 #include "frame_layout.h"
@@ -50,13 +53,54 @@ SL_MULTIVERSION void combineDirections(int width, std::uint8_t* __restrict statu
 
 }  // namespace
 
+float derivedMinModulation(const PatternSpec& spec, float max_unwrap_error) {
+  constexpr double kNoiseDn = 0.54;      // sigma_I near the threshold (codec.h)
+  constexpr double kMarginSigmas = 5.0;  // z
+  constexpr double kFloorDn = 8.0;
+  double phase_gain = 0;  // sigma_phi * B / sigma_I of one set
+  if (spec.family == PatternFamily::kPhaseShift) phase_gain = std::sqrt(2.0 / spec.steps);
+  else if (spec.family == PatternFamily::kTwoPlusOne) phase_gain = std::sqrt(2.0);
+  else return static_cast<float>(kFloorDn);
+  std::vector<double> f = spec.frequencies;
+  std::sort(f.begin(), f.end(), std::greater<>());
+  double amplification = 0;  // largest sqrt(r^2 v_coarse + v_fine) over the steps
+  if (spec.unwrapping == Unwrapping::kHeterodyne) {
+    // Level l: beats of neighbouring level l - 1 phases; the codec unwraps
+    // the first item of each level with the first of the next.
+    auto binomial = [](int n, int k) {
+      double c = 1;
+      for (int i = 1; i <= k; ++i) c = c * (n - k + i) / i;
+      return c;
+    };
+    std::vector<double> level = f;
+    for (int l = 0; level.size() > 1; ++l) {
+      std::vector<double> next;
+      for (std::size_t i = 0; i + 1 < level.size(); ++i) next.push_back(level[i] - level[i + 1]);
+      const double r = level[0] / next[0];
+      amplification = std::max(amplification, std::sqrt(r * r * binomial(2 * l + 2, l + 1) +
+                                                         binomial(2 * l, l)));
+      level = next;
+    }
+  } else {
+    for (std::size_t i = 0; i + 1 < f.size(); ++i) {
+      const double r = f[i] / f[i + 1];
+      amplification = std::max(amplification, std::sqrt(r * r + 1));
+    }
+  }
+  const double b = kMarginSigmas * phase_gain * amplification * kNoiseDn /
+                   (2 * std::numbers::pi * (1.0 - max_unwrap_error));
+  return static_cast<float>(std::max(kFloorDn, b));
+}
+
 Codec::Codec(PatternSpec spec, DecoderOptions options)
     : spec_(std::move(spec)), options_(options) {
   spec_.validate();
-  if (!(options_.min_modulation >= 0.0f))
-    throw std::invalid_argument("DecoderOptions: min_modulation must be >= 0");
   if (!(options_.max_unwrap_error > 0.0f && options_.max_unwrap_error <= 0.5f))
     throw std::invalid_argument("DecoderOptions: max_unwrap_error must be in (0, 0.5]");
+  if (options_.min_modulation < 0.0f)
+    options_.min_modulation = derivedMinModulation(spec_, options_.max_unwrap_error);
+  if (!(options_.min_modulation >= 0.0f))
+    throw std::invalid_argument("DecoderOptions: min_modulation must be >= 0 (or negative: derived)");
   const int n = spec_.frameCount();
   position_.resize(n);
   for (int i = 0; i < n; ++i) {

@@ -45,6 +45,11 @@ TEST_CASE("the shipped sim config loads with the documented values") {
   CHECK(config.synchroniser.image_interval_ns == 33'333'333);
   CHECK(config.runtime.trigger == sl::daemon::TriggerMode::kHardware);
   CHECK(config.software_trigger.settle_s == 0.01);
+  // The decoder section is DecoderOptions' defaults (sl_eval decodes with those).
+  const sl::pipeline::DecoderOptions decoder_defaults;
+  CHECK(config.decoder.min_modulation == decoder_defaults.min_modulation);  // auto
+  CHECK(config.decoder.max_unwrap_error == decoder_defaults.max_unwrap_error);
+  CHECK(config.decoder.reject_saturated == decoder_defaults.reject_saturated);
   // 'calibration: sim' = the rig's own geometry.
   CHECK(config.calibration.t.isApprox(config.sim.rig.t));
   CHECK(config.calibration.camera.fx == config.sim.rig.camera.fx);
@@ -95,6 +100,9 @@ TEST_CASE("config mistakes are reported with file, line and key") {
            "key 'runtime.trigger': must be hardware or software, not 'manual'"},
       Case{"settle_s: 0.01", "settle_s: -1", "key 'software_trigger.settle_s': must be in [0, 10]"},
       Case{"max_unwrap_error: 0.3", "max_unwrap_error: 0.7", "key 'decoder.max_unwrap_error'"},
+      Case{"min_modulation: auto", "min_modulation: -3",
+           "key 'decoder.min_modulation': must be >= 0"},
+      Case{"min_modulation: auto", "min_modulation: bright", "key 'decoder.min_modulation'"},
       Case{"use: best", "use: diagonal", "key 'triangulator.use': must be best, columns or rows"},
       Case{"rotation_deg: [0, 15.25, 0],", "rotation_deg: [0, 15.25, 0], rotation: [1,0,0,0,1,0,0,0,1],",
            "give exactly one of 'rotation'"},
@@ -105,6 +113,14 @@ TEST_CASE("config mistakes are reported with file, line and key") {
   CHECK(message.rfind("test.yaml", 0) == 0);  // names the file first
   CHECK(message.find(c.expected) != std::string::npos);
   CHECK(message.find('\n') == std::string::npos);  // one line
+}
+
+TEST_CASE("decoder.min_modulation takes a number or auto") {
+  const auto numeric =
+      sl::daemon::parseConfig(edited("min_modulation: auto", "min_modulation: 12"), "test.yaml");
+  CHECK(numeric.decoder.min_modulation == 12.0f);
+  const auto derived = sl::daemon::parseConfig(shippedConfig(), "test.yaml");
+  CHECK(derived.decoder.min_modulation == sl::pipeline::kDerivedMinModulation);
 }
 
 TEST_CASE("a missing file and malformed YAML are one clear error") {

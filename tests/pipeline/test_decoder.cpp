@@ -452,3 +452,69 @@ TEST_CASE("decoder rejects malformed input", "[decoder]") {
     CHECK_THROWS_AS(PhaseShift33Decoder(bad, {}), std::invalid_argument);
   }
 }
+
+TEST_CASE("derived min_modulation follows the pattern's frequency ratio", "[decoder][unwrap]") {
+  PhaseShift33Pattern p40, p16;
+  p40.fringes = 40;
+  p16.fringes = 16;
+  const float b40 = derivedMinModulation(p40, 0.3f), b16 = derivedMinModulation(p16, 0.3f);
+  CHECK(b40 > b16);
+  CHECK(b16 >= 8.0f);  // the floor
+  CHECK(derivedMinModulation(p40, 0.35f) > b40);  // less margin left for a wrong order
+  PatternSpec gray;
+  gray.family = PatternFamily::kGrayCode;
+  CHECK(derivedMinModulation(gray, 0.3f) == 8.0f);
+
+  // The codec resolves the default; an explicit value stays.
+  CHECK(makeCodec(p40, {})->options().min_modulation == b40);
+  DecoderOptions explicit_value;
+  explicit_value.min_modulation = 3.0f;
+  CHECK(makeCodec(p40, explicit_value)->options().min_modulation == 3.0f);
+}
+
+TEST_CASE("at the derived min_modulation the cue keeps a 5-sigma margin", "[decoder][unwrap]") {
+  // 40:1 3+3 at 16 bits (quantisation negligible) with Gaussian noise of the
+  // sigma_I the derivation assumes (0.54 DN on the 8-bit scale). Just above
+  // the threshold (B = 1.1 B_min) the cue's error has sigma_e = (1 -
+  // max_unwrap_error) / (5 * 1.1): the share flagged inconsistent must be
+  // P(|e| > max_unwrap_error) of that Gaussian, and no valid pixel may have a
+  // wrong order.
+  PhaseShift33Pattern pattern;
+  pattern.fringes = 40;
+  const DecoderOptions options;
+  const float b_min = derivedMinModulation(pattern, options.max_unwrap_error);
+  const double scale = 256.0;  // 8-bit DN -> 16-bit DN
+  const cv::Size size(400, 250);
+  const Level offset = [&](int, int) { return 25.0 * scale; };
+  const Level modulation = [&](int, int) { return 1.1 * b_min * scale; };
+  const Field field = [&](int u, int v, int) { return groundTruth(pattern, size, u, v); };
+  auto frames = render(pattern, size, 16, field, offset, modulation);
+  std::mt19937 rng(17);
+  std::normal_distribution<double> noise(0.0, 0.54 * scale);
+  for (cv::Mat& f : frames)
+    for (int v = 0; v < size.height; ++v)
+      for (int u = 0; u < size.width; ++u) {
+        std::uint16_t& value = f.at<std::uint16_t>(v, u);
+        value = static_cast<std::uint16_t>(std::clamp(std::round(value + noise(rng)), 0.0, 65535.0));
+      }
+  const ProjectorMaps maps = PhaseShift33Decoder(pattern, options).decode(frames, 16);
+  const double period = pattern.wavelength(pattern.projector_width);
+  int inconsistent = 0, low = 0, wrong_order = 0;
+  for (int v = 0; v < size.height; ++v)
+    for (int u = 0; u < size.width; ++u) {
+      const PixelStatus s = statusAt(maps, u, v);
+      inconsistent += s == PixelStatus::kUnwrapInconsistent;
+      low += s == PixelStatus::kLowModulation;
+      if (s == PixelStatus::kValid &&
+          std::abs(maps.up.at<float>(v, u) - groundTruth(pattern, size, u, v).u) > period / 2)
+        ++wrong_order;
+    }
+  const double sigma_e = (1.0 - options.max_unwrap_error) / (5.0 * 1.1);
+  const double expected = std::erfc(options.max_unwrap_error / sigma_e / std::sqrt(2.0));
+  const double measured = double(inconsistent) / size.area();
+  CAPTURE(b_min, expected, measured, low, wrong_order);
+  CHECK(measured > 0.85 * expected);
+  CHECK(measured < 1.15 * expected);
+  CHECK(low < size.area() / 1000);
+  CHECK(wrong_order == 0);
+}

@@ -13,24 +13,17 @@
 
 namespace sl::pipeline {
 
-// The defaults keep wrong fringe orders (points off by a whole period) out of
-// the 40:1 3+3 patterns' output. The cue's disagreement e = (r Phi_coarse -
-// phi_fine) / (2 pi), in fine periods (r the frequency ratio), has for N-step
-// sets of modulation B and intensity noise sigma_I (DN)
-//   sigma_e = sqrt(2/N) sqrt(r^2 + 1) sigma_I / (2 pi B),
-// and a wrong order passes the consistency test when |e| > 1 -
-// max_unwrap_error. Asking 1 - max_unwrap_error >= z sigma_e gives
-//   min_modulation = z sqrt(2/N) sqrt(r^2 + 1) sigma_I / (2 pi (1 - max_unwrap_error));
-// N = 3, r = 40, sigma_I = 0.54 DN (the simulated IMX174-class camera at the
-// A ~ 25 DN of pixels near the threshold), z = 5, max_unwrap_error 0.3 ->
-// 20 DN. Patterns with a smaller ratio may lower it (r = 16: 8 DN). README,
-// "Simulated camera noise model", has the measured rates.
+// DecoderOptions::min_modulation that asks for derivedMinModulation().
+inline constexpr float kDerivedMinModulation = -1.0f;
+
 struct DecoderOptions {
   // Fringe amplitude B in DN on the 8-bit scale (scaled by 2^(bit_depth-8))
   // below which a pixel is kLowModulation (phase shift: the smallest B of
   // the frequencies). Gray code: half the white-black difference (or of a
-  // bit and its inverse without reference frames).
-  float min_modulation = 20.0f;
+  // bit and its inverse without reference frames). Negative (the default):
+  // derivedMinModulation(spec, max_unwrap_error), resolved when the codec is
+  // made (Codec::options() holds the value in use).
+  float min_modulation = kDerivedMinModulation;
   bool reject_saturated = true;   // any frame at (2^bit_depth - 1) invalidates the pixel
   // Temporal unwrapping: |r * Phi_coarse - phi_fine - 2*pi*k| / (2*pi) above
   // this (periods of the finer frequency) marks kUnwrapInconsistent. Gray +
@@ -38,6 +31,23 @@ struct DecoderOptions {
   // lie outside the half stripe the code names. In (0, 0.5].
   float max_unwrap_error = 0.3f;
 };
+
+// The modulation (8-bit DN) below which the temporal unwrapping of `spec`
+// would pick wrong fringe orders (points off by a whole period) too often.
+// An unwrapping step from a coarse phase to one r times finer compares
+// e = (r Phi_coarse - phi_fine) / (2 pi), in fine periods, whose standard
+// deviation for sets of modulation B and intensity noise sigma_I is
+//   sigma_e = g sqrt(r^2 v_coarse + v_fine) sigma_I / (2 pi B)
+// (g = sqrt(2/N) for N-step sets, sqrt(2) for a 2+1 quadrature pair; v = 1
+// per set, and C(2l, l) for a level-l heterodyne beat, whose phase combines
+// l + 1 sets). A wrong order passes the consistency test when |e| > 1 -
+// max_unwrap_error; asking that margin to be z = 5 standard deviations on
+// the step with the largest sigma_e gives
+//   B_min = z g sqrt(r^2 v_coarse + v_fine) sigma_I / (2 pi (1 - max_unwrap_error))
+// with sigma_I = 0.54 DN (the simulated IMX174-class camera at the A ~ 25 DN
+// of pixels near the threshold). At least 8 DN; Gray-code families (no
+// noise-amplifying step) get 8. The 40:1 3+3 with 0.3: 20 DN; 16:1: 8 DN.
+float derivedMinModulation(const PatternSpec& spec, float max_unwrap_error);
 
 // Thread-compatible and immutable after construction: decode(), decodeRows()
 // and generate() are const and keep no state, so concurrent calls on one
