@@ -46,6 +46,32 @@ enum Axis { kColumn = 0, kRow = 1 };
 // and trip -Wmaybe-uninitialized when inlined (a false positive).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+// Points (x, y, z, intensity) of 16 pixels to 4 cache lines at o (64-byte
+// aligned), non-temporal.
+__attribute__((target("avx512f"))) inline void streamPoints16(__m512 x, __m512 y, __m512 z,
+                                                              __m512 i, float* o) {
+  const __m512 xy_lo = _mm512_unpacklo_ps(x, y), xy_hi = _mm512_unpackhi_ps(x, y);
+  const __m512 zi_lo = _mm512_unpacklo_ps(z, i), zi_hi = _mm512_unpackhi_ps(z, i);
+  // Per 128-bit lane k: points 4k .. 4k+3 end up in p0..p3 (lane k).
+  const __m512 p0 =
+      _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(xy_lo), _mm512_castps_pd(zi_lo)));
+  const __m512 p1 =
+      _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(xy_lo), _mm512_castps_pd(zi_lo)));
+  const __m512 p2 =
+      _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(xy_hi), _mm512_castps_pd(zi_hi)));
+  const __m512 p3 =
+      _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(xy_hi), _mm512_castps_pd(zi_hi)));
+  // 4 x 4 transpose of the 128-bit lanes: register k = points 4k .. 4k+3.
+  const __m512 q0 = _mm512_shuffle_f32x4(p0, p1, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m512 q1 = _mm512_shuffle_f32x4(p2, p3, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m512 q2 = _mm512_shuffle_f32x4(p0, p1, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m512 q3 = _mm512_shuffle_f32x4(p2, p3, _MM_SHUFFLE(3, 2, 3, 2));
+  _mm512_stream_ps(o, _mm512_shuffle_f32x4(q0, q1, _MM_SHUFFLE(2, 0, 2, 0)));
+  _mm512_stream_ps(o + 16, _mm512_shuffle_f32x4(q0, q1, _MM_SHUFFLE(3, 1, 3, 1)));
+  _mm512_stream_ps(o + 32, _mm512_shuffle_f32x4(q2, q3, _MM_SHUFFLE(2, 0, 2, 0)));
+  _mm512_stream_ps(o + 48, _mm512_shuffle_f32x4(q2, q3, _MM_SHUFFLE(3, 1, 3, 1)));
+}
+
 __attribute__((target("avx512f"))) int streamPointsAvx512(int n, const float* z_row,
                                                           const float* rx, const float* ry,
                                                           const float* intensity,
@@ -56,27 +82,65 @@ __attribute__((target("avx512f"))) int streamPointsAvx512(int n, const float* z_
     const __m512 x = _mm512_mul_ps(z, _mm512_loadu_ps(rx + u));
     const __m512 y = _mm512_mul_ps(z, _mm512_loadu_ps(ry + u));
     const __m512 i = intensity ? _mm512_loadu_ps(intensity + u) : _mm512_setzero_ps();
-    // Per 128-bit lane k: points 4k .. 4k+3 end up in p0..p3 (lane k).
-    const __m512 xy_lo = _mm512_unpacklo_ps(x, y), xy_hi = _mm512_unpackhi_ps(x, y);
-    const __m512 zi_lo = _mm512_unpacklo_ps(z, i), zi_hi = _mm512_unpackhi_ps(z, i);
-    const __m512 p0 = _mm512_castpd_ps(
-        _mm512_unpacklo_pd(_mm512_castps_pd(xy_lo), _mm512_castps_pd(zi_lo)));
-    const __m512 p1 = _mm512_castpd_ps(
-        _mm512_unpackhi_pd(_mm512_castps_pd(xy_lo), _mm512_castps_pd(zi_lo)));
-    const __m512 p2 = _mm512_castpd_ps(
-        _mm512_unpacklo_pd(_mm512_castps_pd(xy_hi), _mm512_castps_pd(zi_hi)));
-    const __m512 p3 = _mm512_castpd_ps(
-        _mm512_unpackhi_pd(_mm512_castps_pd(xy_hi), _mm512_castps_pd(zi_hi)));
-    // 4 x 4 transpose of the 128-bit lanes: register k = points 4k .. 4k+3.
-    const __m512 q0 = _mm512_shuffle_f32x4(p0, p1, _MM_SHUFFLE(1, 0, 1, 0));
-    const __m512 q1 = _mm512_shuffle_f32x4(p2, p3, _MM_SHUFFLE(1, 0, 1, 0));
-    const __m512 q2 = _mm512_shuffle_f32x4(p0, p1, _MM_SHUFFLE(3, 2, 3, 2));
-    const __m512 q3 = _mm512_shuffle_f32x4(p2, p3, _MM_SHUFFLE(3, 2, 3, 2));
-    float* o = &out[u].x;
-    _mm512_stream_ps(o, _mm512_shuffle_f32x4(q0, q1, _MM_SHUFFLE(2, 0, 2, 0)));
-    _mm512_stream_ps(o + 16, _mm512_shuffle_f32x4(q0, q1, _MM_SHUFFLE(3, 1, 3, 1)));
-    _mm512_stream_ps(o + 32, _mm512_shuffle_f32x4(q2, q3, _MM_SHUFFLE(2, 0, 2, 0)));
-    _mm512_stream_ps(o + 48, _mm512_shuffle_f32x4(q2, q3, _MM_SHUFFLE(3, 1, 3, 1)));
+    streamPoints16(x, y, z, i, &out[u].x);
+  }
+  return u;
+}
+
+// Terms of the fused single-axis row: the ray's a = a0 x + a1 y + a2 and
+// b = b0 x + b1 y + b2 (M3 and M1 or M2 of the axis), M[axis][3], M3[3] and
+// the depth range.
+struct AxisTerms {
+  float a0, a1, a2, b0, b1, b2, m_axis, m3, min_z, max_z;
+};
+
+// The point of one pixel as the row functions compute it (the fused row's
+// lead and tail; same operations as depthRow<0>, rowRays and the point
+// loops, so the same bits).
+inline PointXYZI fusedPoint(const AxisTerms& k, float p, float rx, float ry, float intensity) {
+  const float ai = k.a0 * rx + k.a1 * ry + k.a2;
+  const float b = k.b0 * rx + k.b1 * ry + k.b2;
+  const float den = p * ai - b;
+  float z = (k.m_axis - p * k.m3) / den;
+  z = (std::abs(den) > 1e-12f) & (z >= k.min_z) & (z <= k.max_z) ? z : kNaN;
+  return PointXYZI{z * rx, z * ry, z, intensity};
+}
+
+// A whole row with one map and no projector correction in one pass:
+// rays (x0 + t (x1 - x0), or x0 itself without kInterpolate), depth and
+// points, 16 pixels per iteration, none of the row buffers of the general
+// path. Pixels [0, n) with `out` 64-byte aligned; returns the pixels written
+// (a multiple of 16). Bit for bit the general path's results (test_triangulator).
+template <bool kInterpolate>
+__attribute__((target("avx512f"))) int fusedRowAvx512(int n, const AxisTerms& k, const float* p_row,
+                                                      const float* x0, const float* x1,
+                                                      const float* y0, const float* y1, float t,
+                                                      const float* intensity, PointXYZI* out) {
+  const __m512 a0 = _mm512_set1_ps(k.a0), a1 = _mm512_set1_ps(k.a1), a2 = _mm512_set1_ps(k.a2);
+  const __m512 b0 = _mm512_set1_ps(k.b0), b1 = _mm512_set1_ps(k.b1), b2 = _mm512_set1_ps(k.b2);
+  const __m512 m_axis = _mm512_set1_ps(k.m_axis), m3 = _mm512_set1_ps(k.m3);
+  const __m512 min_z = _mm512_set1_ps(k.min_z), max_z = _mm512_set1_ps(k.max_z);
+  const __m512 tiny = _mm512_set1_ps(1e-12f), nan = _mm512_set1_ps(kNaN);
+  const __m512 tv = _mm512_set1_ps(t);
+  int u = 0;
+  for (; u + 16 <= n; u += 16) {
+    __m512 rx = _mm512_loadu_ps(x0 + u), ry = _mm512_loadu_ps(y0 + u);
+    if constexpr (kInterpolate) {
+      rx = _mm512_add_ps(rx, _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(x1 + u), rx)));
+      ry = _mm512_add_ps(ry, _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(y1 + u), ry)));
+    }
+    const __m512 p = _mm512_loadu_ps(p_row + u);
+    const __m512 ai =
+        _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(a0, rx), _mm512_mul_ps(a1, ry)), a2);
+    const __m512 b = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(b0, rx), _mm512_mul_ps(b1, ry)), b2);
+    const __m512 den = _mm512_sub_ps(_mm512_mul_ps(p, ai), b);
+    const __m512 z_all = _mm512_div_ps(_mm512_sub_ps(m_axis, _mm512_mul_ps(p, m3)), den);
+    const __mmask16 valid = _mm512_cmp_ps_mask(_mm512_abs_ps(den), tiny, _CMP_GT_OQ) &
+                            _mm512_cmp_ps_mask(z_all, min_z, _CMP_GE_OQ) &
+                            _mm512_cmp_ps_mask(z_all, max_z, _CMP_LE_OQ);
+    const __m512 z = _mm512_mask_blend_ps(valid, nan, z_all);
+    const __m512 i = intensity ? _mm512_loadu_ps(intensity + u) : _mm512_setzero_ps();
+    streamPoints16(_mm512_mul_ps(z, rx), _mm512_mul_ps(z, ry), z, i, &out[u].x);
   }
   return u;
 }
@@ -531,6 +595,14 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
   float* ry_row = rx_row + width;
   const float first_is_column = first == kColumn ? 1.0f : 0.0f;
   const float second_is_column = second == kColumn ? 1.0f : 0.0f;
+#if defined(SL_HAVE_AVX512_POINTS)
+  // One map, no projector correction (the common case): the fused row.
+  const bool fused = avx512_points && iterations == 0 && second < 0;
+  const AxisTerms terms{m_rows[2][0],        m_rows[2][1],     m_rows[2][2],
+                        m_rows[first][0],    m_rows[first][1], m_rows[first][2],
+                        float(m_t[first]),   float(m3_t),      options.min_depth_mm,
+                        options.max_depth_mm};
+#endif
   for (int row = map_begin; row < map_end; ++row) {
     const int v = row - map_begin + cloud_begin;
     const float* first_row = coord_maps[first]->ptr<float>(row);
@@ -539,6 +611,38 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
     const float* __restrict offset_row =
         maps.offset.empty() ? nullptr : maps.offset.ptr<float>(row);
     const std::size_t row_start = static_cast<std::size_t>(v) * width;
+#if defined(SL_HAVE_AVX512_POINTS)
+    const std::uintptr_t misalignment =
+        reinterpret_cast<std::uintptr_t>(cloud.points.data() + row_start) & 63;
+    if (fused && (misalignment & 15) == 0) {
+      // The rays as rowRays() forms them: between two grid rows, or per pixel.
+      const bool interpolate = ray_step != 0;
+      const std::size_t start = static_cast<std::size_t>(interpolate ? v / ray_step : v) * width;
+      const float* x0 = grid_x.data() + start;
+      const float* y0 = grid_y.data() + start;
+      const float* x1 = interpolate ? x0 + width : x0;
+      const float* y1 = interpolate ? y0 + width : y0;
+      const float t =
+          interpolate ? static_cast<float>(v % ray_step) / static_cast<float>(ray_step) : 0.0f;
+      PointXYZI* out = cloud.points.data() + row_start;
+      auto scalar = [&](int u) {
+        const float rx = interpolate ? x0[u] + t * (x1[u] - x0[u]) : x0[u];
+        const float ry = interpolate ? y0[u] + t * (y1[u] - y0[u]) : y0[u];
+        out[u] = fusedPoint(terms, first_row[u], rx, ry, offset_row ? offset_row[u] : 0.0f);
+      };
+      // Up to 3 points to reach a cache-line boundary, whole lines, the rest.
+      const int lead = std::min(width, static_cast<int>(((64 - misalignment) & 63) / 16));
+      int u = 0;
+      for (; u < lead; ++u) scalar(u);
+      const float* intensity = offset_row ? offset_row + u : nullptr;
+      u += interpolate ? fusedRowAvx512<true>(width - u, terms, first_row + u, x0 + u, x1 + u,
+                                              y0 + u, y1 + u, t, intensity, out + u)
+                       : fusedRowAvx512<false>(width - u, terms, first_row + u, x0 + u, x1 + u,
+                                               y0 + u, y1 + u, t, intensity, out + u);
+      for (; u < width; ++u) scalar(u);
+      continue;
+    }
+#endif
     const auto [rx, ry] = rowRays(v, rx_row, ry_row);
     // The fused loop wins without correction; with it, its register pressure
     // makes row passes faster (measured: 2 iterations 22.4 vs 18.9 ms/scan).
