@@ -76,8 +76,6 @@ ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triang
   const int bit_depth = images.bit_depth;
   const Direction direction = codec.spec().direction;
   std::shared_ptr<PointCloud> cloud = freeCloud();
-  cloud->frame_id = frame_id;
-  cloud->stamp_ns = stamp_ns;
   if (keep == Keep::kCloud) {
     // Checked once here rather than by the first block on some thread (each
     // block checks again).

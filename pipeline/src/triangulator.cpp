@@ -26,6 +26,18 @@ namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
+// Depth along the ray for projector coordinate p, with a = M3[0:3].r,
+// b = M[axis][0:3].r and m_axis = M[axis][3]; NaN for NaN input, a ray
+// parallel to the projector plane (den ~ 0 gives an infinite or huge z) and
+// depths outside [min_z, max_z]. Every row form uses this (the same bits).
+inline float depthAlongRay(float p, float a, float b, float m_axis, float m3, float min_z,
+                           float max_z) {
+  const float den = p * a - b;
+  const float z = (m_axis - p * m3) / den;
+  const bool valid = (std::abs(den) > 1e-12f) & (z >= min_z) & (z <= max_z);
+  return valid ? z : kNaN;
+}
+
 // The row loops read and write distinct buffers (maps, rays, scratch, cloud);
 // GCC does not always prove it (too many pointers for its alias checks).
 #if defined(__GNUC__) && !defined(__clang__)
@@ -100,9 +112,7 @@ struct AxisTerms {
 inline PointXYZI fusedPoint(const AxisTerms& k, float p, float rx, float ry, float intensity) {
   const float ai = k.a0 * rx + k.a1 * ry + k.a2;
   const float b = k.b0 * rx + k.b1 * ry + k.b2;
-  const float den = p * ai - b;
-  float z = (k.m_axis - p * k.m3) / den;
-  z = (std::abs(den) > 1e-12f) & (z >= k.min_z) & (z <= k.max_z) ? z : kNaN;
+  const float z = depthAlongRay(p, ai, b, k.m_axis, k.m3, k.min_z, k.max_z);
   return PointXYZI{z * rx, z * ry, z, intensity};
 }
 
@@ -178,6 +188,14 @@ struct Triangulator::Impl {
   int ray_step = 0;                             // 16, 8 or 4; 0: per-pixel arrays
   std::vector<float> grid_x, grid_y;            // grid rows x width; ray_step 0: all rows
 
+  // Where the rays of camera row v come from: x0 + t (x1 - x0) between two
+  // grid rows, or x0 itself (the per-pixel arrays, interpolate false).
+  struct RaySource {
+    const float *x0, *x1, *y0, *y1;
+    float t;
+    bool interpolate;
+  };
+  RaySource raySource(int v) const;
   // The rays of camera row v: pointers into the arrays (ray_step 0), or
   // rx_row, ry_row (width floats each) filled from the grid.
   std::pair<const float*, const float*> rowRays(int v, float* rx_row, float* ry_row) const;
@@ -414,16 +432,26 @@ void Triangulator::prepareCloud(const std::string& frame_id, TimestampNs stamp_n
   cloud.points.resize(static_cast<std::size_t>(impl_->width) * impl_->height);
 }
 
-std::pair<const float*, const float*> Triangulator::Impl::rowRays(int v, float* __restrict rx_row,
-                                                                  float* __restrict ry_row) const {
-  const std::size_t start = static_cast<std::size_t>(ray_step == 0 ? v : v / ray_step) * width;
-  if (ray_step == 0) return {grid_x.data() + start, grid_y.data() + start};
+Triangulator::Impl::RaySource Triangulator::Impl::raySource(int v) const {
+  const bool interpolate = ray_step != 0;
+  const std::size_t start = static_cast<std::size_t>(interpolate ? v / ray_step : v) * width;
+  const float* x0 = grid_x.data() + start;
+  const float* y0 = grid_y.data() + start;
+  if (!interpolate) return RaySource{x0, x0, y0, y0, 0.0f, false};
   // Between grid rows j and j + 1 (t exact in float: ray_step is a power of 2).
   const float t = static_cast<float>(v % ray_step) / static_cast<float>(ray_step);
-  const float* __restrict x0 = grid_x.data() + start;
-  const float* __restrict y0 = grid_y.data() + start;
-  const float* __restrict x1 = x0 + width;
-  const float* __restrict y1 = y0 + width;
+  return RaySource{x0, x0 + width, y0, y0 + width, t, true};
+}
+
+std::pair<const float*, const float*> Triangulator::Impl::rowRays(int v, float* __restrict rx_row,
+                                                                  float* __restrict ry_row) const {
+  const RaySource r = raySource(v);
+  if (!r.interpolate) return {r.x0, r.y0};
+  const float* __restrict x0 = r.x0;
+  const float* __restrict y0 = r.y0;
+  const float* __restrict x1 = r.x1;
+  const float* __restrict y1 = r.y1;
+  const float t = r.t;
   for (int u = 0; u < width; ++u) {
     rx_row[u] = x0[u] + t * (x1[u] - x0[u]);
     ry_row[u] = y0[u] + t * (y1[u] - y0[u]);
@@ -503,14 +531,9 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
     decoded = use_first != 0.0f ? f : s;
     col = second_is_column + use_first * (first_is_column - second_is_column);
   };
-  // NaN input, a ray parallel to the projector plane (den ~ 0 gives an
-  // infinite or huge z) and out-of-range depths all fail the test.
   auto depth = [&](float col_flag, float ai, float bc, float br, float p) {
     const bool col = col_flag != 0.0f;
-    const float den = p * ai - (col ? bc : br);
-    const float z = ((col ? k.m_col : k.m_row) - p * k.m3) / den;
-    const bool valid = (std::abs(den) > 1e-12f) & (z >= min_z) & (z <= max_z);
-    return valid ? z : kNaN;
+    return depthAlongRay(p, ai, col ? bc : br, col ? k.m_col : k.m_row, k.m3, min_z, max_z);
   };
   if constexpr (kIterations >= 0) {
     SL_ROW_LOOP
@@ -615,19 +638,12 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
     const std::uintptr_t misalignment =
         reinterpret_cast<std::uintptr_t>(cloud.points.data() + row_start) & 63;
     if (fused && (misalignment & 15) == 0) {
-      // The rays as rowRays() forms them: between two grid rows, or per pixel.
-      const bool interpolate = ray_step != 0;
-      const std::size_t start = static_cast<std::size_t>(interpolate ? v / ray_step : v) * width;
-      const float* x0 = grid_x.data() + start;
-      const float* y0 = grid_y.data() + start;
-      const float* x1 = interpolate ? x0 + width : x0;
-      const float* y1 = interpolate ? y0 + width : y0;
-      const float t =
-          interpolate ? static_cast<float>(v % ray_step) / static_cast<float>(ray_step) : 0.0f;
+      // The rays as rowRays() forms them.
+      const RaySource r = raySource(v);
       PointXYZI* out = cloud.points.data() + row_start;
       auto scalar = [&](int u) {
-        const float rx = interpolate ? x0[u] + t * (x1[u] - x0[u]) : x0[u];
-        const float ry = interpolate ? y0[u] + t * (y1[u] - y0[u]) : y0[u];
+        const float rx = r.interpolate ? r.x0[u] + r.t * (r.x1[u] - r.x0[u]) : r.x0[u];
+        const float ry = r.interpolate ? r.y0[u] + r.t * (r.y1[u] - r.y0[u]) : r.y0[u];
         out[u] = fusedPoint(terms, first_row[u], rx, ry, offset_row ? offset_row[u] : 0.0f);
       };
       // Up to 3 points to reach a cache-line boundary, whole lines, the rest.
@@ -635,10 +651,11 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
       int u = 0;
       for (; u < lead; ++u) scalar(u);
       const float* intensity = offset_row ? offset_row + u : nullptr;
-      u += interpolate ? fusedRowAvx512<true>(width - u, terms, first_row + u, x0 + u, x1 + u,
-                                              y0 + u, y1 + u, t, intensity, out + u)
-                       : fusedRowAvx512<false>(width - u, terms, first_row + u, x0 + u, x1 + u,
-                                               y0 + u, y1 + u, t, intensity, out + u);
+      u += r.interpolate
+               ? fusedRowAvx512<true>(width - u, terms, first_row + u, r.x0 + u, r.x1 + u, r.y0 + u,
+                                      r.y1 + u, r.t, intensity, out + u)
+               : fusedRowAvx512<false>(width - u, terms, first_row + u, r.x0 + u, r.x1 + u,
+                                       r.y0 + u, r.y1 + u, r.t, intensity, out + u);
       for (; u < width; ++u) scalar(u);
       continue;
     }
