@@ -43,17 +43,22 @@ sl::drivers::SimConfig benchConfig(int bit_depth, bool noise, int optics = 1) {
   return c;
 }
 
+// Renders the 12 frames of "3+3_both" in turn, a new noise seed each time.
+void renderFrames(benchmark::State& state, sl::drivers::SimulatedSensor& sensor) {
+  std::uint64_t seed = 0;
+  int frame = 0;
+  for (auto _ : state) {
+    cv::Mat image = sensor.render("3+3_both", frame, ++seed);
+    benchmark::DoNotOptimize(image.data);
+    frame = (frame + 1) % 12;
+  }
+}
+
 // Args: bit depth, noise on (1) / off (0), optics (see benchConfig).
 void BM_Render(benchmark::State& state) {
   const auto sensor = sl::drivers::SimulatedSensor::create(
       benchConfig(int(state.range(0)), state.range(1) != 0, int(state.range(2))));
-  std::uint64_t seed = 0;
-  int frame = 0;
-  for (auto _ : state) {
-    cv::Mat image = sensor->render("3+3_both", frame, ++seed);
-    benchmark::DoNotOptimize(image.data);
-    frame = (frame + 1) % 12;
-  }
+  renderFrames(state, *sensor);
   state.SetItemsProcessed(state.iterations() * 1440 * 1080);
 }
 BENCHMARK(BM_Render)
@@ -71,13 +76,7 @@ void BM_RenderMoving(benchmark::State& state) {
   sl::drivers::SimConfig config = benchConfig(8, true, int(state.range(0)));
   config.motion.velocity_mm_s = {60, 0, 0};  // 2 mm per image at 30 fps
   const auto sensor = sl::drivers::SimulatedSensor::create(config);
-  std::uint64_t seed = 0;
-  int frame = 0;
-  for (auto _ : state) {
-    cv::Mat image = sensor->render("3+3_both", frame, ++seed);
-    benchmark::DoNotOptimize(image.data);
-    frame = (frame + 1) % 12;
-  }
+  renderFrames(state, *sensor);
 }
 BENCHMARK(BM_RenderMoving)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 

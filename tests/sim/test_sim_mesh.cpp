@@ -32,14 +32,8 @@ using sl::drivers::SimulatedSensor;
 
 constexpr double kPi = std::numbers::pi;
 
-using sl::test::simDefaultRig;
-
 SimConfig baseConfig() {
-  SimConfig c;
-  c.rig = simDefaultRig();
-  sl::pipeline::PhaseShift33Pattern p;
-  p.name = "3+3";
-  c.patterns = {p};
+  SimConfig c = sl::test::simConfig33("3+3");
   c.gain_dn_per_electron = 0;
   c.read_noise_dn = 0;
   return c;

@@ -21,18 +21,11 @@ using sl::drivers::SimulatedSensor;
 constexpr double kPi = std::numbers::pi;
 constexpr int kFringes = 16;  // periods across the projector's 1824 columns
 
-using sl::test::simDefaultRig;
-
 // A matte wall at 550 mm, noise off, 16-bit ADC (so quantisation does not
 // mask sub-milliradian effects), pinhole optics, one 3+3 column-encoding
 // pattern.
 SimConfig wallConfig(int fringes = kFringes) {
-  SimConfig c;
-  c.rig = simDefaultRig();
-  sl::pipeline::PhaseShift33Pattern p;
-  p.name = "3+3";
-  p.fringes = fringes;
-  c.patterns = {p};
+  SimConfig c = sl::test::simConfig33("3+3", fringes);
   c.scene.planes = {SimPlane{{0, 0, 550}, {0, 0, -1}, 0.8}};
   c.gain_dn_per_electron = 0;
   c.read_noise_dn = 0;

@@ -27,14 +27,7 @@ double degrees(double d) { return d * std::numbers::pi / 180.0; }
 
 using sl::test::simDefaultRig;
 
-SimConfig baseConfig() {
-  SimConfig c;
-  c.rig = simDefaultRig();
-  sl::pipeline::PhaseShift33Pattern p;
-  p.name = "3+3_horizontal";
-  c.patterns = {p};
-  return c;
-}
+SimConfig baseConfig() { return sl::test::simConfig33("3+3_horizontal"); }
 
 Eigen::Vector3d at(const cv::Mat& xyz, int row, int col) {
   const cv::Vec3f p = xyz.at<cv::Vec3f>(row, col);

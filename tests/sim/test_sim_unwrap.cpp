@@ -60,12 +60,7 @@ TEST_CASE("dim wall: the default decoder thresholds deliver no wrong fringe orde
   // 40:1 3+3 (config/sim.yaml) on a dark matte wall at 500 mm: albedo 0.25
   // gives B of ~15-30 DN over the image (A ~ 18-32 DN), where the
   // unit-frequency cue's noise times 40 reaches half a period now and then.
-  sl::drivers::SimConfig c;
-  c.rig = sl::test::simDefaultRig();
-  sl::pipeline::PhaseShift33Pattern p;
-  p.name = "3+3_horizontal";
-  p.fringes = 40;
-  c.patterns = {p};
+  sl::drivers::SimConfig c = sl::test::simConfig33("3+3_horizontal", 40);
   c.scene.planes = {sl::drivers::SimPlane{{0, 0, 500}, {0, 0, -1}, 0.25}};
   const auto sensor = sl::drivers::SimulatedSensor::create(c);
   const sl::pipeline::PatternSpec spec = c.patterns.front();

@@ -4,8 +4,11 @@
 
 #include <Eigen/Geometry>
 #include <numbers>
+#include <string>
 
+#include "sl/drivers/sim.h"
 #include "sl/pipeline/camera_model.h"
+#include "sl/pipeline/pattern.h"
 
 namespace sl::test {
 
@@ -17,6 +20,19 @@ inline pipeline::CameraProjectorCalibration simDefaultRig() {
               .toRotationMatrix();
   rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
   return rig;
+}
+
+// A simulator config on that rig with one 3+3 pattern (horizontal, the
+// simulator's other defaults).
+inline drivers::SimConfig simConfig33(const std::string& pattern_name,
+                                      int fringes = pipeline::PhaseShift33Pattern{}.fringes) {
+  drivers::SimConfig c;
+  c.rig = simDefaultRig();
+  pipeline::PhaseShift33Pattern p;
+  p.name = pattern_name;
+  p.fringes = fringes;
+  c.patterns = {p};
+  return c;
 }
 
 }  // namespace sl::test
