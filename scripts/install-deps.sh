@@ -24,7 +24,15 @@ packages=(
   libfastrtps-dev fastddsgen ros-sensor-msgs
   # Cyclone DDS shared memory (config/cyclonedds-shm.xml): the RouDi daemon.
   iceoryx
+  # sl_view (tools/sl_view): WebSockets (websocketpp over Boost.Asio), JSON,
+  # MCAP chunk compression; Node.js + npm for the web page's three.js and the
+  # wire-format / browser tests; Chromium for the headless page test.
+  libwebsocketpp-dev libboost-dev libboost-system-dev libjsoncpp-dev libzstd-dev liblz4-dev
+  nodejs chromium
 )
+# Debian's npm package; a Node.js that brings its own npm (e.g. NodeSource's
+# nodejs) conflicts with it, so it is asked for only when npm is missing.
+command -v npm >/dev/null 2>&1 || packages+=(npm)
 
 missing=()
 for p in "${packages[@]}"; do
@@ -35,12 +43,22 @@ done
 
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#packages[@]} packages present"
-  exit 0
+else
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  echo "install-deps: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-echo "install-deps: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# npm packages of sl_view (three.js for the web page; Foxglove's ROS 2
+# deserializer, @mcap/core and playwright-core for the tests), exactly as
+# tools/sl_view/package-lock.json pins them, from the npm registry. Skipped
+# when node_modules already matches the lock file.
+view_dir=$(cd "$(dirname "$0")/.." && pwd)/tools/sl_view
+if ! cmp -s "$view_dir/package-lock.json" "$view_dir/node_modules/.package-lock.json.installed" 2>/dev/null; then
+  echo "install-deps: npm ci in tools/sl_view"
+  (cd "$view_dir" && npm ci --no-audit --no-fund --loglevel=error)
+  cp "$view_dir/package-lock.json" "$view_dir/node_modules/.package-lock.json.installed"
+fi

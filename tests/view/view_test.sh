@@ -1,0 +1,83 @@
+#!/usr/bin/env bash
+# Live view, MCAP and ROS 2 wire format (issue 18), against sl_sensord on the
+# simulated sensor (unique namespace, depth/shading images on):
+#   wire     the bridge's and an MCAP file's samples decoded by Foxglove's
+#            ROS 2 deserializer == what Cyclone delivered to view_reference
+#   browser  the web page in headless Chromium starts a scan and shows a
+#            cloud of the expected size (screenshot kept as an artefact)
+#   stalled  a viewer that stops reading does not slow the sensor
+# usage: view_test.sh MODE SOURCE_DIR BINARY_DIR
+set -euo pipefail
+mode=$1
+src=$2
+bin=$3
+export CYCLONEDDS_URI=${CYCLONEDDS_URI:-file://$src/config/cyclonedds-loopback.xml}
+node_dir=$src/tools/sl_view
+artefacts=$bin/tests/view/artefacts
+mkdir -p "$artefacts"
+work=$(mktemp -d)
+pids=()
+cleanup() {
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
+  sleep 0.2
+  for p in "${pids[@]}"; do kill -9 "$p" 2>/dev/null || true; done
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() {
+  echo "FAIL: $*" >&2
+  for f in "$work"/*.log; do [ -f "$f" ] && { echo "--- $(basename "$f")"; tail -n 20 "$f"; } >&2; done
+  exit 1
+}
+[ -d "$node_dir/node_modules/@foxglove/rosmsg2-serialization" ] ||
+  fail "npm packages missing: run scripts/install-deps.sh (npm ci in tools/sl_view)"
+
+ns="view_${mode}_$$_$RANDOM"
+sed -e "s/^  namespace: sl$/  namespace: $ns/" \
+    -e "s/^  publish_projector_maps: false$/  publish_projector_maps: false\n  publish_images: true/" \
+    "$src/config/sim.yaml" > "$work/sim.yaml"
+grep -q "namespace: $ns" "$work/sim.yaml" && grep -q "publish_images: true" "$work/sim.yaml" ||
+  fail "could not set the namespace / publish_images in a copy of config/sim.yaml"
+
+"$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
+pids+=($!)
+"$bin/tools/sl_view/sl_view" --ns "$ns" --port 0 > "$work/view.log" 2>&1 &
+pids+=($!)
+view_pid=$!
+for _ in $(seq 100); do grep -q "live view at" "$work/view.log" && break; sleep 0.1; done
+port=$(grep -o "http://127.0.0.1:[0-9]*" "$work/view.log" | grep -o "[0-9]*$") || fail "sl_view did not start"
+for _ in $(seq 150); do grep -q "ready" "$work/daemon.log" && break; sleep 0.1; done
+grep -q "ready" "$work/daemon.log" || fail "the daemon did not get ready"
+
+start_reference() {  # COUNT DIR
+  mkdir -p "$2"
+  "$bin/tests/view/view_reference" --ns "$ns" --out "$2" --count "$1" --timeout 100 \
+    > "$work/reference.log" 2>&1 &
+  ref_pid=$!
+  pids+=($ref_pid)
+  for _ in $(seq 200); do grep -q "ready" "$work/reference.log" && return; sleep 0.05; done
+  fail "view_reference did not match the daemon's writers"
+}
+
+case $mode in
+wire)
+  # One reference subscriber for the whole test: its files are named by stamp.
+  start_reference 0 "$work/ref"
+  # 1. From the bridge: the check starts a continuous scan through the
+  # bridge's command service, compares 2 of each, and stops it.
+  node "$node_dir/test/wire_check.mjs" --ref "$work/ref" --ws "ws://127.0.0.1:$port" \
+    --ns "$ns" --count 2 || fail "wire check (bridge)"
+  # 2. From MCAP files (zstd, lz4 and uncompressed chunks) by sl_view record.
+  for compression in zstd lz4 none; do
+    n=2; [ $compression = zstd ] || n=1
+    "$bin/tools/sl_view/sl_view" record "$work/rec_$compression.mcap" --ns "$ns" --scan 0 \
+      --count $n --compression $compression > "$work/record.log" 2>&1 || fail "sl_view record"
+    cat "$work/record.log"
+    node "$node_dir/test/wire_check.mjs" --ref "$work/ref" \
+      --mcap "$work/rec_$compression.mcap" --ns "$ns" --count $n || fail "wire check (mcap $compression)"
+  done
+  cp "$work/rec_zstd.mcap" "$artefacts/sl_view_record.mcap"
+  ;;
+*) fail "unknown mode $mode" ;;
+esac
+echo "ok: $mode"

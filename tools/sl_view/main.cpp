@@ -1,0 +1,229 @@
+// sl_view: see what the sensor sees.
+//
+//   sl_view [--host 127.0.0.1] [--port 8765] ...   Foxglove WebSocket bridge + web page
+//   sl_view record FILE.mcap [--count N] ...      the daemon's topics into an MCAP file
+//
+// The bridge subscribes to the daemon's DDS topics and forwards each sample's
+// CDR bytes unchanged to Foxglove (foxglove.websocket.v1, ros2msg schemas,
+// cdr encoding); the same port serves the built-in web page (tools/sl_view/web)
+// with three.js from npm, and a /sl/command service (JSON) that sends
+// requests on the daemon's request topic exactly as slctl does.
+#include <json/json.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "common/cdr.h"
+#include "common/cli.h"
+#include "common/ros2_schemas.h"
+#include "foxglove_server.h"
+#include "mcap_record.h"
+#include "preview.h"
+#include "raw_topics.h"
+#include "sl/daemon/client.h"
+
+#ifndef SL_VIEW_WEB_DIR
+#define SL_VIEW_WEB_DIR "tools/sl_view/web"
+#endif
+#ifndef SL_VIEW_THREE_DIR
+#define SL_VIEW_THREE_DIR "tools/sl_view/node_modules/three"
+#endif
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+void onSignal(int) { g_stop = true; }
+
+const char* kUsage =
+    "usage: sl_view [options]                 live view: Foxglove bridge + web page\n"
+    "       sl_view record FILE.mcap [options] record the daemon's topics as MCAP (ROS 2)\n"
+    "options (both):\n"
+    "  --domain N        DDS domain (default 0)\n"
+    "  --ns NAME         the daemon's namespace (default sl)\n"
+    "  --best-effort     read clouds and images best-effort (default reliable,\n"
+    "                    keep-last 1; best-effort loses clouds bigger than the\n"
+    "                    socket receive buffer)\n"
+    "live view:\n"
+    "  --host ADDR       listen address (default 127.0.0.1; 0.0.0.0 = every interface)\n"
+    "  --port N          TCP port (default 8765; 0 = any free port)\n"
+    "  --queue N         messages queued per viewer subscription (default 2; the\n"
+    "                    oldest is dropped and counted when full)\n"
+    "  --decimate N      the web page's cloud: every Nth pixel per direction (default 4)\n"
+    "  --web-dir DIR     the page's files (default: the source tree's tools/sl_view/web)\n"
+    "  --three-dir DIR   three.js from npm (default: tools/sl_view/node_modules/three)\n"
+    "record:\n"
+    "  --topics A,B      ROS topic names to record (default: all but image sets and maps)\n"
+    "  --count N         stop after N clouds (default: until Ctrl-C or --seconds)\n"
+    "  --seconds S       stop after S seconds\n"
+    "  --scan N          also ask the daemon for N scans (as `slctl scan --count N`);\n"
+    "                    0: scan continuously, stopped after --count clouds\n"
+    "  --compression C   chunk compression: zstd (default), lz4 or none\n";
+
+int usage(const std::string& error) {
+  std::cerr << "sl_view: " << error << "\n" << kUsage;
+  return 2;
+}
+
+std::string requestJson(const std::string& text, sl::daemon::SensorClient& client) {
+  Json::Value req;
+  Json::CharReaderBuilder b;
+  std::string errors;
+  std::istringstream in(text);
+  if (!Json::parseFromStream(b, in, &req, &errors) || !req.isObject())
+    throw std::runtime_error("request is not a JSON object: " + errors);
+  const std::string command = req.get("command", "").asString();
+  const std::string pattern = req.get("pattern", "").asString();
+  const int count = req.get("count", 0).asInt();
+  using sl::daemon::Command;
+  std::optional<sl::daemon::CommandReplyInfo> reply;
+  const auto timeout = std::chrono::milliseconds(5000);
+  if (command == "start") {
+    reply = client.request(Command::kStart, pattern, count, timeout);
+  } else if (command == "scan") {
+    reply = client.request(Command::kStart, pattern, count > 0 ? count : 1, timeout);
+  } else if (command == "stop") {
+    reply = client.request(Command::kStop, "", 0, timeout);
+  } else if (command == "set_pattern") {
+    reply = client.request(Command::kSetPattern, pattern, 0, timeout);
+  } else if (command == "list_patterns") {
+    reply = client.request(Command::kListPatterns, "", 0, timeout);
+  } else {
+    throw std::runtime_error("unknown command '" + command +
+                             "' (start, scan, stop, set_pattern, list_patterns)");
+  }
+  if (!reply) throw std::runtime_error("no daemon answered '" + command + "' within 5 s");
+  Json::Value out;
+  out["command"] = command;
+  out["accepted"] = reply->accepted;
+  out["code"] = sl::daemon::toString(reply->code);
+  out["reason"] = reply->reason;
+  out["patterns"] = Json::Value(Json::arrayValue);
+  for (const auto& p : reply->patterns) out["patterns"].append(p);
+  Json::StreamWriterBuilder w;
+  w["indentation"] = "";
+  return Json::writeString(w, out);
+}
+
+int serve(int argc, char** argv) {
+  sl::view::ServerOptions server;
+  sl::view::RawTopicsOptions topics;
+  int decimate = 4;
+  std::string web_dir = SL_VIEW_WEB_DIR, three_dir = SL_VIEW_THREE_DIR;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+      return argv[++i];
+    };
+    const auto integer = [&](int lo, int hi) {
+      const std::string v = value();
+      const auto n = sl::tools::toInt(v);
+      if (!n || *n < lo || *n > hi)
+        throw std::invalid_argument(a + " " + v + ": expected an integer in [" +
+                                    std::to_string(lo) + ", " + std::to_string(hi) + "]");
+      return *n;
+    };
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      return 0;
+    } else if (a == "--host") server.host = value();
+    else if (a == "--port") server.port = integer(0, 65535);
+    else if (a == "--queue") server.queue_depth = static_cast<std::size_t>(integer(1, 64));
+    else if (a == "--decimate") decimate = integer(1, 64);
+    else if (a == "--domain") topics.domain_id = integer(0, 232);
+    else if (a == "--ns") topics.ns = value();
+    else if (a == "--best-effort") topics.best_effort = true;
+    else if (a == "--web-dir") web_dir = value();
+    else if (a == "--three-dir") three_dir = value();
+    else throw std::invalid_argument("unknown option '" + a + "'");
+  }
+  if (!std::filesystem::exists(three_dir + "/build/three.module.js"))
+    std::cerr << "sl_view: warning: " << three_dir
+              << "/build/three.module.js not found: the web page needs three.js from npm "
+                 "(`npm ci` in tools/sl_view, done by scripts/install-deps.sh); "
+                 "Foxglove works without it\n";
+  server.static_dirs = {{"/", web_dir}, {"/three/", three_dir}};
+
+  sl::view::RawTopics raw(topics);
+  std::vector<sl::view::ChannelInfo> channels;
+  std::uint32_t next_id = 1;
+  for (const auto& t : raw.topics()) {
+    const auto& schema = sl::tools::ros2Schema(t.type_name);
+    channels.push_back({next_id++, t.ros_name, "cdr", schema.name, schema.definition, "ros2msg"});
+  }
+  const std::size_t points_topic = 0;  // daemonTopics() lists the cloud first
+  const std::uint32_t preview_channel = next_id++;
+  {
+    const auto& schema = sl::tools::ros2Schema("sensor_msgs/msg/PointCloud2");
+    channels.push_back({preview_channel, "/" + topics.ns + "/points/preview", "cdr", schema.name,
+                        schema.definition, "ros2msg"});
+  }
+
+  sl::daemon::ClientOptions client_options;
+  client_options.domain_id = topics.domain_id;
+  client_options.ns = topics.ns;
+  client_options.subscribe_points = false;
+  sl::daemon::SensorClient client(client_options);
+  std::vector<sl::view::ServiceInfo> services;
+  services.push_back({1, "/" + topics.ns + "/command", "sl_msgs/srv/Command",
+                      [&client](const std::string& req) { return requestJson(req, client); }});
+
+  sl::view::FoxgloveServer ws(server, channels, services);
+  std::printf("sl_view: live view at http://%s:%d/  (Foxglove: ws://%s:%d)\n",
+              server.host.c_str(), ws.port(), server.host.c_str(), ws.port());
+  std::fflush(stdout);
+
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+  std::uint64_t preview_errors = 0;
+  std::string last_preview_error;
+  while (!g_stop) {
+    raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const sl::view::RawSample> s) {
+      const std::uint32_t channel = static_cast<std::uint32_t>(s->topic + 1);
+      if (s->topic == points_topic && ws.subscribed(preview_channel)) {
+        try {
+          auto bytes = std::make_shared<std::vector<std::uint8_t>>(
+              sl::view::decimateCloud(s->bytes(), decimate));
+          std::string_view view(reinterpret_cast<const char*>(bytes->data()), bytes->size());
+          ws.publish({preview_channel, s->receive_ns, view, bytes});
+        } catch (const sl::tools::CdrError& e) {
+          if (preview_errors++ == 0 || last_preview_error != e.what())
+            std::cerr << "sl_view: preview: " << e.what() << "\n";
+          last_preview_error = e.what();
+        }
+      }
+      if (ws.subscribed(channel)) ws.publish({channel, s->receive_ns, s->bytes(), s});
+    });
+  }
+  ws.stop();
+  const auto st = ws.stats();
+  std::printf("sl_view: %llu messages sent, %llu dropped for slow viewers\n",
+              static_cast<unsigned long long>(st.sent),
+              static_cast<unsigned long long>(st.dropped));
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    if (argc >= 2 && std::strcmp(argv[1], "record") == 0) {
+      std::signal(SIGINT, onSignal);
+      std::signal(SIGTERM, onSignal);
+      return sl::view::recordMain(argc - 1, argv + 1, g_stop);
+    }
+    return serve(argc, argv);
+  } catch (const std::invalid_argument& e) {
+    return usage(e.what());
+  } catch (const std::exception& e) {
+    std::cerr << "sl_view: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,183 @@
+#include "raw_topics.h"
+
+#include <dds/ddsi/ddsi_serdata.h>
+
+#include <chrono>
+#include <stdexcept>
+
+#include "builtin_interfaces/msg/Time.h"
+#include "sensor_msgs/msg/CameraInfo.h"
+#include "sensor_msgs/msg/Image.h"
+#include "sensor_msgs/msg/PointCloud2.h"
+#include "sl/daemon/dds_bridge.h"
+#include "sl_msgs/msg/ImageSet.h"
+#include "sl_msgs/msg/ProjectorMaps.h"
+#include "sl_msgs/msg/Status.h"
+
+namespace sl::view {
+
+namespace {
+
+// dds::Topic / dds::Reader need a sample type only for take(), which is not
+// used here (dds_takecdr reads the serialized form).
+struct Serialized {};
+
+std::string rosName(const std::string& dds_name) {
+  // "rt/sl/points" -> "/sl/points"
+  if (dds_name.rfind("rt/", 0) != 0)
+    throw std::invalid_argument("topic '" + dds_name + "' has no ROS 2 'rt/' prefix");
+  return dds_name.substr(2);
+}
+
+const dds_topic_descriptor_t& descriptorOf(const std::string& type_name) {
+  if (type_name == "sensor_msgs/msg/PointCloud2") return sensor_msgs_msg_dds__PointCloud2__desc;
+  if (type_name == "sensor_msgs/msg/Image") return sensor_msgs_msg_dds__Image__desc;
+  if (type_name == "sensor_msgs/msg/CameraInfo") return sensor_msgs_msg_dds__CameraInfo__desc;
+  if (type_name == "sl_msgs/msg/Status") return sl_msgs_msg_Status_desc;
+  if (type_name == "sl_msgs/msg/ImageSet") return sl_msgs_msg_ImageSet_desc;
+  if (type_name == "sl_msgs/msg/ProjectorMaps") return sl_msgs_msg_ProjectorMaps_desc;
+  throw std::invalid_argument("no DDS type for '" + type_name + "'");
+}
+
+std::uint64_t nowNs() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+
+}  // namespace
+
+std::vector<TopicInfo> daemonTopics(const std::string& ns) {
+  const auto names = daemon::TopicNames::forNamespace(ns);
+  const auto topic = [](const std::string& dds_name, const char* type) {
+    return TopicInfo{dds_name, rosName(dds_name), type};
+  };
+  return {topic(names.points, "sensor_msgs/msg/PointCloud2"),
+          topic(names.depth_image, "sensor_msgs/msg/Image"),
+          topic(names.shading_image, "sensor_msgs/msg/Image"),
+          topic(names.camera_info, "sensor_msgs/msg/CameraInfo"),
+          topic(names.status, "sl_msgs/msg/Status"),
+          topic(names.image_sets, "sl_msgs/msg/ImageSet"),
+          topic(names.projector_maps, "sl_msgs/msg/ProjectorMaps")};
+}
+
+RawSample::~RawSample() {
+  if (ref_ != nullptr) {
+    ddsrt_iovec_t iov;
+    iov.iov_base = iov_base_;
+    iov.iov_len = static_cast<decltype(iov.iov_len)>(iov_len_);
+    ddsi_serdata_to_ser_unref(ref_, &iov);
+  }
+  if (serdata_ != nullptr) ddsi_serdata_unref(serdata_);
+}
+
+struct RawTopics::Impl {
+  explicit Impl(const RawTopicsOptions& options) : participant(options.domain_id), wake(participant), waitset(participant) {
+    for (const auto& t : daemonTopics(options.ns)) {
+      if (!options.only.empty()) {
+        bool wanted = false;
+        for (const auto& name : options.only) wanted = wanted || name == t.ros_name;
+        if (!wanted) continue;
+      }
+      infos.push_back(t);
+    }
+    for (const auto& name : options.only) {
+      bool known = false;
+      for (const auto& t : infos) known = known || t.ros_name == name;
+      if (!known) throw std::invalid_argument("unknown topic '" + name + "' (the daemon's topics are /<ns>/points, /<ns>/status, ...)");
+    }
+    topics.reserve(infos.size());
+    readers.reserve(infos.size());
+    conditions.reserve(infos.size());
+    for (std::size_t i = 0; i < infos.size(); ++i) {
+      topics.emplace_back(participant, infos[i].dds_name, descriptorOf(infos[i].type_name));
+      dds::Qos qos;
+      if (infos[i].type_name == "sl_msgs/msg/Status")
+        qos.reliable().transientLocal().keepLast(1);
+      else if (options.best_effort)
+        qos.bestEffort().keepLast(options.depth);
+      else
+        qos.reliable().keepLast(options.depth);
+      readers.emplace_back(participant, topics.back(), qos);
+      conditions.emplace_back(readers.back());
+      waitset.attach(conditions.back(), static_cast<dds_attach_t>(i + 1));
+    }
+    waitset.attach(wake, 0);
+  }
+
+  dds::Participant participant;
+  std::vector<TopicInfo> infos;
+  std::vector<dds::Topic<Serialized>> topics;
+  std::vector<dds::Reader<Serialized>> readers;
+  std::vector<dds::ReadCondition> conditions;
+  dds::GuardCondition wake;
+  dds::WaitSet waitset;
+  std::uint64_t next_sequence = 1;
+};
+
+RawTopics::RawTopics(const RawTopicsOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+RawTopics::~RawTopics() = default;
+
+const std::vector<TopicInfo>& RawTopics::topics() const { return impl_->infos; }
+
+bool RawTopics::poll(std::int64_t timeout_ns, const Callback& callback) {
+  std::vector<dds_attach_t> triggered;
+  impl_->waitset.wait(timeout_ns, &triggered);
+  bool woken = false;
+  for (const dds_attach_t cookie : triggered) {
+    if (cookie == 0) {
+      woken = true;
+      impl_->wake.reset();
+      continue;
+    }
+    const std::size_t i = static_cast<std::size_t>(cookie - 1);
+    for (;;) {
+      struct ddsi_serdata* serdata = nullptr;
+      dds_sample_info_t info;
+      const dds_return_t n =
+          dds::check(dds_takecdr(impl_->readers[i].handle(), &serdata, 1, &info, DDS_ANY_STATE),
+                     "dds_takecdr(" + impl_->infos[i].dds_name + ")");
+      if (n <= 0) break;
+      std::shared_ptr<RawSample> sample(new RawSample());
+      sample->serdata_ = serdata;
+      if (!info.valid_data) continue;  // a writer went away: no data
+      sample->topic = i;
+      sample->receive_ns = nowNs();
+      sample->source_ns = static_cast<std::uint64_t>(info.source_timestamp);
+      sample->sequence = impl_->next_sequence++;
+      const std::uint32_t size = ddsi_serdata_size(serdata);
+      ddsrt_iovec_t iov;
+      sample->ref_ = ddsi_serdata_to_ser_ref(serdata, 0, size, &iov);
+      if (sample->ref_ != nullptr && iov.iov_len == size) {
+        sample->iov_base_ = iov.iov_base;
+        sample->iov_len_ = iov.iov_len;
+        sample->bytes_ = std::string_view(static_cast<const char*>(iov.iov_base), iov.iov_len);
+      } else {
+        if (sample->ref_ != nullptr) {
+          ddsi_serdata_to_ser_unref(sample->ref_, &iov);
+          sample->ref_ = nullptr;
+        }
+        sample->copy_.resize(size);
+        ddsi_serdata_to_ser(serdata, 0, size, sample->copy_.data());
+        sample->bytes_ = sample->copy_;
+      }
+      callback(std::move(sample));
+    }
+  }
+  return !woken;
+}
+
+void RawTopics::wake() { impl_->wake.trigger(); }
+
+std::uint32_t RawTopics::matchedWriters(std::size_t i) const {
+  return impl_->readers.at(i).matchedWriters();
+}
+
+std::uint64_t RawTopics::samplesLost(std::size_t i) const {
+  dds_sample_lost_status_t status;
+  dds::check(dds_get_sample_lost_status(impl_->readers.at(i).handle(), &status),
+             "dds_get_sample_lost_status");
+  return status.total_count;
+}
+
+}  // namespace sl::view

@@ -1,0 +1,93 @@
+// The daemon's DDS topics read as serialized samples: each sample's CDR bytes
+// exactly as the daemon's writer produced them (4-byte encapsulation header
+// first), without deserializing them. Used by sl_view (forwarded to
+// Foxglove clients) and by its MCAP recorder (written to the file).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "sl/daemon/dds.h"
+
+namespace sl::view {
+
+// A daemon topic: DDS name, ROS 2 name (as Foxglove and rosbag2 show it) and
+// ROS 2 type.
+struct TopicInfo {
+  std::string dds_name;   // "rt/sl/points"
+  std::string ros_name;   // "/sl/points"
+  std::string type_name;  // "sensor_msgs/msg/PointCloud2"
+};
+
+// The topics the daemon publishes (sl::daemon::TopicNames) for namespace ns.
+std::vector<TopicInfo> daemonTopics(const std::string& ns);
+
+// One received sample, holding a reference on Cyclone's serialized data (no
+// copy). Immutable; share it between consumers with shared_ptr.
+class RawSample {
+ public:
+  RawSample(const RawSample&) = delete;
+  RawSample& operator=(const RawSample&) = delete;
+  ~RawSample();
+
+  std::string_view bytes() const { return bytes_; }
+  const std::uint8_t* data() const { return reinterpret_cast<const std::uint8_t*>(bytes_.data()); }
+  std::size_t size() const { return bytes_.size(); }
+  std::size_t topic = 0;             // index into RawTopics::topics()
+  std::uint64_t receive_ns = 0;      // wall clock when taken
+  std::uint64_t source_ns = 0;       // the writer's source timestamp
+  std::uint64_t sequence = 0;        // per RawTopics, increasing
+
+ private:
+  friend class RawTopics;
+  RawSample() = default;
+  struct ddsi_serdata* serdata_ = nullptr;  // the reference taken from the reader
+  struct ddsi_serdata* ref_ = nullptr;      // from ddsi_serdata_to_ser_ref, or null
+  void* iov_base_ = nullptr;
+  std::size_t iov_len_ = 0;
+  std::string copy_;  // only if Cyclone's data could not be referenced in one piece
+  std::string_view bytes_;
+};
+
+struct RawTopicsOptions {
+  int domain_id = 0;
+  std::string ns = "sl";
+  // Reliable (default): lost fragments of a 25 MB cloud are resent, and the
+  // reader keeps only the latest sample (keep-last 1), acknowledging on
+  // receipt in Cyclone's receive thread, so it never holds the daemon's
+  // writer back even when this program's consumers are slow. Best-effort
+  // loses every cloud whose burst overflows the socket receive buffer (most
+  // of them with Linux's default rmem_max). Status is always reliable +
+  // transient-local (the latest one arrives on start-up).
+  bool best_effort = false;
+  int depth = 1;  // keep-last depth of the cloud and image readers
+  std::vector<std::string> only;  // ROS names to subscribe; empty = all
+};
+
+// Not thread-safe except wake(), which any thread may call.
+class RawTopics {
+ public:
+  using Callback = std::function<void(std::shared_ptr<const RawSample>)>;
+  explicit RawTopics(const RawTopicsOptions& options);
+  ~RawTopics();
+
+  const std::vector<TopicInfo>& topics() const;
+  // Waits up to timeout_ns for samples and hands each to `callback` (on this
+  // thread). Returns false if woken by wake().
+  bool poll(std::int64_t timeout_ns, const Callback& callback);
+  void wake();
+  // Writers matched on topic i (0 until discovery).
+  std::uint32_t matchedWriters(std::size_t i) const;
+  // Samples Cyclone reported lost (best-effort fragments missing) per topic.
+  std::uint64_t samplesLost(std::size_t i) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sl::view
