@@ -6,7 +6,13 @@
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <functional>
+#include <map>
+#include <optional>
+#include <set>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -276,4 +282,147 @@ TEST_CASE("software trigger: a switch waits for the sequence in progress, never 
                   "sequence began; period " << period * 1e-6 << " ms");
   CHECK(requested - horizontal.back() < period);
   CHECK(requested > horizontal.back());
+}
+
+namespace {
+
+// A camera that loses the frames `drop(frame_id)` selects and delivers the
+// ones `delay(frame_id)` selects one frame late (after the next frame: out
+// of order and an image interval late), recording every frame it saw with
+// whether it passed. A source that falls behind or drops frames, as a
+// camera on a loaded link does.
+class LossyCamera : public sl::drivers::Camera {
+ public:
+  LossyCamera(std::shared_ptr<sl::drivers::Camera> inner, std::function<bool(std::uint64_t)> drop,
+              std::function<bool(std::uint64_t)> delay)
+      : inner_(std::move(inner)), drop_(std::move(drop)), delay_(std::move(delay)) {}
+  std::string id() const override { return inner_->id(); }
+  int width() const override { return inner_->width(); }
+  int height() const override { return inner_->height(); }
+  void start() override { inner_->start(); }
+  void stop() override { inner_->stop(); }
+  std::optional<sl::pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
+    if (pending_) return std::exchange(pending_, std::nullopt);
+    for (;;) {
+      std::optional<sl::pipeline::Frame> frame = inner_->grab(timeout);
+      if (!frame) return std::nullopt;
+      const bool dropped = drop_(frame->frame_id);
+      {
+        std::lock_guard lock(mutex_);
+        passed_[frame->stamp_ns] = !dropped;
+      }
+      if (dropped) continue;
+      if (held_) {  // the delayed frame goes out after this one
+        pending_ = std::exchange(held_, std::nullopt);
+        return frame;
+      }
+      if (delay_(frame->frame_id)) {
+        held_ = std::move(frame);
+        continue;
+      }
+      return frame;
+    }
+  }
+  // Stamps of every frame the inner camera delivered -> passed on or not.
+  std::map<sl::pipeline::TimestampNs, bool> passed() const {
+    std::lock_guard lock(mutex_);
+    return passed_;
+  }
+
+ private:
+  std::shared_ptr<sl::drivers::Camera> inner_;
+  std::function<bool(std::uint64_t)> drop_, delay_;
+  std::optional<sl::pipeline::Frame> held_, pending_;  // grab() thread only
+  mutable std::mutex mutex_;
+  std::map<sl::pipeline::TimestampNs, bool> passed_;  // guarded by mutex_
+};
+
+// Records the trigger stamps it passes on.
+class RecordingTrigger : public sl::drivers::TriggerSource {
+ public:
+  explicit RecordingTrigger(std::shared_ptr<sl::drivers::TriggerSource> inner)
+      : inner_(std::move(inner)) {}
+  std::optional<sl::drivers::TriggerEvent> next(std::chrono::milliseconds timeout) override {
+    auto t = inner_->next(timeout);
+    if (t) {
+      std::lock_guard lock(mutex_);
+      stamps_.push_back(t->stamp_ns);
+    }
+    return t;
+  }
+  void stop() override { inner_->stop(); }
+  std::vector<sl::pipeline::TimestampNs> stamps() const {
+    std::lock_guard lock(mutex_);
+    return stamps_;
+  }
+
+ private:
+  std::shared_ptr<sl::drivers::TriggerSource> inner_;
+  mutable std::mutex mutex_;
+  std::vector<sl::pipeline::TimestampNs> stamps_;  // guarded by mutex_
+};
+
+}  // namespace
+
+TEST_CASE("a source that drops and delays frames costs exactly the sequences it spoiled") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  // Frame 7 of every 15 lost: sequences 1 and 3 of every 5 (6 frames each)
+  // lose one frame, so 3 in 5 complete. Every 4th frame comes late.
+  auto camera = std::make_shared<LossyCamera>(
+      sim->camera(), [](std::uint64_t id) { return id % 15 == 7; },
+      [](std::uint64_t id) { return id % 4 == 1; });
+  auto trigger = std::make_shared<RecordingTrigger>(sim->triggerSource());
+  sl::daemon::EngineDevices devices{{camera}, sim->projector(), trigger};
+  std::mutex mutex;
+  std::set<sl::pipeline::TimestampNs> delivered;  // cloud stamps = trigger stamps
+  sl::daemon::ScanEngine engine(config, devices, [&](const sl::daemon::ScanResult& r) {
+    std::lock_guard lock(mutex);
+    delivered.insert(r.cloud->stamp_ns);
+  });
+  REQUIRE(engine.start("3+3_horizontal", 0).accepted());
+  constexpr std::size_t kSequences = 20;
+  for (int i = 0; i < 200 && trigger->stamps().size() < kSequences + 3; ++i)
+    std::this_thread::sleep_for(50ms);
+  std::this_thread::sleep_for(500ms);  // the last sequences processed
+  const sl::pipeline::TimestampNs snapshot_ns = sl::pipeline::systemClockNs();
+  const sl::daemon::EngineStatus status = engine.status();
+  REQUIRE(engine.stop().accepted());
+
+  const auto triggers = trigger->stamps();
+  REQUIRE(triggers.size() >= kSequences);
+  const auto passed = camera->passed();
+  const sl::pipeline::TimestampNs dt = config.synchroniser.image_interval_ns;
+  // A sequence can complete when all 6 frames passed (frames the simulator
+  // itself dropped under load count as lost too).
+  auto passedAt = [&](sl::pipeline::TimestampNs t) {
+    const auto it = passed.lower_bound(t - dt / 10);
+    return it != passed.end() && it->first <= t + dt / 10 && it->second;
+  };
+  // Spoiled sequences older than max_age (plus slack) are purged and counted
+  // by the time of the status snapshot.
+  const sl::pipeline::TimestampNs counted_before =
+      snapshot_ns - config.synchroniser.max_age_ns - 800'000'000;
+  std::size_t expected = 0, spoiled_old = 0, got = 0;
+  for (std::size_t k = 0; k < kSequences; ++k) {
+    bool complete = true;
+    for (int i = 0; i < 6; ++i) complete = complete && passedAt(triggers[k] + i * dt);
+    std::lock_guard lock(mutex);
+    const bool published = delivered.count(triggers[k]) > 0;
+    INFO("sequence " << k << " complete " << complete);
+    CHECK_FALSE((published && !complete));  // never a set with a frame missing
+    expected += complete;
+    got += published;
+    spoiled_old += !complete && triggers[k] < counted_before;
+  }
+  // Every complete sequence is published unless a queue overflowed (counted).
+  CHECK(got + status.sets_overflow >= expected);
+  CHECK(got <= expected);
+  CHECK(status.frames_overflow == 0);
+  // 3 of 5 sequences survive the drop rule (fewer if the simulator dropped too).
+  CHECK(expected <= kSequences * 3 / 5 + 1);
+  CHECK(expected >= kSequences / 2 - 2);
+  // The spoiled ones are counted as incomplete, their frames as unmatched.
+  CHECK(status.sets_incomplete >= spoiled_old);
+  CHECK(status.frames_unmatched >= 5 * spoiled_old);
 }

@@ -20,12 +20,13 @@ std::int64_t deadlineAfter(std::chrono::milliseconds timeout) {
 
 LiveSchedule::LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps,
                            int bit_depth, std::uint64_t seed, RenderFunction render,
-                           int camera_count)
+                           int camera_count, PrepareFunction prepare)
     : sequences_(std::move(sequences)),
       frame_interval_ns_(1e9 / camera_fps),
       bit_depth_(bit_depth),
       seed_(seed),
       render_(std::move(render)),
+      prepare_(std::move(prepare)),
       cameras_(static_cast<std::size_t>(std::max(camera_count, 1))) {
   if (sequences_.empty()) throw std::invalid_argument("LiveSchedule: no sequences");
   if (camera_count < 1) throw std::invalid_argument("LiveSchedule: camera_count must be >= 1");
@@ -86,9 +87,19 @@ void LiveSchedule::select(const std::string& name) {
     for (const ProjectorSequence& s : sequences_) known += (known.empty() ? "" : ", ") + s.name;
     throw std::invalid_argument("projector: unknown pattern '" + name + "' (known: " + known + ")");
   }
+  auto refuseWhileRunning = [&] {
+    if (runningLocked(pipeline::systemClockNs()))
+      throw std::logic_error("projector: select('" + name + "') while running; stop() first");
+  };
+  if (prepare_) {
+    {
+      std::lock_guard lock(mutex_);
+      refuseWhileRunning();
+    }
+    prepare_(static_cast<std::size_t>(it - sequences_.begin()));
+  }
   std::lock_guard lock(mutex_);
-  if (runningLocked(pipeline::systemClockNs()))
-    throw std::logic_error("projector: select('" + name + "') while running; stop() first");
+  refuseWhileRunning();
   selected_ = static_cast<std::size_t>(it - sequences_.begin());
 }
 
@@ -187,12 +198,21 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
         const std::int64_t last_due = lastFrameAtOrBefore(now);
         if (last_due >= c.next) {
           const std::int64_t behind = last_due - c.next + 1;
-          if (behind > kLiveBufferDepth) {  // drop the oldest
-            const std::int64_t dropped = behind - kLiveBufferDepth;
+          if (behind > kLiveBufferDepth) {
+            // Drop the oldest, up to the next sequence start: a consumer
+            // (or a renderer) that falls behind loses whole sequences, so
+            // the frames it does get complete theirs.
+            const std::int64_t n = frames_per_sequence_;
+            const std::int64_t keep_from = last_due - kLiveBufferDepth + 1;
+            const std::int64_t dropped = (keep_from + n - 1) / n * n - c.next;
             c.next += dropped;
             c.next_frame_id += static_cast<std::uint64_t>(dropped);
             counters_.frames_dropped += static_cast<std::uint64_t>(dropped);
           }
+        }
+        // After a drop the next sequence may not be exposed yet, or may lie
+        // beyond the end of the schedule.
+        if (frameExists(c.next) && c.next <= last_due) {
           const std::int64_t j = c.next++;
           pipeline::Frame frame;
           frame.frame_id = c.next_frame_id++;
@@ -208,7 +228,7 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
           frame.image = render_(camera, pattern, pattern_frame, noise_seed);
           return frame;
         }
-        wake = std::min(deadline, frameStamp(c.next));
+        if (frameExists(c.next)) wake = std::min(deadline, frameStamp(c.next));
       }
     }
     if (now >= deadline) return std::nullopt;

@@ -27,8 +27,15 @@ namespace sl::drivers::sim {
 using RenderFunction = std::function<cv::Mat(int camera, std::size_t pattern_index, int frame,
                                              std::uint64_t noise_seed)>;
 
+// Prepares pattern `pattern_index` for rendering (e.g. computes its
+// noise-free images once); called by select() before it takes the lock, so
+// that a schedule's first frames render as fast as its later ones.
+using PrepareFunction = std::function<void(std::size_t pattern_index)>;
+
 // Frames and triggers a slow consumer may fall behind by before the oldest
-// are dropped (like the buffer pool of a camera driver).
+// are dropped (like the buffer pool of a camera driver). The camera then
+// drops up to the next sequence start (whole sequences: what it delivers
+// completes sequences, so a slow consumer loses scans in proportion).
 inline constexpr std::int64_t kLiveBufferDepth = 8;
 // Delay between Projector::start() and the first trigger.
 inline constexpr std::int64_t kStartDelayNs = 20'000'000;
@@ -52,7 +59,8 @@ class LiveSchedule {
  public:
   // camera_count cameras (>= 1) expose on the same schedule.
   LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps, int bit_depth,
-               std::uint64_t seed, RenderFunction render, int camera_count = 1);
+               std::uint64_t seed, RenderFunction render, int camera_count = 1,
+               PrepareFunction prepare = {});
 
   const std::vector<ProjectorSequence>& sequences() const { return sequences_; }
 
@@ -102,6 +110,7 @@ class LiveSchedule {
   const int bit_depth_;
   const std::uint64_t seed_;
   const RenderFunction render_;
+  const PrepareFunction prepare_;
 
   mutable std::mutex mutex_;
   std::condition_variable cv_;

@@ -127,6 +127,37 @@ void blurCameraImage(const RenderMaps& maps, int passes, cv::Mat& signal) {
   }
 }
 
+// The noise-free signal (8-bit DN, camera blur applied) of one pattern frame
+// into `signal` (CV_32FC1, camera size), row by row.
+void signalInto(const RenderMaps& maps, const ProjectorFrame& frame,
+                const ProjectorResponse& projector, int camera_blur_passes, cv::Mat& signal) {
+  signal.create(maps.height, maps.width, CV_32FC1);
+  for (int row = 0; row < maps.height; ++row) {
+    float* out = signal.ptr<float>(row);
+    if (!frame.light.empty())
+      signalRow<std::uint16_t, true>(maps, frame.light.ptr<std::uint16_t>(), nullptr, row, out);
+    else if (projector.linear)
+      signalRow<std::uint8_t, true>(maps, frame.image.ptr<std::uint8_t>(), nullptr, row, out);
+    else
+      signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(),
+                                     projector.light.data(), row, out);
+  }
+  if (camera_blur_passes > 0) blurCameraImage(maps, camera_blur_passes, signal);
+}
+
+// Noise, exposure, gain and ADC applied to a noise-free signal image.
+template <typename Pixel, bool kNoise>
+void finishInto(const cv::Mat& signal, const SensorResponse& r, std::uint64_t noise_seed,
+                cv::Mat& out) {
+  const int width = signal.cols;
+  NormalSource normals(noise_seed);
+  std::vector<float> z(kNoise ? width : 0);
+  for (int row = 0; row < signal.rows; ++row) {
+    if constexpr (kNoise) normals.fill(z.data(), width);
+    finishRow<Pixel, kNoise>(signal.ptr<float>(row), z.data(), r, width, out.ptr<Pixel>(row));
+  }
+}
+
 template <typename Pixel, bool kNoise>
 void renderInto(const RenderMaps& maps, const ProjectorFrame& frame, const SensorResponse& r,
                 const ProjectorResponse& projector, int camera_blur_passes,
@@ -141,10 +172,10 @@ void renderInto(const RenderMaps& maps, const ProjectorFrame& frame, const Senso
       signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(), projector.light.data(),
                                      row, signal);
   };
-  NormalSource normals(noise_seed);
-  std::vector<float> z(kNoise ? width : 0);
   if (camera_blur_passes == 0) {
     // Row by row: the signal row stays in cache.
+    NormalSource normals(noise_seed);
+    std::vector<float> z(kNoise ? width : 0);
     std::vector<float> signal(width);
     for (int row = 0; row < maps.height; ++row) {
       signalRowOf(row, signal.data());
@@ -154,13 +185,8 @@ void renderInto(const RenderMaps& maps, const ProjectorFrame& frame, const Senso
     return;
   }
   thread_local cv::Mat signal;
-  signal.create(maps.height, width, CV_32FC1);
-  for (int row = 0; row < maps.height; ++row) signalRowOf(row, signal.ptr<float>(row));
-  blurCameraImage(maps, camera_blur_passes, signal);
-  for (int row = 0; row < maps.height; ++row) {
-    if constexpr (kNoise) normals.fill(z.data(), width);
-    finishRow<Pixel, kNoise>(signal.ptr<float>(row), z.data(), r, width, out.ptr<Pixel>(row));
-  }
+  signalInto(maps, frame, projector, camera_blur_passes, signal);
+  finishInto<Pixel, kNoise>(signal, r, noise_seed, out);
 }
 
 }  // namespace
@@ -254,6 +280,40 @@ cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
   ProjectorFrame frame;
   frame.image = pattern_image;
   return renderImage(maps, frame, response, noise_seed, projector, 0);
+}
+
+cv::Mat renderSignal(const RenderMaps& maps, const ProjectorFrame& frame,
+                     const ProjectorResponse& projector, int camera_blur_passes) {
+  const cv::Mat& texture = frame.light.empty() ? frame.image : frame.light;
+  if (texture.type() != (frame.light.empty() ? CV_8UC1 : CV_16UC1) ||
+      texture.cols != maps.texture_width || !texture.isContinuous())
+    throw std::invalid_argument(
+        "renderSignal: pattern image must be continuous CV_8UC1 (light CV_16UC1) of the "
+        "projector's width");
+  if (camera_blur_passes > 0 && maps.camera_blur_a.size() != maps.ambient_dn.size())
+    throw std::invalid_argument("renderSignal: camera blur not assigned to the maps");
+  cv::Mat signal;
+  signalInto(maps, frame, projector, camera_blur_passes, signal);
+  return signal;
+}
+
+cv::Mat renderFromSignal(const cv::Mat& signal, const SensorResponse& response,
+                         std::uint64_t noise_seed) {
+  if (signal.type() != CV_32FC1)
+    throw std::invalid_argument("renderFromSignal: signal must be CV_32FC1");
+  const bool noise = response.gain_dn_per_electron > 0 || response.read_noise_dn > 0;
+  cv::Mat out(signal.rows, signal.cols, response.bit_depth == 8 ? CV_8UC1 : CV_16UC1);
+  auto run = [&]<typename Pixel>() {
+    if (noise)
+      finishInto<Pixel, true>(signal, response, noise_seed, out);
+    else
+      finishInto<Pixel, false>(signal, response, noise_seed, out);
+  };
+  if (response.bit_depth == 8)
+    run.template operator()<std::uint8_t>();
+  else
+    run.template operator()<std::uint16_t>();
+  return out;
 }
 
 void BlurLevels::locate(double sigma, int& k, float& weight) const {

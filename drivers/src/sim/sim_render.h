@@ -109,4 +109,14 @@ cv::Mat renderImage(const RenderMaps& maps, const cv::Mat& pattern_image,
                     const SensorResponse& response, std::uint64_t noise_seed,
                     const ProjectorResponse& projector = {});
 
+// renderImage in two steps, for a static scene whose noise-free signal is
+// computed once per pattern frame: renderFromSignal(renderSignal(...), r, seed)
+// is bit for bit renderImage(maps, frame, r, seed, projector, passes).
+// renderSignal: CV_32FC1 of the camera's size, 8-bit DN before exposure,
+// gain and noise.
+cv::Mat renderSignal(const RenderMaps& maps, const ProjectorFrame& frame,
+                     const ProjectorResponse& projector = {}, int camera_blur_passes = 0);
+cv::Mat renderFromSignal(const cv::Mat& signal, const SensorResponse& response,
+                         std::uint64_t noise_seed);
+
 }  // namespace sl::drivers::sim
