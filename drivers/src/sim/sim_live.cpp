@@ -20,13 +20,12 @@ std::int64_t deadlineAfter(std::chrono::milliseconds timeout) {
 
 LiveSchedule::LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps,
                            int bit_depth, std::uint64_t seed, RenderFunction render,
-                           int camera_count, PrepareFunction prepare)
+                           int camera_count)
     : sequences_(std::move(sequences)),
       frame_interval_ns_(1e9 / camera_fps),
       bit_depth_(bit_depth),
       seed_(seed),
       render_(std::move(render)),
-      prepare_(std::move(prepare)),
       cameras_(static_cast<std::size_t>(std::max(camera_count, 1))) {
   if (sequences_.empty()) throw std::invalid_argument("LiveSchedule: no sequences");
   if (camera_count < 1) throw std::invalid_argument("LiveSchedule: camera_count must be >= 1");
@@ -87,19 +86,9 @@ void LiveSchedule::select(const std::string& name) {
     for (const ProjectorSequence& s : sequences_) known += (known.empty() ? "" : ", ") + s.name;
     throw std::invalid_argument("projector: unknown pattern '" + name + "' (known: " + known + ")");
   }
-  auto refuseWhileRunning = [&] {
-    if (runningLocked(pipeline::systemClockNs()))
-      throw std::logic_error("projector: select('" + name + "') while running; stop() first");
-  };
-  if (prepare_) {
-    {
-      std::lock_guard lock(mutex_);
-      refuseWhileRunning();
-    }
-    prepare_(static_cast<std::size_t>(it - sequences_.begin()));
-  }
   std::lock_guard lock(mutex_);
-  refuseWhileRunning();
+  if (runningLocked(pipeline::systemClockNs()))
+    throw std::logic_error("projector: select('" + name + "') while running; stop() first");
   selected_ = static_cast<std::size_t>(it - sequences_.begin());
 }
 

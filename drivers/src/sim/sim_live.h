@@ -27,11 +27,6 @@ namespace sl::drivers::sim {
 using RenderFunction = std::function<cv::Mat(int camera, std::size_t pattern_index, int frame,
                                              std::uint64_t noise_seed)>;
 
-// Prepares pattern `pattern_index` for rendering (e.g. computes its
-// noise-free images once); called by select() before it takes the lock, so
-// that a schedule's first frames render as fast as its later ones.
-using PrepareFunction = std::function<void(std::size_t pattern_index)>;
-
 // Frames and triggers a slow consumer may fall behind by before the oldest
 // are dropped (like the buffer pool of a camera driver). The camera then
 // drops up to the next sequence start (whole sequences: what it delivers
@@ -59,8 +54,7 @@ class LiveSchedule {
  public:
   // camera_count cameras (>= 1) expose on the same schedule.
   LiveSchedule(std::vector<ProjectorSequence> sequences, double camera_fps, int bit_depth,
-               std::uint64_t seed, RenderFunction render, int camera_count = 1,
-               PrepareFunction prepare = {});
+               std::uint64_t seed, RenderFunction render, int camera_count = 1);
 
   const std::vector<ProjectorSequence>& sequences() const { return sequences_; }
 
@@ -110,7 +104,6 @@ class LiveSchedule {
   const int bit_depth_;
   const std::uint64_t seed_;
   const RenderFunction render_;
-  const PrepareFunction prepare_;
 
   mutable std::mutex mutex_;
   std::condition_variable cv_;

@@ -309,14 +309,6 @@ class SceneRenderer {
         .ground_truth;
   }
 
-  // Computes the noise-free signals of every frame of `pattern` for every
-  // camera now (a static scene; else nothing to do).
-  void prepare(std::size_t pattern) const {
-    if (config_.motion.moving()) return;
-    for (int camera = 0; camera < cameraCount(); ++camera)
-      for (const sim::ProjectorFrame* frame : frames_.at(pattern)) cachedSignal(camera, *frame);
-  }
-
   cv::Mat render(int camera, std::size_t pattern, int frame, std::uint64_t noise_seed) const {
     const CameraView& c = checkedCamera(camera);
     const std::vector<const sim::ProjectorFrame*>& frames = frames_.at(pattern);
@@ -504,8 +496,7 @@ class SimulatedSensorImpl final : public SimulatedSensor {
         [renderer](int camera, std::size_t pattern, int frame, std::uint64_t seed) {
           return renderer->render(camera, pattern, frame, seed);
         },
-        renderer_->cameraCount(),
-        [renderer](std::size_t pattern) { renderer->prepare(pattern); });
+        renderer_->cameraCount());
     cameras_.push_back(
         sim::makeLiveCamera(schedule_, 0, c.camera_id, c.rig.camera.width, c.rig.camera.height));
     if (c.second_camera)
