@@ -78,6 +78,16 @@ wire)
   done
   cp "$work/rec_zstd.mcap" "$artefacts/sl_view_record.mcap"
   ;;
+browser)
+  # sim.yaml's camera is 1440 x 1080; sl_view decimates by 4 for the page.
+  node "$node_dir/test/browser_check.mjs" --url "http://127.0.0.1:$port/" --width 360 --height 270 \
+    --screenshot "$artefacts/sl_view_page.png" || fail "browser check"
+  echo "screenshot: $artefacts/sl_view_page.png"
+  ;;
+stalled)
+  node "$node_dir/test/stalled_check.mjs" --ws "ws://127.0.0.1:$port" \
+    --stats "http://127.0.0.1:$port/stats" --ns "$ns" --scans 8 --queue 2 || fail "stalled viewer check"
+  ;;
 *) fail "unknown mode $mode" ;;
 esac
 echo "ok: $mode"
