@@ -151,6 +151,7 @@ int serve(int argc, char** argv) {
                  "Foxglove works without it\n";
   server.static_dirs = {{"/", web_dir}, {"/three/", three_dir}};
 
+  topics.lazy = true;  // a topic is read only while a viewer subscribes to it
   sl::view::RawTopics raw(topics);
   std::vector<sl::view::ChannelInfo> channels;
   std::uint32_t next_id = 1;
@@ -185,6 +186,9 @@ int serve(int argc, char** argv) {
   std::uint64_t preview_errors = 0;
   std::string last_preview_error;
   while (!g_stop) {
+    for (std::size_t i = 0; i < raw.topics().size(); ++i)
+      raw.setActive(i, ws.subscribed(static_cast<std::uint32_t>(i + 1)) ||
+                           (i == points_topic && ws.subscribed(preview_channel)));
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const sl::view::RawSample> s) {
       const std::uint32_t channel = static_cast<std::uint32_t>(s->topic + 1);
       if (s->topic == points_topic && ws.subscribed(preview_channel)) {

@@ -3,6 +3,7 @@
 #include <dds/ddsi/ddsi_serdata.h>
 
 #include <chrono>
+#include <optional>
 #include <stdexcept>
 
 #include "builtin_interfaces/msg/Time.h"
@@ -72,7 +73,8 @@ RawSample::~RawSample() {
 }
 
 struct RawTopics::Impl {
-  explicit Impl(const RawTopicsOptions& options) : participant(options.domain_id), wake(participant), waitset(participant) {
+  explicit Impl(const RawTopicsOptions& opts)
+      : options(opts), participant(opts.domain_id), wake(participant), waitset(participant) {
     for (const auto& t : daemonTopics(options.ns)) {
       if (!options.only.empty()) {
         bool wanted = false;
@@ -87,29 +89,42 @@ struct RawTopics::Impl {
       if (!known) throw std::invalid_argument("unknown topic '" + name + "' (the daemon's topics are /<ns>/points, /<ns>/status, ...)");
     }
     topics.reserve(infos.size());
-    readers.reserve(infos.size());
-    conditions.reserve(infos.size());
-    for (std::size_t i = 0; i < infos.size(); ++i) {
-      topics.emplace_back(participant, infos[i].dds_name, descriptorOf(infos[i].type_name));
-      dds::Qos qos;
-      if (infos[i].type_name == "sl_msgs/msg/Status")
-        qos.reliable().transientLocal().keepLast(1);
-      else if (options.best_effort)
-        qos.bestEffort().keepLast(options.depth);
-      else
-        qos.reliable().keepLast(options.depth);
-      readers.emplace_back(participant, topics.back(), qos);
-      conditions.emplace_back(readers.back());
-      waitset.attach(conditions.back(), static_cast<dds_attach_t>(i + 1));
-    }
+    for (const auto& info : infos)
+      topics.emplace_back(participant, info.dds_name, descriptorOf(info.type_name));
+    readers.resize(infos.size());
+    conditions.resize(infos.size());
+    for (std::size_t i = 0; i < infos.size(); ++i)
+      if (!options.lazy || infos[i].type_name == "sl_msgs/msg/Status") setActive(i, true);
     waitset.attach(wake, 0);
   }
 
+  void setActive(std::size_t i, bool active) {
+    if (active == readers[i].has_value()) return;
+    if (!active) {
+      if (infos[i].type_name == "sl_msgs/msg/Status") return;
+      waitset.detach(*conditions[i]);
+      conditions[i].reset();
+      readers[i].reset();
+      return;
+    }
+    dds::Qos qos;
+    if (infos[i].type_name == "sl_msgs/msg/Status")
+      qos.reliable().transientLocal().keepLast(1);
+    else if (options.best_effort)
+      qos.bestEffort().keepLast(options.depth);
+    else
+      qos.reliable().keepLast(options.depth);
+    readers[i].emplace(participant, topics[i], qos);
+    conditions[i].emplace(*readers[i]);
+    waitset.attach(*conditions[i], static_cast<dds_attach_t>(i + 1));
+  }
+
+  RawTopicsOptions options;
   dds::Participant participant;
   std::vector<TopicInfo> infos;
   std::vector<dds::Topic<Serialized>> topics;
-  std::vector<dds::Reader<Serialized>> readers;
-  std::vector<dds::ReadCondition> conditions;
+  std::vector<std::optional<dds::Reader<Serialized>>> readers;
+  std::vector<std::optional<dds::ReadCondition>> conditions;
   dds::GuardCondition wake;
   dds::WaitSet waitset;
   std::uint64_t next_sequence = 1;
@@ -131,11 +146,12 @@ bool RawTopics::poll(std::int64_t timeout_ns, const Callback& callback) {
       continue;
     }
     const std::size_t i = static_cast<std::size_t>(cookie - 1);
+    if (!impl_->readers[i]) continue;
     for (;;) {
       struct ddsi_serdata* serdata = nullptr;
       dds_sample_info_t info;
       const dds_return_t n =
-          dds::check(dds_takecdr(impl_->readers[i].handle(), &serdata, 1, &info, DDS_ANY_STATE),
+          dds::check(dds_takecdr(impl_->readers[i]->handle(), &serdata, 1, &info, DDS_ANY_STATE),
                      "dds_takecdr(" + impl_->infos[i].dds_name + ")");
       if (n <= 0) break;
       std::shared_ptr<RawSample> sample(new RawSample());
@@ -169,13 +185,17 @@ bool RawTopics::poll(std::int64_t timeout_ns, const Callback& callback) {
 
 void RawTopics::wake() { impl_->wake.trigger(); }
 
+void RawTopics::setActive(std::size_t i, bool active) { impl_->setActive(i, active); }
+bool RawTopics::active(std::size_t i) const { return impl_->readers.at(i).has_value(); }
+
 std::uint32_t RawTopics::matchedWriters(std::size_t i) const {
-  return impl_->readers.at(i).matchedWriters();
+  return impl_->readers.at(i) ? impl_->readers[i]->matchedWriters() : 0;
 }
 
 std::uint64_t RawTopics::samplesLost(std::size_t i) const {
+  if (!impl_->readers.at(i)) return 0;
   dds_sample_lost_status_t status;
-  dds::check(dds_get_sample_lost_status(impl_->readers.at(i).handle(), &status),
+  dds::check(dds_get_sample_lost_status(impl_->readers[i]->handle(), &status),
              "dds_get_sample_lost_status");
   return status.total_count;
 }

@@ -66,6 +66,9 @@ struct RawTopicsOptions {
   bool best_effort = false;
   int depth = 1;  // keep-last depth of the cloud and image readers
   std::vector<std::string> only;  // ROS names to subscribe; empty = all
+  // Lazy: only the status reader exists at first; setActive() creates and
+  // deletes the others (sl_view reads a topic only while a viewer wants it).
+  bool lazy = false;
 };
 
 // Not thread-safe except wake(), which any thread may call.
@@ -80,7 +83,10 @@ class RawTopics {
   // thread). Returns false if woken by wake().
   bool poll(std::int64_t timeout_ns, const Callback& callback);
   void wake();
-  // Writers matched on topic i (0 until discovery).
+  // Creates (true) or deletes (false) topic i's reader; status stays.
+  void setActive(std::size_t i, bool active);
+  bool active(std::size_t i) const;
+  // Writers matched on topic i (0 until discovery or while inactive).
   std::uint32_t matchedWriters(std::size_t i) const;
   // Samples Cyclone reported lost (best-effort fragments missing) per topic.
   std::uint64_t samplesLost(std::size_t i) const;

@@ -51,14 +51,16 @@ try {
     return { n, total: c.width * c.height };
   });
   check(lit.n > 0.05 * lit.total, `only ${lit.n} of ${lit.total} canvas pixels show the cloud`);
-  const depthLit = await page.evaluate(() => {
+  // The depth image and the point count of the same cloud (one evaluate:
+  // no cloud can arrive in between).
+  const depth = await page.evaluate(() => {
     const c = document.getElementById('depth');
     const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
     let n = 0;
     for (let i = 0; i < d.length; i += 4) if (d[i] + d[i + 1] + d[i + 2] > 0) n++;
-    return n;
+    return { n, points: window.slView.points };
   });
-  check(depthLit === v.points, `depth image: ${depthLit} coloured pixels, ${v.points} points`);
+  check(depth.n === depth.points, `depth image: ${depth.n} coloured pixels, ${depth.points} points`);
   await page.waitForFunction(() => window.slView.status.state === 'scanning', null, { timeout: 5000 });
   const statusText = await page.textContent('#status');
   check(/scanning/.test(statusText) && /scan rate/.test(statusText), `status panel: ${statusText}`);
