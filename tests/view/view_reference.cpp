@@ -103,12 +103,14 @@ int main(int argc, char** argv) {
   dds::Topic<Image> shading_t(p, "rt/" + ns + "/shading/image", sensor_msgs_msg_dds__Image__desc);
   dds::Topic<Info> info_t(p, "rt/" + ns + "/camera_info", sensor_msgs_msg_dds__CameraInfo__desc);
   dds::Topic<Status> status_t(p, "rt/" + ns + "/status", sl_msgs_msg_Status_desc);
-  const auto qos = dds::Qos().reliable().keepLast(8);
+  // Keep-all: nothing is overwritten while this program writes files (the
+  // check asks for every sample the bridge or a recording saw).
+  const auto qos = dds::Qos().reliable().keepAll();
   dds::Reader<Cloud> points(p, points_t, qos);
   dds::Reader<Image> depth(p, depth_t, qos);
   dds::Reader<Image> shading(p, shading_t, qos);
   dds::Reader<Info> info(p, info_t, qos);
-  dds::Reader<Status> status(p, status_t, dds::Qos().reliable().transientLocal().keepLast(16));
+  dds::Reader<Status> status(p, status_t, dds::Qos().reliable().transientLocal().keepAll());
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (!(points.matchedWriters() && depth.matchedWriters() && shading.matchedWriters() &&
            info.matchedWriters() && status.matchedWriters())) {
