@@ -97,9 +97,14 @@ TopicNames TopicNames::forNamespace(const std::string& ns) {
           "rt/" + ns + "/depth/image", "rt/" + ns + "/shading/image", "rt/" + ns + "/camera_info"};
 }
 
+std::string FrameIds::of(const std::string& camera_id) const {
+  return camera_id == first_camera_id ? first_frame_id : camera_id + "_optical_frame";
+}
+
 struct DdsBridge::Impl {
-  Impl(const DdsConfig& config, const pipeline::PinholeModel& camera)
+  Impl(const DdsConfig& config, const std::string& camera_id, const pipeline::PinholeModel& camera)
       : config(config),
+        frame_ids{camera_id, config.frame_id},
         camera(camera),
         names(TopicNames::forNamespace(config.ns)),
         participant(config.domain_id),
@@ -136,7 +141,8 @@ struct DdsBridge::Impl {
   }
 
   const DdsConfig config;
-  const pipeline::PinholeModel camera;
+  const FrameIds frame_ids;
+  const pipeline::PinholeModel camera;  // of the first camera, for camera_info
   const TopicNames names;
   dds::Participant participant;
   dds::Topic<PointCloud2> points_topic;
@@ -165,14 +171,14 @@ struct DdsBridge::Impl {
   // Publish-thread scratch buffer (metres), reused between clouds.
   std::vector<float> cloud_buffer;
 
-  void publishCloud(const pipeline::PointCloud& cloud);
+  void publishCloud(const pipeline::PointCloud& cloud, const std::string& frame_id);
   void publishMaps(const pipeline::ProjectorMaps& maps, const ScanResult& result);
   void publishImages(const ScanResult& result);
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
   void answer(ScanEngine& engine, const Request& request);
 };
 
-void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud) {
+void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud, const std::string& frame_id_of_camera) {
   const std::size_t n = cloud.points.size();
   cloud_buffer.resize(4 * n);
   bool dense = true;
@@ -189,7 +195,7 @@ void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud) {
   PointField fields[4];
   for (int i = 0; i < 4; ++i)
     fields[i] = {const_cast<char*>(kNames[i]), static_cast<std::uint32_t>(4 * i), kFloat32, 1};
-  std::string frame_id = cloud.frame_id;
+  std::string frame_id = frame_id_of_camera;
 
   PointCloud2 msg{};
   msg.header.stamp = toTime(cloud.stamp_ns);
@@ -242,14 +248,14 @@ void DdsBridge::Impl::publishImages(const ScanResult& result) {
   const std::size_t n = cloud.points.size();
   std::vector<float> depth(n);
   std::vector<std::uint8_t> shading(n);
-  const int bit_depth = result.images ? result.images->cameras.front().bit_depth : 8;
+  const int bit_depth = result.bit_depth;
   const float to_8bit = 255.0f / float((1 << bit_depth) - 1);
   for (std::size_t i = 0; i < n; ++i) {
     depth[i] = cloud.points[i].z * 1e-3f;
     const float a = cloud.points[i].intensity * to_8bit;
     shading[i] = std::isfinite(a) ? static_cast<std::uint8_t>(std::clamp(a + 0.5f, 0.0f, 255.0f)) : 0;
   }
-  std::string frame_id = cloud.frame_id, enc_depth = "32FC1", enc_mono = "mono8";
+  std::string frame_id = frame_ids.of(result.camera_id), enc_depth = "32FC1", enc_mono = "mono8";
   auto image = [&](std::string& encoding, void* data, std::uint32_t bytes_per_pixel) {
     Image msg{};
     msg.header.stamp = toTime(cloud.stamp_ns);
@@ -266,7 +272,7 @@ void DdsBridge::Impl::publishImages(const ScanResult& result) {
   if (!shading_writer.write(image(enc_mono, shading.data(), 1))) ++writes_timed_out;
   // camera_info describes the first camera (whose frame is dds.frame_id);
   // images of other cameras carry their own frame_id and no camera_info yet.
-  if (cloud.frame_id != config.frame_id) return;
+  if (result.camera_id != frame_ids.first_camera_id) return;
 
   std::string model = "plumb_bob";
   std::vector<double> d(camera.distortion.begin(), camera.distortion.end());
@@ -371,12 +377,13 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   reply_writer.write(reply);
 }
 
-DdsBridge::DdsBridge(const DdsConfig& config, const pipeline::PinholeModel& camera)
-    : impl_(std::make_unique<Impl>(config, camera)) {}
+DdsBridge::DdsBridge(const DdsConfig& config, const std::string& camera_id,
+                     const pipeline::PinholeModel& camera)
+    : impl_(std::make_unique<Impl>(config, camera_id, camera)) {}
 DdsBridge::~DdsBridge() = default;
 
 void DdsBridge::publish(const ScanResult& result) {
-  if (result.cloud) impl_->publishCloud(*result.cloud);
+  if (result.cloud) impl_->publishCloud(*result.cloud, impl_->frame_ids.of(result.camera_id));
   if (impl_->config.publish_projector_maps && result.maps) impl_->publishMaps(*result.maps, result);
   if (impl_->config.publish_images && result.cloud) impl_->publishImages(result);
 }

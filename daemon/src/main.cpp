@@ -60,9 +60,9 @@ void reload(const std::string& path, const sl::daemon::DaemonConfig& running,
 int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
   const DaemonConfig config = loadConfig(config_path);
-  DdsBridge bridge(config.dds, config.calibration.camera);
   std::shared_ptr<void> device_owner;
   EngineDevices devices = openDevices(config, device_owner);
+  DdsBridge bridge(config.dds, devices.cameras.front()->id(), config.calibration.camera);
   ScanEngine engine(config, std::move(devices),
                     [&bridge](const ScanResult& result) { bridge.publish(result); });
   std::thread server([&] { bridge.serve(engine); });

@@ -1,4 +1,4 @@
-#include "intensity_transfer.h"
+#include "sl/pipeline/intensity_transfer.h"
 
 #include <cmath>
 #include <limits>
@@ -6,11 +6,11 @@
 
 #include <opencv2/core.hpp>
 
-namespace sl::daemon {
+namespace sl::pipeline {
 
-void transferIntensity(pipeline::PointCloud& cloud, const pipeline::CameraProjectorCalibration& own,
-                       const pipeline::CameraProjectorCalibration& other,
-                       const pipeline::CameraImages& images) {
+void transferIntensity(PointCloud& cloud, const CameraProjectorCalibration& own,
+                       const CameraProjectorCalibration& other,
+                       const CameraImages& images) {
   if (images.frames.empty()) throw std::invalid_argument("intensity camera: no frames");
   const cv::Size size = images.frames.front().size();
   if (size.width != other.camera.width || size.height != other.camera.height)
@@ -26,7 +26,7 @@ void transferIntensity(pipeline::PointCloud& cloud, const pipeline::CameraProjec
   mean /= double(images.frames.size());
 
   // own camera -> projector -> other camera.
-  const Eigen::Isometry3d own_to_other = pipeline::cameraToCamera(own, other);
+  const Eigen::Isometry3d own_to_other = cameraToCamera(own, other);
   const Eigen::Matrix3d rotation = own_to_other.linear();
   const Eigen::Vector3d translation = own_to_other.translation();
   const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -54,4 +54,4 @@ void transferIntensity(pipeline::PointCloud& cloud, const pipeline::CameraProjec
   });
 }
 
-}  // namespace sl::daemon
+}  // namespace sl::pipeline

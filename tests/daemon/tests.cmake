@@ -9,9 +9,14 @@ sl_add_test(test_e2e daemon/test_e2e.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
 add_dependencies(test_e2e sl_sensord)
 
-# ScanEngine health (feeds the systemd watchdog), without DDS.
-sl_add_test(test_engine daemon/test_engine.cpp)
+# ScanEngine without DDS: health (feeds the systemd watchdog), requests,
+# software trigger; its stages without threads (start validation, set
+# processing); BoundedQueue's overflow policies.
+sl_add_test(test_engine daemon/test_engine.cpp daemon/test_engine_stages.cpp
+  daemon/test_bounded_queue.cpp)
 target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
+# The engine's stages are private to the daemon (daemon/src/engine/).
+target_include_directories(test_engine PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
 
 # Config loading and its error messages.
 sl_add_test(test_config daemon/test_config.cpp sim/test_sim_config.cpp)

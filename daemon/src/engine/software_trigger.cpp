@@ -1,4 +1,4 @@
-#include "software_trigger.h"
+#include "engine/software_trigger.h"
 
 #include <stdexcept>
 #include <thread>
@@ -26,25 +26,22 @@ std::string SoftwareTrigger::unsupportedReason() const {
   return "";
 }
 
-std::shared_ptr<const pipeline::ImageSet> SoftwareTrigger::acquire(
-    const std::string& pattern, int frame_count, const std::function<bool()>& cancelled) {
+bool SoftwareTrigger::acquire(const std::string& pattern, int frame_count,
+                              const std::function<bool()>& cancelled,
+                              pipeline::IndexedSynchroniser& grouping) {
   if (selected_ != pattern) {
     projector_->stop();
     projector_->select(pattern);
     selected_ = pattern;
   }
-  auto set = std::make_shared<pipeline::ImageSet>();
-  set->sequence_id = next_sequence_id_++;
-  set->pattern_name = pattern;
-  for (const auto& camera : cameras_) set->cameras.push_back({camera->id(), {}, {}, 8});
   const auto settle = std::chrono::duration<double>(config_.settle_s);
   for (int i = 0; i < frame_count; ++i) {
-    if (cancelled()) return nullptr;
+    if (cancelled()) return false;
     const pipeline::TimestampNs shown_ns = pipeline::systemClockNs();
     projector_->projectSingle(i);
     std::this_thread::sleep_for(settle);
     const pipeline::TimestampNs trigger_ns = pipeline::systemClockNs();
-    if (i == 0) set->trigger_stamp_ns = trigger_ns;
+    if (i == 0) grouping.begin(pattern, frame_count, trigger_ns);
     for (const auto& camera : cameras_) camera->triggerSoftware();
     for (std::size_t c = 0; c < cameras_.size(); ++c) {
       const auto deadline = std::chrono::steady_clock::now() + toMs(config_.grab_timeout_s);
@@ -66,13 +63,59 @@ std::shared_ptr<const pipeline::ImageSet> SoftwareTrigger::acquire(
                                  "' delivered no image of pattern " + std::to_string(i) +
                                  " within " + std::to_string(config_.grab_timeout_s) + " s");
       }
-      pipeline::CameraImages& images = set->cameras[c];
-      if (i == 0) images.bit_depth = frame->bit_depth;
-      images.frames.push_back(std::move(frame->image));
-      images.stamps_ns.push_back(frame->stamp_ns);
+      grouping.pushFrame(c, i, std::move(*frame));
     }
   }
-  return set;
+  return true;
+}
+
+namespace {
+
+std::vector<std::string> idsOf(const std::vector<std::shared_ptr<drivers::Camera>>& cameras) {
+  std::vector<std::string> ids;
+  for (const auto& c : cameras) ids.push_back(c->id());
+  return ids;
+}
+
+}  // namespace
+
+SoftwareRuns::SoftwareRuns(std::vector<std::shared_ptr<drivers::Camera>> cameras,
+                           std::shared_ptr<drivers::Projector> projector, SoftwareTriggerConfig config)
+    : trigger_(cameras, std::move(projector), config), grouping_(idsOf(cameras)) {}
+
+SoftwareRuns::Outcome SoftwareRuns::acquire(std::uint64_t generation, const std::string& pattern,
+                                            int frame_count, const std::function<bool()>& cancelled) {
+  if (generation != generation_) {
+    trigger_.stop();  // a new request: select its pattern afresh
+    grouping_.startRun();
+    generation_ = generation;
+    acquired_ = 0;
+    failures_ = 0;
+  }
+  Outcome out;
+  try {
+    if (!trigger_.acquire(pattern, frame_count, cancelled, grouping_)) {
+      grouping_.abandon(false);  // stopped meanwhile
+      return out;
+    }
+    auto sets = grouping_.takeCompleted();
+    if (sets.size() != 1)
+      throw std::logic_error("software trigger: a complete sequence gave " + std::to_string(sets.size()) +
+                             " image sets");
+    out.set = std::move(sets.front());
+    out.frames = out.set->cameras.size() * static_cast<std::uint64_t>(frame_count);
+    ++acquired_;
+    failures_ = 0;
+  } catch (const std::exception& e) {
+    const bool fault = !cancelled();  // else stopped meanwhile: not a fault
+    grouping_.abandon(fault);
+    if (fault) {
+      out.end_request = ++failures_ >= 3;
+      out.fault = out.end_request ? std::string(e.what()) + " (3 sequences in a row failed; request ended)"
+                                  : e.what();
+    }
+  }
+  return out;
 }
 
 void SoftwareTrigger::stop() {

@@ -2,7 +2,8 @@
 // a pattern sequence itself ("project pattern i, wait, grab"), triggering
 // every camera in software for each pattern, and stamps the set itself. The
 // sequence rate is then bounded by settle + exposure + transfer per pattern,
-// well below the hardware-triggered rate.
+// well below the hardware-triggered rate. The frames are grouped by the
+// trigger-time grouping's sibling, pipeline::IndexedSynchroniser.
 #pragma once
 
 #include <atomic>
@@ -15,6 +16,7 @@
 #include "sl/daemon/config.h"
 #include "sl/drivers/camera.h"
 #include "sl/drivers/projector.h"
+#include "sl/pipeline/indexed_synchroniser.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::daemon {
@@ -31,13 +33,14 @@ class SoftwareTrigger {
   std::string unsupportedReason() const;
 
   // Acquires one sequence of `frame_count` patterns of `pattern` (selected on
-  // the projector here when it changed). Frame i of every camera shows
-  // pattern i; the set is stamped with the first pattern's trigger time.
-  // Returns nullptr when `cancelled` turned true between patterns. Throws
-  // std::runtime_error (naming the device) on a device fault or an image that
-  // did not arrive within grab_timeout_s; the projector is stopped then.
-  std::shared_ptr<const pipeline::ImageSet> acquire(const std::string& pattern, int frame_count,
-                                                    const std::function<bool()>& cancelled);
+  // the projector here when it changed) into `grouping`: begin() with the
+  // first pattern's trigger time, then frame i of every camera as pattern i.
+  // Returns false when `cancelled` turned true between patterns (the sequence
+  // is left open). Throws std::runtime_error (naming the device) on a device
+  // fault or an image that did not arrive within grab_timeout_s; the
+  // projector is stopped then.
+  bool acquire(const std::string& pattern, int frame_count, const std::function<bool()>& cancelled,
+               pipeline::IndexedSynchroniser& grouping);
 
   // Ends the held pattern; the next acquire() selects its pattern again.
   void stop();
@@ -51,8 +54,47 @@ class SoftwareTrigger {
   std::shared_ptr<drivers::Projector> projector_;
   const SoftwareTriggerConfig config_;
   std::string selected_;  // pattern selected on the projector by us ("" = unknown)
-  std::uint64_t next_sequence_id_ = 0;
   std::atomic<std::uint64_t> stale_frames_{0};
+};
+
+// The control thread's side of software-triggered requests: one sequence per
+// acquire(), grouped by an IndexedSynchroniser, and the fault policy (three
+// failed sequences in a row end the request). Thread-compatible (the control
+// thread); staleFrames() from any thread.
+class SoftwareRuns {
+ public:
+  SoftwareRuns(std::vector<std::shared_ptr<drivers::Camera>> cameras,
+               std::shared_ptr<drivers::Projector> projector, SoftwareTriggerConfig config);
+
+  std::string unsupportedReason() const { return trigger_.unsupportedReason(); }
+  // True when the run of `generation` has all of its `requested` sets (0 = continuous).
+  bool finished(std::uint64_t generation, std::uint64_t requested) const {
+    return requested != 0 && generation == generation_ && acquired_ >= requested;
+  }
+
+  struct Outcome {
+    std::shared_ptr<const pipeline::ImageSet> set;  // null: none completed
+    std::uint64_t frames = 0;  // camera frames received
+    std::string fault;         // a device fault of this sequence ("" = none)
+    bool end_request = false;  // the third fault in a row: end the request
+  };
+  // One sequence of `pattern` for the request `generation` (a new generation
+  // is a new run: the pattern selected afresh, sequence ids from 0).
+  // `cancelled` turning true (the request stopped) is no fault.
+  Outcome acquire(std::uint64_t generation, const std::string& pattern, int frame_count,
+                  const std::function<bool()>& cancelled);
+  // Ends the held pattern (no software run any more).
+  void stop() { trigger_.stop(); }
+
+  const pipeline::SynchroniserCounters& counters() const { return grouping_.counters(); }
+  std::uint64_t staleFrames() const { return trigger_.staleFrames(); }
+
+ private:
+  SoftwareTrigger trigger_;
+  pipeline::IndexedSynchroniser grouping_;
+  std::uint64_t generation_ = 0;  // of the run in progress
+  std::uint64_t acquired_ = 0;    // its sets so far
+  int failures_ = 0;              // consecutive failed sequences
 };
 
 }  // namespace sl::daemon

@@ -11,21 +11,33 @@
 
 namespace sl::daemon {
 
-// Thread-safe. Overflow policy: push() never blocks; when the queue is full the
-// oldest element is dropped and counted (a real-time sensor prefers the newest
-// scan to a growing backlog). close() wakes every waiting consumer; pops then
-// drain what is left and return nullopt once empty.
+// What push() does when the queue is full.
+enum class Overflow {
+  // Drop the oldest element and count it: a real-time sensor prefers the
+  // newest frame or scan to a growing backlog.
+  kDropOldest,
+  // Wait until a consumer made room (or the queue closed): for channels where
+  // every element matters and the consumer never blocks for long.
+  kWaitForRoom,
+};
+
+// Thread-safe. close() wakes every waiting producer and consumer: pushes then
+// drop their element (counted) and return false; pops drain what is left and
+// return nullopt once empty.
 template <typename T>
 class BoundedQueue {
  public:
-  explicit BoundedQueue(std::size_t capacity) : capacity_(capacity ? capacity : 1) {}
+  explicit BoundedQueue(std::size_t capacity, Overflow overflow = Overflow::kDropOldest)
+      : capacity_(capacity ? capacity : 1), overflow_(overflow) {}
 
-  // Returns false if an element had to be dropped to make room (or the queue
-  // is closed, in which case `value` is dropped).
+  // Returns false if an element was dropped: the oldest, to make room
+  // (kDropOldest), or `value` itself because the queue is closed.
   bool push(T value) {
     bool dropped = false;
     {
-      std::lock_guard lock(mutex_);
+      std::unique_lock lock(mutex_);
+      if (overflow_ == Overflow::kWaitForRoom)
+        room_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
       if (closed_) {
         ++dropped_;
         return false;
@@ -45,10 +57,12 @@ class BoundedQueue {
   std::optional<T> pop(std::chrono::milliseconds timeout) {
     std::unique_lock lock(mutex_);
     ready_.wait_for(lock, timeout, [&] { return closed_ || !items_.empty(); });
-    if (items_.empty()) return std::nullopt;
-    T value = std::move(items_.front());
-    items_.pop_front();
-    return value;
+    return takeFront(lock);
+  }
+  // The front element if there is one; never waits.
+  std::optional<T> tryPop() {
+    std::unique_lock lock(mutex_);
+    return takeFront(lock);
   }
 
   void close() {
@@ -57,14 +71,19 @@ class BoundedQueue {
       closed_ = true;
     }
     ready_.notify_all();
+    room_.notify_all();
   }
 
   // Removes every queued element (counted as dropped); returns how many.
   std::size_t clear() {
-    std::lock_guard lock(mutex_);
-    const std::size_t n = items_.size();
-    items_.clear();
-    dropped_ += n;
+    std::size_t n = 0;
+    {
+      std::lock_guard lock(mutex_);
+      n = items_.size();
+      items_.clear();
+      dropped_ += n;
+    }
+    room_.notify_all();
     return n;
   }
 
@@ -76,11 +95,23 @@ class BoundedQueue {
     std::lock_guard lock(mutex_);
     return items_.size();
   }
+  std::size_t capacity() const { return capacity_; }
 
  private:
+  std::optional<T> takeFront(std::unique_lock<std::mutex>& lock) {
+    if (items_.empty()) return std::nullopt;
+    T value = std::move(items_.front());
+    items_.pop_front();
+    lock.unlock();
+    room_.notify_one();
+    return value;
+  }
+
   const std::size_t capacity_;
+  const Overflow overflow_;
   mutable std::mutex mutex_;
-  std::condition_variable ready_;
+  std::condition_variable ready_;  // an element arrived or the queue closed
+  std::condition_variable room_;   // an element left or the queue closed
   std::deque<T> items_;        // guarded by mutex_
   std::uint64_t dropped_ = 0;  // guarded by mutex_
   bool closed_ = false;        // guarded by mutex_

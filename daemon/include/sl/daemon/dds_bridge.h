@@ -28,14 +28,23 @@ struct TopicNames {
   static TopicNames forNamespace(const std::string& ns);
 };
 
+// ROS frame ids of the clouds and images: dds.frame_id for the first camera,
+// "<camera id>_optical_frame" for the others.
+struct FrameIds {
+  std::string first_camera_id;
+  std::string first_frame_id;
+  std::string of(const std::string& camera_id) const;
+};
+
 // Thread-safe in the way the daemon uses it: publish() from the engine's
 // output thread while serve() runs on another; stop() from any thread.
 class DdsBridge {
  public:
   // Creates the participant, topics, writers and the request reader; throws
   // sl::dds::Error naming the failing call.
-  // `camera`: the triangulating camera's model, for camera_info.
-  DdsBridge(const DdsConfig& config, const pipeline::PinholeModel& camera);
+  // `camera_id`, `camera`: the first camera (frame dds.frame_id) and its
+  // model, for camera_info.
+  DdsBridge(const DdsConfig& config, const std::string& camera_id, const pipeline::PinholeModel& camera);
   ~DdsBridge();
 
   void publish(const ScanResult& result);

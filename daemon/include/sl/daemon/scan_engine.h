@@ -1,18 +1,20 @@
-// The daemon's pipeline: camera and trigger threads feed the synchroniser,
-// whose image sets are decoded and triangulated on a processing thread and
-// handed to an output thread. Stages are the synchronous classes of
-// sl_pipeline; the threads and bounded queues live here.
+// The daemon's pipeline: camera and trigger threads feed the grouping
+// thread, whose image sets are decoded and triangulated on a processing
+// thread and handed to an output thread. Stages are synchronous classes
+// (sl_pipeline, daemon/src/engine/); the threads and bounded queues live in
+// daemon/src/engine/scan_engine.cpp.
 //
 //   camera thread(s) --frames---+
-//                               +--> event queue -> sync thread -> set queue
-//   trigger thread  --triggers--+                                     |
-//                          output thread <- result queue <- processing thread
+//                               +--> input queue -> grouping thread -> set queue
+//   trigger thread  --triggers--+         ^                                |
+//                                         | schedule queue                 v
+//   control thread: RequestControl -------+    output thread <- results <- processing thread
 //
-// A control thread starts delayed requests at their time, carries out
+// The control thread starts delayed requests at their time, carries out
 // pattern switches at sequence boundaries and, in software-trigger mode,
-// acquires the image sets itself (projector stepped pattern by
-// pattern, one grab per camera) straight into the set queue; the camera
-// threads are parked meanwhile.
+// acquires the image sets itself (projector stepped pattern by pattern, one
+// grab per camera, grouped by pipeline::IndexedSynchroniser) into the set
+// queue; the camera threads are parked meanwhile.
 #pragma once
 
 #include <atomic>
@@ -87,18 +89,18 @@ struct EngineStatus {
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
 };
 
-// One scan's results, shared with the output callback.
-// One camera's result of one scan (a pattern triangulated by two cameras
-// gives two results with the same scan_index).
+// One camera's result of one scan, shared with the output callback (a
+// pattern triangulated by two cameras gives two results with the same
+// scan_index).
 struct ScanResult {
   std::uint64_t scan_index = 0;  // 1-based within the current request
   std::string pattern;
-  std::string camera_id;         // the triangulating camera
-  std::shared_ptr<const pipeline::ImageSet> images;
+  std::string camera_id;         // the triangulating camera (also cloud->frame_id)
+  int bit_depth = 8;             // of that camera's images (cloud intensities are its DN)
   // Null unless dds.publish_projector_maps: the processing then never writes
   // the maps out (pipeline::ScanProcessor::Keep::kCloud).
   std::shared_ptr<const pipeline::ProjectorMaps> maps;
-  std::shared_ptr<const pipeline::PointCloud> cloud;
+  std::shared_ptr<const pipeline::PointCloud> cloud;  // mm, the camera's optical frame
 };
 
 struct EngineDevices {

@@ -7,7 +7,7 @@
 #include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/types.h"
 
-namespace sl::daemon {
+namespace sl::pipeline {
 
 // Replaces the intensity of every valid point of `cloud` (mm, frame of the
 // camera calibrated by `own`) by the mean of `images`' frames (camera DN of
@@ -17,8 +17,8 @@ namespace sl::daemon {
 // test: a point hidden from the other camera takes the colour of what hides
 // it. Throws std::invalid_argument when `images` holds no frames or their
 // size differs from `other`'s camera.
-void transferIntensity(pipeline::PointCloud& cloud, const pipeline::CameraProjectorCalibration& own,
-                       const pipeline::CameraProjectorCalibration& other,
-                       const pipeline::CameraImages& images);
+void transferIntensity(PointCloud& cloud, const CameraProjectorCalibration& own,
+                       const CameraProjectorCalibration& other,
+                       const CameraImages& images);
 
-}  // namespace sl::daemon
+}  // namespace sl::pipeline

@@ -1,0 +1,353 @@
+#include "engine/request_control.h"
+
+#include <algorithm>
+#include <limits>
+#include <utility>
+
+#include "engine/start_validation.h"
+
+namespace sl::daemon {
+
+using namespace std::chrono_literals;
+
+RequestControl::RequestControl(const DaemonConfig& config, Links links)
+    : config_(config), links_(std::move(links)), trigger_(config.runtime.trigger) {
+  current_pattern_ = config.runtime.default_pattern;
+  links_.projector->select(current_pattern_);
+}
+
+CommandResult RequestControl::start(const StartRequest& request) {
+  using Code = CommandResult::Code;
+  std::lock_guard lock(mutex_);
+  StartContext context;
+  context.config = &config_;
+  context.state = state_;
+  context.current_pattern = current_pattern_;
+  context.scans_done = scans_done_;
+  context.scans_requested = scans_requested_;
+  context.pattern_cameras = &links_.pattern_cameras;
+  context.camera_ids = links_.camera_ids;
+  context.software_unsupported = links_.software_unsupported;
+  context.now_ns = pipeline::systemClockNs();
+  const StartValidation validation = validateStart(request, context);
+  if (!validation.accepted()) return validation.rejection;
+  const AcceptedStart& accepted = validation.start;
+
+  if (!accepted.recording.empty()) {
+    try {
+      links_.recorder->start(accepted.recording_dir, "pattern " + accepted.pattern + ", " +
+                                                         std::to_string(accepted.count) +
+                                                         " scans requested");
+    } catch (const std::exception& e) {
+      return {Code::kDeviceError, std::string("cannot record: ") + e.what()};
+    }
+    recording_ = accepted.recording;
+  }
+  if (accepted.pattern != current_pattern_) {
+    try {
+      links_.projector->select(accepted.pattern);
+    } catch (const std::exception& e) {
+      links_.recorder->stop();
+      recording_.clear();
+      last_error_ = std::string("projector: ") + e.what();
+      ++status_version_;
+      return {Code::kDeviceError, last_error_};
+    }
+    current_pattern_ = accepted.pattern;
+  }
+  options_ = std::make_shared<RequestOptions>(accepted.options);
+  trigger_ = accepted.trigger;
+  scans_requested_ = static_cast<std::uint64_t>(accepted.count);
+  scans_done_ = 0;
+  pending_count_ = accepted.count;
+  last_error_.clear();
+  if (accepted.launch_at_ns > context.now_ns) {
+    state_ = ScanState::kWaiting;  // the control thread begins it
+    launch_at_ns_ = accepted.launch_at_ns;
+    changed_.notify_all();
+    ++status_version_;
+    return {};
+  }
+  beginLocked();
+  if (state_ == ScanState::kError) return {Code::kDeviceError, last_error_};
+  return {};
+}
+
+CommandResult RequestControl::stop() {
+  std::lock_guard lock(mutex_);
+  if (state_ != ScanState::kScanning && state_ != ScanState::kWaiting)
+    return {CommandResult::Code::kNotRunning, "not scanning"};
+  finishLocked("");
+  return {};
+}
+
+CommandResult RequestControl::selectPattern(const std::string& name) {
+  using Code = CommandResult::Code;
+  std::lock_guard lock(mutex_);
+  if (!config_.findPattern(name)) return {Code::kUnknownPattern, "unknown pattern '" + name + "'"};
+  const bool scanning = state_ == ScanState::kScanning;
+  if ((scanning || state_ == ScanState::kWaiting) && scans_requested_ != 0)
+    return {Code::kBusy, "cannot switch pattern during a request of " +
+                             std::to_string(scans_requested_) +
+                             " scans; wait for it or send stop (continuous scans switch)"};
+  if (scanning && trigger_ == TriggerMode::kSoftware) {
+    // The control thread reads the pattern at each sequence boundary: the
+    // sequence in progress completes with the old pattern.
+    current_pattern_ = name;
+    ++status_version_;
+    return {};
+  }
+  if (scanning) {
+    // Continuous hardware-triggered scan: the control thread switches at the
+    // end of the sequence in progress (a sequence of the running pattern
+    // starts every frame_count image intervals from the last trigger).
+    // Before the first trigger there is nothing to finish: switch now. A
+    // later request replaces a switch still pending.
+    if (switch_draining_) {  // the projector already stopped at the boundary
+      switch_pattern_ = name;
+      return {};
+    }
+    if (!switch_pattern_.empty() && name == current_pattern_) {
+      // Back to the running pattern before the pending switch happened:
+      // cancel it and release the boundary hold.
+      switch_pattern_.clear();
+      tellSchedule({generation_.load(), SwitchPending{std::numeric_limits<pipeline::TimestampNs>::max()}});
+      return {};
+    }
+    if (name == current_pattern_) return {};
+    const pipeline::TimestampNs period =
+        config_.findPattern(current_pattern_)->frameCount() * config_.synchroniser.image_interval_ns;
+    const pipeline::TimestampNs last = links_.last_trigger_ns();
+    const pipeline::TimestampNs now = pipeline::systemClockNs();
+    switch_at_ns_ = last > 0 && now >= last ? last + ((now - last) / period + 1) * period : now;
+    switch_pattern_ = name;
+    tellSchedule({generation_.load(), SwitchPending{switch_at_ns_}});
+    changed_.notify_all();
+    return {};
+  }
+  try {
+    links_.projector->select(name);
+    current_pattern_ = name;
+  } catch (const std::exception& e) {
+    return {Code::kDeviceError, std::string("projector: ") + e.what()};
+  }
+  ++status_version_;
+  return {};
+}
+
+bool RequestControl::serviceTimers() {
+  std::unique_lock lock(mutex_);
+  if (shut_down_) return false;
+  if (state_ == ScanState::kWaiting) {
+    const pipeline::TimestampNs now = pipeline::systemClockNs();
+    if (now >= launch_at_ns_) {
+      beginLocked();
+    } else {
+      changed_.wait_for(lock, std::min<std::chrono::nanoseconds>(
+                                  100ms, std::chrono::nanoseconds(launch_at_ns_ - now)));
+    }
+    return true;
+  }
+  if (state_ != ScanState::kScanning || switch_pattern_.empty()) return false;
+  const pipeline::TimestampNs now = pipeline::systemClockNs();
+  if (switch_draining_) {
+    // The old pattern's last frame is exposed one image interval before the
+    // boundary (half an interval of slack for stamp jitter).
+    const pipeline::TimestampNs last_frame = switch_at_ns_ - 3 * config_.synchroniser.image_interval_ns / 2;
+    if (links_.cameras_reached(last_frame) || Clock::now() >= drain_until_) {
+      switchLocked();
+    } else {
+      changed_.wait_for(lock, 2ms);
+    }
+  } else if (now >= switch_at_ns_) {
+    try {
+      links_.projector->stop();
+    } catch (const std::exception& e) {
+      switch_pattern_.clear();
+      finishLocked(std::string("projector: ") + e.what());
+      return true;
+    }
+    switch_draining_ = true;
+    drain_until_ = Clock::now() + 300ms;
+  } else {
+    changed_.wait_for(lock, std::min<std::chrono::nanoseconds>(
+                                100ms, std::chrono::nanoseconds(switch_at_ns_ - now)));
+  }
+  return true;
+}
+
+void RequestControl::waitForChange(std::chrono::milliseconds timeout) {
+  std::unique_lock lock(mutex_);
+  if (!shut_down_) changed_.wait_for(lock, timeout);
+}
+
+std::optional<RequestControl::SoftwareRun> RequestControl::softwareRun() const {
+  std::lock_guard lock(mutex_);
+  if (state_ != ScanState::kScanning || trigger_ != TriggerMode::kSoftware) return std::nullopt;
+  return SoftwareRun{generation_.load(), current_pattern_,
+                     config_.findPattern(current_pattern_)->frameCount(), scans_requested_};
+}
+
+std::optional<std::uint64_t> RequestControl::countScan(std::uint64_t generation) {
+  std::lock_guard lock(mutex_);
+  if (generation != generation_.load() || state_ != ScanState::kScanning) return std::nullopt;
+  ++scans_done_;
+  // Software-triggered sets come as fast as the devices allow: the deadline
+  // follows progress (as long as a scan arrives every sequence_s + 2 s,
+  // nothing is lost).
+  if (trigger_ == TriggerMode::kSoftware && scans_requested_ > scans_done_)
+    deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+                                   (scans_requested_ - scans_done_) * sequence_s_ + 2.0));
+  ++status_version_;
+  return scans_done_;
+}
+
+void RequestControl::finishIfComplete(std::uint64_t generation) {
+  std::lock_guard lock(mutex_);
+  if (generation == generation_.load() && scans_requested_ != 0 && scans_done_ >= scans_requested_)
+    finishLocked("");
+}
+
+void RequestControl::checkDeadline() {
+  std::lock_guard lock(mutex_);
+  if (state_ == ScanState::kScanning && Clock::now() > deadline_)
+    finishLocked("request ended with " + std::to_string(scans_done_) + " of " +
+                 std::to_string(scans_requested_) +
+                 " scans: image sets were lost (see the drop counters)");
+}
+
+void RequestControl::endRequest(std::uint64_t generation, const std::string& error) {
+  std::lock_guard lock(mutex_);
+  if (generation == generation_.load()) finishLocked(error);
+}
+
+void RequestControl::reportError(const std::string& message) {
+  std::lock_guard lock(mutex_);
+  last_error_ = message;
+  ++status_version_;
+}
+
+void RequestControl::touch() {
+  std::lock_guard lock(mutex_);
+  ++status_version_;
+}
+
+std::shared_ptr<const RequestOptions> RequestControl::options() const {
+  std::lock_guard lock(mutex_);
+  return options_;
+}
+
+std::vector<std::string> RequestControl::camerasFor(const std::string& pattern,
+                                                    const RequestOptions& options) const {
+  if (!options.cameras.empty() && options.cameras_pattern == pattern) return options.cameras;
+  return links_.pattern_cameras.at(pattern);
+}
+
+void RequestControl::fillStatus(EngineStatus& s) const {
+  std::lock_guard lock(mutex_);
+  s.version = status_version_;
+  s.state = state_;
+  s.pattern = current_pattern_;
+  s.scans_done = scans_done_;
+  s.scans_requested = scans_requested_;
+  s.last_error = last_error_;
+  s.recording = recording_;
+  s.trigger = trigger_;
+  s.cameras = camerasFor(current_pattern_, *options_);
+  s.start_at_ns = state_ == ScanState::kWaiting ? launch_at_ns_ : 0;
+}
+
+void RequestControl::shutDown() {
+  {
+    std::lock_guard lock(mutex_);
+    shut_down_ = true;
+  }
+  changed_.notify_all();
+}
+
+// Starts a new projector schedule of `count` sequences (0 = until stop) of
+// pattern `name` as a new generation. Throws what the projector throws.
+void RequestControl::launchLocked(const std::string& name, int frame_count, int count) {
+  const std::uint64_t next = generation_.load() + 1;
+  links_.projector->select(name);
+  current_pattern_ = name;
+  tellSchedule({next, RunStarted{name, frame_count, pipeline::systemClockNs()}});
+  generation_ = next;
+  links_.projector->start(count);
+}
+
+// Begins the accepted request (kWaiting until now) with current_pattern_ and
+// pending_count_. A device error ends it in kError.
+void RequestControl::beginLocked() {
+  const pipeline::PatternSpec* pattern = config_.findPattern(current_pattern_);
+  const int count = pending_count_;
+  scans_done_ = 0;
+  // Time per sequence: one image interval per pattern with a trigger board;
+  // in software, settle plus (at least) an exposure per pattern, doubled
+  // for transfer and processing.
+  sequence_s_ = pattern->frameCount() * config_.synchroniser.image_interval_ns * 1e-9;
+  if (trigger_ == TriggerMode::kSoftware)
+    sequence_s_ = 2 * pattern->frameCount() *
+                  (config_.software_trigger.settle_s + config_.synchroniser.image_interval_ns * 1e-9);
+  deadline_ = count == 0 ? Clock::time_point::max()
+                         : Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(count * sequence_s_ + 2.0));
+  state_ = ScanState::kScanning;
+  launch_at_ns_ = 0;
+  try {
+    if (trigger_ == TriggerMode::kHardware) {
+      launchLocked(current_pattern_, pattern->frameCount(), count);
+    } else {
+      generation_++;  // the control thread acquires this generation's sets
+      changed_.notify_all();
+    }
+  } catch (const std::exception& e) {
+    state_ = ScanState::kError;
+    links_.recorder->stop();
+    recording_.clear();
+    last_error_ = std::string("projector: ") + e.what();
+  }
+  ++status_version_;
+}
+
+// Carries out the pending pattern switch of a continuous hardware-triggered
+// scan at the boundary after the sequence in progress: the projector starts
+// the new pattern's schedule in the same request; the grouping lets the old
+// pattern's last sequence complete (PatternSwitched::boundary_ns).
+void RequestControl::switchLocked() {
+  const std::string name = std::exchange(switch_pattern_, std::string());
+  const pipeline::TimestampNs boundary = std::exchange(switch_at_ns_, 0);
+  switch_draining_ = false;
+  try {
+    links_.projector->select(name);
+    current_pattern_ = name;
+    tellSchedule({generation_.load(), PatternSwitched{name, config_.findPattern(name)->frameCount(),
+                                                      pipeline::systemClockNs(), boundary}});
+    links_.projector->start(0);
+  } catch (const std::exception& e) {
+    finishLocked(std::string("projector: ") + e.what());
+    return;
+  }
+  ++status_version_;
+}
+
+void RequestControl::finishLocked(const std::string& error) {
+  try {
+    links_.projector->stop();
+  } catch (const std::exception& e) {
+    last_error_ = std::string("projector stop: ") + e.what();
+  }
+  tellSchedule({generation_.load(), RunEnded{!error.empty()}});
+  generation_++;
+  state_ = ScanState::kIdle;
+  launch_at_ns_ = 0;
+  switch_pattern_.clear();
+  switch_draining_ = false;
+  links_.recorder->stop();
+  recording_.clear();
+  if (!error.empty()) last_error_ = error;
+  ++status_version_;
+  changed_.notify_all();
+}
+
+}  // namespace sl::daemon

@@ -1,0 +1,136 @@
+// The request state machine of the scan engine: idle -> (waiting ->)
+// scanning -> idle / error; begin, launch, pattern switches at sequence
+// boundaries, delayed starts, the end of a request. It drives the projector
+// and the recorder and tells the grouping thread about every schedule change
+// (ScheduleEvent); it starts no threads: the engine's control thread calls
+// serviceTimers(), its output thread countScan() / finishIfComplete().
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "engine/schedule_events.h"
+#include "recorder.h"
+#include "sl/daemon/bounded_queue.h"
+#include "sl/daemon/config.h"
+#include "sl/daemon/scan_engine.h"
+#include "sl/drivers/projector.h"
+
+namespace sl::daemon {
+
+// Thread-safe: one mutex guards every member below it; the generation is an
+// atomic so that the data threads can tag and filter without the mutex.
+class RequestControl {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  struct Links {
+    std::shared_ptr<drivers::Projector> projector;
+    Recorder* recorder = nullptr;
+    BoundedQueue<ScheduleEvent>* schedule = nullptr;  // to the grouping thread
+    std::map<std::string, std::vector<std::string>> pattern_cameras;
+    std::vector<std::string> camera_ids;
+    std::string software_unsupported;  // "" = the devices can be software-triggered
+    // The latest trigger grouped for the running pattern (0: none yet).
+    std::function<pipeline::TimestampNs()> last_trigger_ns;
+    // True once every camera delivered a frame stamped at or after the time.
+    std::function<bool(pipeline::TimestampNs)> cameras_reached;
+  };
+
+  RequestControl(const DaemonConfig& config, Links links);
+
+  CommandResult start(const StartRequest& request);
+  CommandResult stop();
+  CommandResult selectPattern(const std::string& name);
+
+  // Control thread: begins a waiting request at its time, or carries out a
+  // pending pattern switch at its boundary (waiting at most until the next
+  // step is due). False when neither is pending.
+  bool serviceTimers();
+  // Waits up to `timeout` for a request to change (start, stop, switch).
+  void waitForChange(std::chrono::milliseconds timeout);
+
+  // A software-triggered request in progress.
+  struct SoftwareRun {
+    std::uint64_t generation = 0;
+    std::string pattern;  // read at each sequence boundary
+    int frame_count = 0;
+    std::uint64_t scans_requested = 0;  // 0 = continuous
+  };
+  std::optional<SoftwareRun> softwareRun() const;
+
+  // Output thread: counts a scan of `generation`; its 1-based index within
+  // the request, or nullopt when it belongs to no running request.
+  std::optional<std::uint64_t> countScan(std::uint64_t generation);
+  // Ends the request of `generation` once its last scan was published.
+  void finishIfComplete(std::uint64_t generation);
+  // Ends a finite request that missed its deadline (image sets were lost).
+  void checkDeadline();
+  // Ends the request of `generation` (if still current) with an error.
+  void endRequest(std::uint64_t generation, const std::string& error);
+
+  void reportError(const std::string& message);
+  // Bumps the status version (a change worth publishing).
+  void touch();
+
+  std::uint64_t generation() const { return generation_.load(); }
+  std::shared_ptr<const RequestOptions> options() const;
+  // The cameras triangulating `pattern` under `options`.
+  std::vector<std::string> camerasFor(const std::string& pattern, const RequestOptions& options) const;
+  // State, pattern, scan counts, version, last error and request options.
+  void fillStatus(EngineStatus& status) const;
+
+  // Called once by the engine's destructor: wakes waiters for good.
+  void shutDown();
+
+ private:
+  void beginLocked();
+  void launchLocked(const std::string& name, int frame_count, int count);
+  void switchLocked();
+  void finishLocked(const std::string& error);
+  void tellSchedule(ScheduleEvent event) { links_.schedule->push(std::move(event)); }
+
+  const DaemonConfig& config_;
+  Links links_;
+  std::atomic<std::uint64_t> generation_{0};  // bumped at every begin and end
+
+  mutable std::mutex mutex_;
+  std::condition_variable changed_;  // with mutex_
+  bool shut_down_ = false;
+  std::string current_pattern_;
+  ScanState state_ = ScanState::kIdle;
+  std::uint64_t scans_requested_ = 0;
+  std::uint64_t scans_done_ = 0;
+  std::uint64_t status_version_ = 0;
+  std::string last_error_;
+  std::string recording_;  // the recording in progress ("" = none)
+  TriggerMode trigger_;    // of the current (or last) request
+  std::shared_ptr<const RequestOptions> options_ = std::make_shared<RequestOptions>();
+  // kWaiting: the request begins at launch_at_ns_ (system clock).
+  pipeline::TimestampNs launch_at_ns_ = 0;
+  int pending_count_ = 0;
+  // A pattern switch of a continuous hardware-triggered scan, carried out at
+  // switch_at_ns_, the end of the sequence in progress ("" = none).
+  std::string switch_pattern_;
+  pipeline::TimestampNs switch_at_ns_ = 0;
+  // After the projector stopped at the boundary: the new schedule starts once
+  // every camera delivered the old pattern's last frame (a restart may
+  // discard frames not yet read out), or at drain_until_ at the latest.
+  bool switch_draining_ = false;
+  Clock::time_point drain_until_;
+  // A finite request that has not delivered every scan by then ends with an
+  // error (frames were lost).
+  Clock::time_point deadline_ = Clock::time_point::max();
+  double sequence_s_ = 0;  // expected time per sequence of the request
+};
+
+}  // namespace sl::daemon

@@ -1,0 +1,114 @@
+#include "engine/set_processor.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "sl/pipeline/intensity_transfer.h"
+
+namespace sl::daemon {
+
+ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids) {
+  ProcessingConfig p;
+  p.patterns = config.patterns;
+  p.decoder = config.decoder;
+  p.triangulator = config.triangulator;
+  for (std::size_t i = 0; i < camera_ids.size(); ++i) {
+    if (i == 0) {
+      p.calibrations.emplace(camera_ids[i], config.calibration);
+    } else if (const auto c = config.extra_calibrations.find(camera_ids[i]);
+               c != config.extra_calibrations.end()) {
+      p.calibrations.emplace(camera_ids[i], c->second);
+    }
+  }
+  p.intensity_camera = config.pattern_intensity_camera;
+  p.motion_enabled = config.motion.enabled;
+  p.motion = config.motion.options;
+  p.keep_maps = config.dds.publish_projector_maps;
+  return p;
+}
+
+SetProcessor::SetProcessor(const ProcessingConfig& config)
+    : config_(config), stages_(build(config)), motion_(config.motion) {}
+
+SetProcessor::Stages SetProcessor::build(const ProcessingConfig& config) {
+  Stages stages;
+  for (const auto& p : config.patterns) stages.decoders.emplace(p.name, pipeline::Decoder(p, config.decoder));
+  for (const auto& [id, calibration] : config.calibrations)
+    stages.triangulators.emplace(id, pipeline::Triangulator(calibration, config.triangulator));
+  return stages;
+}
+
+std::string SetProcessor::reconfigure(const ProcessingConfig& config) {
+  try {
+    Stages rebuilt = build(config);
+    pipeline::MotionCompensator motion(config.motion);
+    stages_ = std::move(rebuilt);
+    motion_ = std::move(motion);
+    config_ = config;
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vector<std::string>& cameras,
+                                 bool motion_compensation) {
+  SetOutcome out;
+  // Motion compensation aligns every frame with the reference frame of its
+  // sequence; the cloud is then stamped with the reference frame's time.
+  std::shared_ptr<const pipeline::ImageSet> compensated;
+  if (motion_compensation) {
+    try {
+      pipeline::MotionEstimate estimate;
+      compensated = motion_.compensate(input, &estimate);
+      if (!estimate.all_within_limit)
+        out.warning = "motion compensation: a shift beyond max_shift_px was ignored";
+    } catch (const std::exception& e) {
+      out.error = std::string("motion compensation: ") + e.what();
+      return out;
+    }
+  }
+  const pipeline::ImageSet& set = compensated ? *compensated : input;
+  try {
+    const auto decoder = stages_.decoders.find(set.pattern_name);
+    if (decoder == stages_.decoders.end())
+      throw std::runtime_error("no decoder for pattern '" + set.pattern_name + "'");
+    for (const std::string& camera_id : cameras) {
+      const auto images = std::find_if(set.cameras.begin(), set.cameras.end(),
+                                       [&](const auto& c) { return c.camera_id == camera_id; });
+      if (images == set.cameras.end())
+        throw std::runtime_error("no images of camera '" + camera_id + "' in the set");
+      const auto triangulator = stages_.triangulators.find(camera_id);
+      if (triangulator == stages_.triangulators.end())
+        throw std::runtime_error("no calibration of camera '" + camera_id + "'");
+      auto [maps, cloud] = processor_.process(
+          decoder->second.codec(), triangulator->second, *images, set.trigger_stamp_ns, camera_id,
+          config_.keep_maps ? pipeline::ScanProcessor::Keep::kMapsAndCloud
+                            : pipeline::ScanProcessor::Keep::kCloud);
+      if (auto coloured = colouredCopy(set, camera_id, *cloud)) cloud = std::move(coloured);
+      out.scans.push_back({camera_id, images->bit_depth, std::move(maps), std::move(cloud)});
+    }
+  } catch (const std::exception& e) {
+    out.scans.clear();
+    out.error = "processing sequence " + std::to_string(set.sequence_id) + ": " + e.what();
+  }
+  return out;
+}
+
+// A copy of `cloud` (triangulated by `camera_id`) with the intensity seen by
+// the pattern's intensity camera; nullptr when the pattern has none.
+std::shared_ptr<const pipeline::PointCloud> SetProcessor::colouredCopy(
+    const pipeline::ImageSet& set, const std::string& camera_id, const pipeline::PointCloud& cloud) const {
+  const auto other = config_.intensity_camera.find(set.pattern_name);
+  if (other == config_.intensity_camera.end() || other->second == camera_id) return nullptr;
+  const auto images = std::find_if(set.cameras.begin(), set.cameras.end(),
+                                   [&](const auto& c) { return c.camera_id == other->second; });
+  if (images == set.cameras.end())
+    throw std::runtime_error("no images of intensity camera '" + other->second + "' in the set");
+  auto coloured = std::make_shared<pipeline::PointCloud>(cloud);
+  pipeline::transferIntensity(*coloured, config_.calibrations.at(camera_id),
+                              config_.calibrations.at(other->second), *images);
+  return coloured;
+}
+
+}  // namespace sl::daemon

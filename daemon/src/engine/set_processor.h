@@ -1,0 +1,91 @@
+// Per image set: motion compensation, decoding, triangulation by each of the
+// pattern's cameras, colouring from an intensity camera. The processing
+// thread's stage: synchronous, no DDS settings, errors returned as values.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "sl/daemon/config.h"
+#include "sl/pipeline/codec.h"
+#include "sl/pipeline/motion_compensation.h"
+#include "sl/pipeline/scan_processor.h"
+#include "sl/pipeline/triangulator.h"
+#include "sl/pipeline/types.h"
+
+namespace sl::daemon {
+
+// What set processing needs, and nothing else.
+struct ProcessingConfig {
+  std::vector<pipeline::PatternSpec> patterns;
+  pipeline::DecoderOptions decoder;
+  pipeline::TriangulatorOptions triangulator;
+  // Calibrations against the projector by camera id: one triangulator each.
+  std::map<std::string, pipeline::CameraProjectorCalibration> calibrations;
+  // Pattern -> the camera whose view colours its clouds (none: the
+  // triangulating camera's own intensity).
+  std::map<std::string, std::string> intensity_camera;
+  bool motion_enabled = false;  // default of requests that leave it open
+  pipeline::MotionCompensationOptions motion;
+  bool keep_maps = false;  // return the projector maps (costs memory traffic)
+};
+
+// From the daemon's config for the sensor's cameras (`camera_ids`, in
+// synchroniser order): the first uses `calibration`, the others their entry
+// of `calibrations:` (if any); maps are kept when the DDS edge publishes them
+// (dds.publish_projector_maps).
+ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids);
+
+// One camera's result of one set.
+struct CameraScan {
+  std::string camera_id;  // the triangulating camera; also the cloud's frame_id
+  int bit_depth = 8;      // of that camera's images
+  std::shared_ptr<const pipeline::ProjectorMaps> maps;  // null unless keep_maps
+  std::shared_ptr<const pipeline::PointCloud> cloud;    // mm, that camera's optical frame
+};
+
+struct SetOutcome {
+  std::vector<CameraScan> scans;  // empty when `error` is set
+  std::string error;              // names the stage and the sequence
+  std::string warning;            // processed, but worth reporting
+  bool ok() const { return error.empty(); }
+};
+
+// Thread-compatible: one processing thread owns it (its row workers are its
+// own).
+class SetProcessor {
+ public:
+  // Throws std::invalid_argument (from the pipeline stages) on a pattern or
+  // calibration they reject.
+  explicit SetProcessor(const ProcessingConfig& config);
+
+  // Processes `set` for `cameras` (each must have images in the set);
+  // motion compensation when `motion_compensation`. Never throws.
+  SetOutcome process(const pipeline::ImageSet& set, const std::vector<std::string>& cameras,
+                     bool motion_compensation);
+
+  // Rebuilds the stages from new settings (a config reload). On an error the
+  // old stages stay and the error is returned ("" = applied).
+  std::string reconfigure(const ProcessingConfig& config);
+
+  bool motionEnabled() const { return config_.motion_enabled; }
+
+ private:
+  struct Stages {
+    std::map<std::string, pipeline::Decoder> decoders;            // by pattern
+    std::map<std::string, pipeline::Triangulator> triangulators;  // by camera id
+  };
+  static Stages build(const ProcessingConfig& config);
+  std::shared_ptr<const pipeline::PointCloud> colouredCopy(const pipeline::ImageSet& set,
+                                                           const std::string& camera_id,
+                                                           const pipeline::PointCloud& cloud) const;
+
+  ProcessingConfig config_;
+  Stages stages_;
+  pipeline::MotionCompensator motion_;
+  pipeline::ScanProcessor processor_;
+};
+
+}  // namespace sl::daemon

@@ -1,0 +1,55 @@
+// The engine's counts and rates for the status topic: what each thread
+// counted (frames received, unmatched, sequences incomplete) and the rates
+// derived from them.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <mutex>
+
+namespace sl::daemon {
+
+// Thread-safe: counters are atomics written by the thread that owns the
+// count; the rates take their own mutex.
+class EngineStatistics {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  // Camera frames received (all cameras); camera and control threads.
+  void framesReceived(std::uint64_t n) { frames_received_ += n; }
+  // Totals of the two groupings (trigger time: grouping thread; software
+  // trigger: control thread), stored after each push.
+  struct GroupingCounts {
+    std::uint64_t frames_unmatched = 0;
+    std::uint64_t sets_incomplete = 0;
+  };
+  void setTriggerGrouping(GroupingCounts counts);
+  void setSoftwareGrouping(GroupingCounts counts);
+  std::uint64_t framesUnmatched() const;
+  std::uint64_t setsIncomplete() const;
+
+  // A scan of request `generation` was published (output thread).
+  void scanPublished(std::uint64_t generation);
+  // Scans per second over the last (up to) 10 scans of `generation`: stable,
+  // and quick to follow a switch; 0 before two scans of it.
+  double scanRateHz(std::uint64_t generation) const;
+  // Frames per second over windows of at least a second (status() is polled
+  // often; the window moves on when asked after a second).
+  double frameRateHz();
+
+ private:
+  std::atomic<std::uint64_t> frames_received_{0};
+  std::atomic<std::uint64_t> unmatched_trigger_{0}, unmatched_software_{0};
+  std::atomic<std::uint64_t> incomplete_trigger_{0}, incomplete_software_{0};
+
+  mutable std::mutex mutex_;
+  std::uint64_t scan_generation_ = 0;      // guarded by mutex_
+  std::deque<Clock::time_point> recent_;   // guarded by mutex_
+  Clock::time_point window_start_ = Clock::now();  // guarded by mutex_
+  std::uint64_t window_frames_ = 0;        // guarded by mutex_
+  double frame_rate_hz_ = 0;               // guarded by mutex_
+};
+
+}  // namespace sl::daemon
