@@ -1,5 +1,6 @@
 #include "sl/pipeline/schedule_synchroniser.h"
 
+#include <cmath>
 #include <utility>
 
 namespace sl::pipeline {
@@ -101,10 +102,15 @@ ScheduleCounters ScheduleSynchroniser::counters() const {
 // The schedule whose stamp interval holds `stamp` (the running one ends at
 // the pending switch's boundary); nullptr when none does.
 ScheduleSynchroniser::Schedule* ScheduleSynchroniser::route(TimestampNs stamp) {
+  // A boundary is the start of a sequence that does not belong to the
+  // schedule: its first frame may be stamped up to tol_l * dt before it.
+  const auto lower = static_cast<TimestampNs>(
+      std::llround(options_.tolerance_lower * static_cast<double>(options_.image_interval_ns)));
   for (std::size_t i = 0; i < schedules_.size(); ++i) {
     Schedule& s = schedules_[i];
     const bool is_running = running_ && i + 1 == schedules_.size();
-    const TimestampNs until = is_running ? std::min(s.until_ns, hold_from_ns_) : s.until_ns;
+    const TimestampNs boundary = is_running ? std::min(s.until_ns, hold_from_ns_) : s.until_ns;
+    const TimestampNs until = boundary == kNoHold ? kNoHold : boundary - lower;
     if (stamp >= s.from_ns && stamp < until) return &s;
   }
   ++stamps_outside_;

@@ -36,8 +36,9 @@ struct ScheduleCounters {
 //
 // Sequence ids increase from 0 within a run, across its pattern switches.
 // Every schedule of a run is a Synchroniser over a stamp interval
-// [not_before, boundary); a stamp is grouped by the schedule whose interval
-// holds it. A schedule that is no longer running is retired (what it still
+// [not_before, boundary - tol_l * dt): the sequence starting at the boundary
+// is not the schedule's, and its first frame may be stamped up to tol_l * dt
+// early. A stamp is grouped by the schedule whose interval holds it. A schedule that is no longer running is retired (what it still
 // holds counted as incomplete / unmatched) once a stamp newer than its
 // boundary + max_age arrives, or when its run ends with endRun(true).
 class ScheduleSynchroniser {
@@ -54,8 +55,8 @@ class ScheduleSynchroniser {
   // `boundary_ns` and starts `pattern` at or after not_before_ns (>= boundary).
   void switchPattern(std::string pattern, int frame_count, TimestampNs not_before_ns,
                      TimestampNs boundary_ns);
-  // A switch is pending at `at_ns`: stamps at or after it belong to no set
-  // until switchPattern(). kNoHold releases the hold (switch cancelled).
+  // A switch is pending at `at_ns`: stamps at or after it (less tol_l * dt)
+  // belong to no set until switchPattern(). kNoHold releases the hold (switch cancelled).
   void holdFrom(TimestampNs at_ns);
   // The run ended. What is still held is a sequence the stop cut short
   // (count_pending false: dropped silently) or one whose frames were lost
