@@ -4,6 +4,7 @@
 # (bench_viewer.mjs) subscribed to the full cloud (as Foxglove) or to the web
 # page's decimated cloud. Prints sl_view's CPU per cloud, the daemon's CPU
 # per cloud with and without the bridge, and the latency the bridge adds.
+# VIEW_ARGS="--best-effort" passes options to sl_view.
 # Run it in a private network namespace, on an otherwise idle machine:
 #   unshare -n sh -c 'ip link set lo up && bash tools/sl_view/bench/bench_view.sh build 20'
 set -euo pipefail
@@ -39,7 +40,7 @@ measure() {  # LABEL VIEW_PID: daemon (and sl_view) CPU per cloud over $seconds
 }
 measure "no bridge" ""
 for topic in "/$ns/points" "/$ns/points/preview"; do
-  "$bin/tools/sl_view/sl_view" --ns "$ns" --port 0 > "$work/view.log" 2>&1 &
+  "$bin/tools/sl_view/sl_view" --ns "$ns" --port 0 ${VIEW_ARGS:-} > "$work/view.log" 2>&1 &
   view=$!; pids+=($view)
   sleep 2
   port=$(grep -o "http://127.0.0.1:[0-9]*" "$work/view.log" | grep -o "[0-9]*$")
