@@ -58,8 +58,9 @@ struct RawTopicsOptions {
   std::string ns = "sl";
   // Reliable (default): lost fragments of a 25 MB cloud are resent, and the
   // reader keeps only the latest sample (keep-last 1), acknowledging on
-  // receipt in Cyclone's receive thread, so it never holds the daemon's
-  // writer back even when this program's consumers are slow. Best-effort
+  // receipt in Cyclone's receive thread, so slow consumers of this program
+  // never hold the daemon's writer back (a process starved of CPU does:
+  // the daemon's reliable writers wait for its acknowledgements). Best-effort
   // loses every cloud whose burst overflows the socket receive buffer (most
   // of them with Linux's default rmem_max). Status is always reliable +
   // transient-local (the latest one arrives on start-up).
