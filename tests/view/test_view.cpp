@@ -1,0 +1,161 @@
+// sl_view's pieces without DDS: the CDR reader's errors, the preview
+// decimation, the ROS 2 schemas and the MCAP writer's framing (the Node
+// tests check the files with @mcap/core; these check what they cannot see:
+// errors, and the bytes we choose).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+#include "common/cdr.h"
+#include "common/mcap_writer.h"
+#include "common/ros2_schemas.h"
+#include "preview.h"
+
+using sl::tools::CdrError;
+using sl::tools::CdrReader;
+using sl::tools::CdrWriter;
+
+namespace {
+
+// An organized PointCloud2 of w x h points (x, y, z, intensity float32),
+// point (r, c) = (c, r, 1000 r + c, 7).
+std::vector<std::uint8_t> cloud(std::uint32_t w, std::uint32_t h) {
+  CdrWriter out;
+  out.i32(12);
+  out.u32(34);
+  out.string("frame");
+  out.u32(h);
+  out.u32(w);
+  out.u32(4);
+  const char* names[] = {"x", "y", "z", "intensity"};
+  for (std::uint32_t i = 0; i < 4; ++i) {
+    out.string(names[i]);
+    out.u32(4 * i);
+    out.u8(7);
+    out.u32(1);
+  }
+  out.boolean(false);
+  out.u32(16);
+  out.u32(16 * w);
+  std::uint8_t* d = out.bytes(std::size_t{16} * w * h);
+  for (std::uint32_t r = 0; r < h; ++r)
+    for (std::uint32_t c = 0; c < w; ++c) {
+      const float p[4] = {float(c), float(r), float(1000 * r + c), 7.f};
+      std::memcpy(d + 16 * (r * w + c), p, 16);
+    }
+  out.boolean(true);
+  return out.finish();
+}
+
+}  // namespace
+
+TEST_CASE("CdrReader: aligned fields, strings, and errors naming the sample") {
+  CdrWriter w;
+  w.u8(1);
+  w.u32(0xdeadbeef);  // aligned to 4 after the header
+  w.u64(42);
+  w.string("abc");
+  w.f64(2.5);
+  auto bytes = w.finish();
+  CHECK(bytes[0] == 0);
+  CHECK(bytes[1] == 1);
+  CHECK((bytes.size() - 4) % 4 == 0);
+  CdrReader r(bytes.data(), bytes.size(), "test sample");
+  CHECK(r.u8() == 1);
+  CHECK(r.u32() == 0xdeadbeef);
+  CHECK(r.u64() == 42);
+  CHECK(r.string() == "abc");
+  CHECK(r.f64() == 2.5);
+  CHECK_THROWS_WITH(r.u64(), Catch::Contains("test sample") && Catch::Contains("truncated"));
+  const std::uint8_t big_endian[] = {0, 0, 0, 0, 1, 2, 3, 4};
+  CHECK_THROWS_WITH(CdrReader(big_endian, sizeof big_endian, "be"),
+                    Catch::Contains("be") && Catch::Contains("little-endian"));
+}
+
+TEST_CASE("decimateCloud keeps every step-th point of each row and column") {
+  const auto in = cloud(10, 7);
+  const auto out = sl::view::decimateCloud(
+      std::string_view(reinterpret_cast<const char*>(in.data()), in.size()), 4);
+  CdrReader r(out.data(), out.size(), "preview");
+  CHECK(r.i32() == 12);
+  CHECK(r.u32() == 34);
+  CHECK(r.string() == "frame");
+  CHECK(r.u32() == 2);  // height: rows 0, 4
+  CHECK(r.u32() == 3);  // width: columns 0, 4, 8
+  REQUIRE(r.u32() == 4);
+  for (int i = 0; i < 4; ++i) {
+    r.string();
+    r.u32();
+    r.u8();
+    r.u32();
+  }
+  CHECK_FALSE(r.boolean());
+  CHECK(r.u32() == 16);
+  CHECK(r.u32() == 48);
+  const auto data = r.bytes();
+  REQUIRE(data.size() == 6 * 16);
+  for (int row = 0; row < 2; ++row)
+    for (int col = 0; col < 3; ++col) {
+      float p[4];
+      std::memcpy(p, data.data() + 16 * (row * 3 + col), 16);
+      CHECK(p[0] == float(4 * col));
+      CHECK(p[1] == float(4 * row));
+      CHECK(p[2] == float(1000 * 4 * row + 4 * col));
+    }
+  CHECK(r.boolean());
+  // A cloud whose data is shorter than width x height points is an error.
+  auto broken = cloud(10, 7);
+  broken.resize(broken.size() - 40);
+  CHECK_THROWS_AS(sl::view::decimateCloud(std::string_view(reinterpret_cast<const char*>(broken.data()), broken.size()), 4),
+                  CdrError);
+}
+
+TEST_CASE("ros2Schema: the standard fields and their dependencies; unknown types named") {
+  const auto& pc = sl::tools::ros2Schema("sensor_msgs/msg/PointCloud2");
+  CHECK(pc.name == "sensor_msgs/msg/PointCloud2");
+  CHECK(pc.definition.rfind("std_msgs/Header header\n", 0) == 0);
+  CHECK(pc.definition.find("MSG: std_msgs/Header\n") != std::string::npos);
+  CHECK(pc.definition.find("MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n") != std::string::npos);
+  CHECK(pc.definition.find("MSG: sensor_msgs/PointField\n") != std::string::npos);
+  CHECK(sl::tools::ros2Schema("sensor_msgs/msg/CameraInfo").definition.find("float64[9] k\n") != std::string::npos);
+  CHECK_THROWS_WITH(sl::tools::ros2Schema("sensor_msgs/msg/Nope"), Catch::Contains("sensor_msgs/msg/Nope"));
+}
+
+TEST_CASE("McapWriter: magic at both ends, the footer points at the summary, errors name the file") {
+  const std::string path = std::string(SL_BINARY_DIR) + "/tests/view/test_view.mcap";
+  {
+    sl::tools::McapWriter w(path, {"ros2", "test", "", 64});
+    const auto s = w.addSchema("sensor_msgs/msg/PointCloud2", "ros2msg", "uint8 x\n");
+    const auto c = w.addChannel(s, "/sl/points", "cdr");
+    for (std::uint32_t i = 0; i < 5; ++i) w.write(c, i + 1, 100 + i, 90 + i, "0123456789");
+    CHECK(w.messageCount() == 5);
+    CHECK_THROWS_WITH(w.write(7, 1, 1, 1, "x"), Catch::Contains(path) && Catch::Contains("channel 7"));
+  }
+  std::ifstream in(path, std::ios::binary);
+  const std::string f((std::istreambuf_iterator<char>(in)), {});
+  const std::string magic("\x89MCAP0\r\n", 8);
+  REQUIRE(f.size() > 16 + 29);
+  CHECK(f.substr(0, 8) == magic);
+  CHECK(f.substr(f.size() - 8) == magic);
+  // Footer: opcode 0x02, length 20, summary_start, summary_offset_start, crc.
+  const std::size_t footer = f.size() - 8 - 29;
+  CHECK(f[footer] == 0x02);
+  std::uint64_t summary_start, offsets_start;
+  std::uint32_t crc;
+  std::memcpy(&summary_start, f.data() + footer + 9, 8);
+  std::memcpy(&offsets_start, f.data() + footer + 17, 8);
+  std::memcpy(&crc, f.data() + footer + 25, 4);
+  REQUIRE(summary_start < offsets_start);
+  REQUIRE(offsets_start < footer);
+  CHECK(f[summary_start] == 0x03);  // the summary opens with the schema
+  CHECK(f[offsets_start] == 0x0E);  // then the summary offsets
+  CHECK(crc == sl::tools::crc32(std::string_view(f).substr(summary_start, footer + 25 - summary_start)));
+  CHECK(sl::tools::crc32("123456789") == 0xCBF43926u);  // the CRC-32 check value
+  std::remove(path.c_str());
+  CHECK_THROWS_WITH(sl::tools::McapWriter("/nonexistent/dir/x.mcap"), Catch::Contains("/nonexistent/dir/x.mcap"));
+  CHECK_THROWS_WITH(sl::tools::McapWriter(path, {"ros2", "t", "brotli", 1}), Catch::Contains("brotli"));
+}
