@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "aravis_devices.h"
+#include "sl/daemon/log.h"
 #include "sl/drivers/camera_stamp_trigger.h"
 #include "sl/drivers/lightcrafter4500.h"
 #include "sl/drivers/replay.h"
@@ -47,8 +48,8 @@ EngineDevices openReplay(const DaemonConfig& config, std::shared_ptr<void>& keep
   if (camera.width() != config.calibration.camera.width ||
       camera.height() != config.calibration.camera.height)
     throw std::runtime_error(config.source_path + ": replay: the recording's images are " +
-                             std::to_string(camera.width()) + "x" + std::to_string(camera.height()) +
-                             ", the calibration's camera " +
+                             std::to_string(camera.width()) + "x" +
+                             std::to_string(camera.height()) + ", the calibration's camera " +
                              std::to_string(config.calibration.camera.width) + "x" +
                              std::to_string(config.calibration.camera.height));
   for (const auto& sequence : devices.projector->sequences())
@@ -72,7 +73,8 @@ EngineDevices openHardware(const DaemonConfig& config) {
   const drivers::LightCrafter4500Config& p = config.hardware.projector;
   try {
     devices.projector = std::make_shared<drivers::LightCrafter4500Projector>(
-        p, [p] { return drivers::openHidapiTransport(p.vendor_id, p.product_id, p.serial); });
+        p, [p] { return drivers::openHidapiTransport(p.vendor_id, p.product_id, p.serial); },
+        [id = p.id](const std::string& note) { logWarning("projector '" + id + "': " + note); });
   } catch (const std::exception& e) {
     throw std::runtime_error("projector '" + p.id + "': " + e.what());
   }

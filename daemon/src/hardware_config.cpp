@@ -1,4 +1,5 @@
 #include <cmath>
+#include <optional>
 #include <set>
 
 #include "hardware_config_yaml.h"
@@ -57,8 +58,35 @@ drivers::LightCrafter4500Sequence parseSequence(const YamlMap& m) {
   s.name = m.get<std::string>("name");
   if (s.name.empty()) m.fail("name", "must not be empty");
   const std::vector<int> images = intList(m, "image_indices", 0, 255);
-  const std::vector<int> channels = intList(m, "channels", 0, 24);
-  const std::vector<int> depths =
+  // Channels: a pattern number 0..24, or "white" / "black" for the 1-bit
+  // fill pattern with the polarity of dlpc350::fillPattern (Gray-code
+  // reference frames), which sets its bit depth and invert flag.
+  std::vector<int> channels;
+  std::vector<std::optional<bool>> fill;  // white / black entries
+  {
+    const YAML::Node node = m.raw("channels");
+    if (!node.IsSequence() || node.size() == 0)
+      m.fail("channels", "expected a non-empty list of pattern numbers or white / black");
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      const std::string text = node[i].IsScalar() ? node[i].Scalar() : std::string();
+      if (text == "white" || text == "black") {
+        const dl::FillPattern f = dl::fillPattern(text == "white");
+        channels.push_back(f.pattern_number);
+        fill.push_back(text == "white");
+        continue;
+      }
+      int v = -1;
+      try {
+        const double d = node[i].as<double>();
+        if (d == std::floor(d) && d >= 0 && d <= 24) v = static_cast<int>(d);
+      } catch (const YAML::Exception&) {
+      }
+      if (v < 0) m.fail("channels", "expected integers in 0..24 or white / black");
+      channels.push_back(v);
+      fill.push_back(std::nullopt);
+    }
+  }
+  std::vector<int> depths =
       m.has("bit_depths") ? intList(m, "bit_depths", 1, 8) : std::vector<int>(images.size(), 8);
   std::vector<bool> invert(images.size(), false);
   if (m.has("invert")) {
@@ -77,8 +105,20 @@ drivers::LightCrafter4500Sequence parseSequence(const YamlMap& m) {
     m.fail("channels", "needs one entry per image index (" + std::to_string(images.size()) + ")");
   if (depths.size() != images.size())
     m.fail("bit_depths", "needs one entry per image index (" + std::to_string(images.size()) + ")");
-  for (std::size_t i = 0; i < images.size(); ++i)
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    if (fill[i]) {
+      if (m.has("bit_depths") && depths[i] != 1)
+        m.fail("bit_depths", "entry " + std::to_string(i) + " is the " +
+                                 (*fill[i] ? "white" : "black") + " fill pattern: bit depth 1");
+      if (invert[i])
+        m.fail("invert", "entry " + std::to_string(i) +
+                             " is white / black: its polarity comes from the name");
+      const dl::FillPattern f = dl::fillPattern(*fill[i]);
+      depths[i] = f.bit_depth;
+      invert[i] = f.invert;
+    }
     s.patterns.push_back({images[i], channels[i], depths[i], invert[i]});
+  }
   s.leds = ledSelect(m);
   s.exposure_us = microseconds(m, "exposure_us", s.exposure_us);
   s.frame_period_us = microseconds(m, "frame_period_us", s.exposure_us);
@@ -119,6 +159,8 @@ void parseProjector(const YamlMap& m, drivers::LightCrafter4500Config& p) {
     p.led_current_blue = static_cast<std::uint8_t>(c[2]);
   }
   p.led_pwm_inverted = m.get<bool>("led_pwm_inverted", p.led_pwm_inverted);
+  p.led_pwm_polarity_inverted =
+      m.get<bool>("led_pwm_polarity_inverted", p.led_pwm_polarity_inverted);
   const YamlMap out1 = m.optionalMap("trigger_out1");
   p.trigger_out1_invert = out1.get<bool>("invert", p.trigger_out1_invert);
   p.trigger_out1_rising_delay_us = out1.get<double>("rising_delay_us", 0);

@@ -3,6 +3,9 @@
 // would, and answers like the device (guide section 1.2 framing). Faults can
 // be injected: NACK a command, drop replies (timeout), fail I/O (unplug),
 // keep validation busy for a number of polls, report validation bits.
+// Sequence numbers in replies: kEcho returns the request's; kTiApi numbers
+// them the way TI's host API does its requests (its own counter, incremented
+// on writes only, 0 on reads), i.e. never the host's number in general.
 #pragma once
 
 #include <map>
@@ -16,7 +19,15 @@ namespace sl::test {
 
 namespace dl = drivers::dlpc350;
 
+enum class FakeSequenceStyle { kEcho, kTiApi };
+
 struct FakeDlpc350State {
+  FakeSequenceStyle sequence_style = FakeSequenceStyle::kEcho;
+  std::uint8_t device_sequence = 0;  // kTiApi: the device's own write counter
+  std::uint8_t led_pwm_default = 1;  // 0x1A05 before any write (not what the driver wants)
+  bool led_pwm_stuck = false;        // 0x1A05 writes are acknowledged but not kept
+  // Delivered just before the next reply (a late reply to an earlier request).
+  std::optional<dl::Report> late;
   std::vector<dl::Report> written;                               // every report, in order
   std::map<std::uint16_t, std::vector<std::uint8_t>> registers;  // last write per command
   std::vector<std::vector<std::uint8_t>> mailbox_writes;         // LutData payloads
@@ -61,6 +72,12 @@ class FakeDlpc350 : public dl::HidTransport {
 
  private:
   void reply(std::uint8_t flags, std::uint8_t seq, const std::vector<std::uint8_t>& data) {
+    if (s_.sequence_style == FakeSequenceStyle::kTiApi)
+      seq = (flags & dl::kFlagRead) ? 0 : s_.device_sequence++;
+    if (s_.late) {
+      replies_.push_back(*s_.late);
+      s_.late.reset();
+    }
     std::vector<std::uint8_t> bytes{flags, seq, static_cast<std::uint8_t>(data.size()),
                                     static_cast<std::uint8_t>(data.size() >> 8)};
     bytes.insert(bytes.end(), data.begin(), data.end());
@@ -83,7 +100,7 @@ class FakeDlpc350 : public dl::HidTransport {
     }
     const bool is_read = flags & dl::kFlagRead;
     if (!is_read) {
-      s_.registers[cmd] = data;
+      if (!(cmd == 0x1A05 && s_.led_pwm_stuck)) s_.registers[cmd] = data;
       if (cmd == 0x1A34) s_.mailbox_writes.push_back(data);
       if (cmd == 0x1A1A) validation_polls_ = 0;
       if (flags & dl::kFlagReply) reply(flags, seq, {});
@@ -126,6 +143,12 @@ class FakeDlpc350 : public dl::HidTransport {
       case 0x1A29:
         reg(8);
         break;
+      case 0x1A05: {
+        auto it = s_.registers.find(cmd);
+        out = {it != s_.registers.end() && !it->second.empty() ? it->second[0]
+                                                               : s_.led_pwm_default};
+        break;
+      }
       case 0x1A31:
         reg(4);
         break;

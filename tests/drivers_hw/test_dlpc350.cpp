@@ -217,6 +217,8 @@ TEST_CASE("NACK, timeout, stale replies, unplugged device") {
     rig.fake.queueRaw(stale);
     rig.device.setDisplayMode(DisplayMode::kPattern);
     CHECK(rig.device.displayMode() == DisplayMode::kPattern);
+    CHECK(rig.device.staleReplies() == 1);  // read and dropped before the request
+    CHECK(rig.device.sequenceMismatches() == 0);
   }
   SECTION("unplugged: device error with the command name") {
     rig.state.unplugged = true;
@@ -261,4 +263,65 @@ TEST_CASE("trigger delay conversion: 107.2 ns steps around 0xBB") {
   CHECK(triggerDelayRaw(2.787) == 0xD5);
   CHECK_THROWS_AS(triggerDelayRaw(3.0), std::invalid_argument);
   CHECK_THROWS_AS(triggerDelayRaw(-21.0), std::invalid_argument);
+}
+
+// Point 5 of issue 19: the reply to the one outstanding request is taken
+// whatever its sequence byte; both device behaviours work.
+TEST_CASE("sequence numbers: echoing device and TI-API-style device") {
+  FakeDlpc350State state;
+  std::vector<std::string> logged;
+  auto log = [&](const std::string& m) { logged.push_back(m); };
+  auto exercise = [](Dlpc350& device) {
+    device.setDisplayMode(DisplayMode::kPattern);
+    CHECK(device.displayMode() == DisplayMode::kPattern);
+    device.setPatternConfig(PatternConfig{6, true, 6, 2});
+    CHECK(device.patternConfig() == PatternConfig{6, true, 6, 2});
+    device.setLedCurrents(1, 2, 3);
+    CHECK(device.ledCurrents() == std::array<std::uint8_t, 3>{1, 2, 3});
+    CHECK(Version::format(device.version().application) == "5.1.0");
+  };
+  SECTION("echo: no mismatch, nothing logged") {
+    FakeDlpc350 fake(state);
+    Dlpc350 device(fake, std::chrono::milliseconds(30), log);
+    exercise(device);
+    CHECK(device.sequenceMismatches() == 0);
+    CHECK(logged.empty());
+  }
+  SECTION("TI API style (own write counter, 0 on reads): every read still answers, logged once") {
+    state.sequence_style = sl::test::FakeSequenceStyle::kTiApi;
+    state.device_sequence = 200;  // nothing like the host's numbers
+    FakeDlpc350 fake(state);
+    Dlpc350 device(fake, std::chrono::milliseconds(30), log);
+    exercise(device);
+    exercise(device);
+    CHECK(device.sequenceMismatches() >= 8);
+    REQUIRE(logged.size() == 1);
+    CHECK_THAT(logged[0], Catch::Contains("DLPC350 DisplayMode: reply carries sequence 200 for "
+                                          "request 0"));
+  }
+  SECTION("an echoing device's late reply to an earlier request is skipped") {
+    FakeDlpc350 fake(state);
+    Dlpc350 device(fake, std::chrono::milliseconds(30), log);
+    exercise(device);  // 8 echoed replies: the device echoes
+    Report late{};
+    late[0] = 0xC0;
+    late[1] = 0x03;  // an old request's number
+    late[2] = 1;
+    late[4] = 0x00;  // would read as video mode
+    state.late = late;
+    CHECK(device.displayMode() == DisplayMode::kPattern);
+    CHECK(device.staleReplies() == 1);
+    CHECK(logged.empty());
+  }
+}
+
+TEST_CASE("LED PWM polarity command 0x1A05: one byte, read back") {
+  Rig rig;
+  rig.device.setLedPwmInverted(false);
+  CHECK(head(rig.state.written[0], 7) == Bytes{0x40, 0x00, 0x03, 0x00, 0x05, 0x1A, 0x00});
+  CHECK_FALSE(rig.device.ledPwmInverted());
+  CHECK(head(rig.state.written[1], 6) == Bytes{0xC0, 0x01, 0x02, 0x00, 0x05, 0x1A});
+  rig.device.setLedPwmInverted(true);
+  CHECK(head(rig.state.written[2], 7) == Bytes{0x40, 0x02, 0x03, 0x00, 0x05, 0x1A, 0x01});
+  CHECK(rig.device.ledPwmInverted());
 }

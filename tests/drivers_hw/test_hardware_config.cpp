@@ -58,6 +58,29 @@ TEST_CASE("config/hardware-paper.yaml loads into the driver structs") {
   CHECK(c.hardware.versavis.baud == 250000);
   CHECK(c.hardware.versavis.topic == "/versavis/projector/image_time");
   CHECK(c.synchroniser.image_interval_ns == 33333000);
+  CHECK_FALSE(p.led_pwm_polarity_inverted);
+}
+
+TEST_CASE("white / black channels (Gray-code reference frames) follow the fill polarity") {
+  const daemon::DaemonConfig c = loadVariant(
+      "channels:      [0, 1, 2, 0, 1, 2]\n      bit_depths:    [8, 8, 8, 8, 8, 8]",
+      "channels:      [white, black, 2, 0, 1, 2]\n      bit_depths:    [1, 1, 8, 8, 8, 8]");
+  const auto& s = c.hardware.projector.sequences[0];
+  const auto white = drivers::dlpc350::fillPattern(true);
+  CHECK(s.patterns[0].channel == white.pattern_number);
+  CHECK(s.patterns[0].bit_depth == 1);
+  CHECK(s.patterns[0].invert == white.invert);
+  CHECK(s.patterns[0].invert);  // 24 inverted = white
+  CHECK(s.patterns[1].channel == 24);
+  CHECK_FALSE(s.patterns[1].invert);  // 24 = black
+  CHECK(s.patterns[2].channel == 2);
+  CHECK_THROWS_WITH(
+      loadVariant("channels:      [0, 1, 2, 0, 1, 2]\n      bit_depths:    [8, 8, 8, 8, 8, 8]",
+                  "channels:      [white, 1, 2, 0, 1, 2]\n      bit_depths:    [8, 8, 8, 8, 8, 8]"),
+      Catch::Contains("entry 0 is the white fill pattern: bit depth 1"));
+  CHECK_THROWS_WITH(
+      loadVariant("channels:      [0, 1, 2, 0, 1, 2]", "channels:      [grey, 1, 2, 0, 1, 2]"),
+      Catch::Contains("expected integers in 0..24 or white / black"));
 }
 
 TEST_CASE("hardware config mistakes name file, line and key") {

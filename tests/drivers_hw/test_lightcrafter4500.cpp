@@ -1,6 +1,7 @@
 // LightCrafter4500Projector above a fake DLPC350: start-up, sequence upload
 // (pattern LUT, image LUT, LUT control, validation), refusals with the
 // projector's reason, errors naming the command, reconnect after unplugging.
+#include <algorithm>
 #include <catch2/catch.hpp>
 
 #include "fake_dlpc350.h"
@@ -101,8 +102,9 @@ TEST_CASE("start-up: version, leaves standby, status, pattern mode, LEDs, trigge
   CHECK(p.firmwareVersion() == "5.1.0");
   CHECK(rig.state.opens == 1);
   CHECK(rig.commands() ==
-        std::vector<std::uint16_t>{0x0200, 0x1A1B, 0x1A24, 0x0B01, 0x1A07, 0x1A1D});
+        std::vector<std::uint16_t>{0x0200, 0x1A1B, 0x1A24, 0x1A05, 0x0B01, 0x1A07, 0x1A1D});
   CHECK(rig.state.registers[0x0200] == Bytes{0});              // normal operation
+  CHECK(rig.state.registers[0x1A05] == Bytes{0});              // LED PWM polarity normal
   CHECK(rig.state.registers[0x1A1B] == Bytes{1});              // pattern display mode
   CHECK(rig.state.registers[0x0B01] == Bytes{255, 195, 255});  // 255 - {0, 60, 0}
   CHECK(rig.state.registers[0x1A07] == Bytes{0x08});           // sequencer drives the LEDs
@@ -113,6 +115,58 @@ TEST_CASE("start-up: version, leaves standby, status, pattern mode, LEDs, trigge
   CHECK(seqs[0].frame_count == 6);
   CHECK(seqs[1].name == "white");
   CHECK(seqs[2].name == "black");
+}
+
+TEST_CASE("LED PWM polarity (0x1A05) set explicitly at connect and read back") {
+  Rig rig;
+  REQUIRE(rig.state.led_pwm_default == 1);  // the fake powers up inverted
+  SECTION("normal, as SLStudio and TI's GUI set it; currents still 255 - value") {
+    LightCrafter4500Projector p(config(), rig.factory());
+    CHECK(rig.state.registers[0x1A05] == Bytes{0});
+    CHECK(rig.state.registers[0x0B01] == Bytes{255, 195, 255});
+    // The polarity is written before the currents (the order SLStudio uses).
+    const auto cmds = rig.commands();
+    const auto at = [&](std::uint16_t c) {
+      return std::find(cmds.begin(), cmds.end(), c) - cmds.begin();
+    };
+    CHECK(at(0x1A05) < at(0x0B01));
+  }
+  SECTION("configured inverted") {
+    LightCrafter4500Config c = config();
+    c.led_pwm_polarity_inverted = true;
+    LightCrafter4500Projector p(c, rig.factory());
+    CHECK(rig.state.registers[0x1A05] == Bytes{1});
+  }
+  SECTION("a device that does not keep it is an error naming the command") {
+    rig.state.led_pwm_stuck = true;
+    CHECK_THROWS_WITH(LightCrafter4500Projector(config(), rig.factory()),
+                      Catch::Contains("LED PWM polarity (DLPC350 LedPwmPolarity, USB 0x1A05) reads "
+                                      "back inverted after setting it normal"));
+  }
+  SECTION("set again on every reconnect") {
+    LightCrafter4500Projector p(config(), rig.factory());
+    rig.state.registers.erase(0x1A05);  // power-cycled: back to its default
+    rig.state.unplugged = true;
+    CHECK_THROWS(p.stop());
+    rig.state.unplugged = false;
+    p.stop();  // reconnects
+    CHECK(rig.state.opens == 2);
+    CHECK(rig.state.registers[0x1A05] == Bytes{0});
+  }
+}
+
+TEST_CASE("a device numbering replies TI-API style works and is logged once") {
+  Rig rig;
+  rig.state.sequence_style = sl::test::FakeSequenceStyle::kTiApi;
+  std::vector<std::string> logged;
+  LightCrafter4500Projector p(config(), rig.factory(),
+                              [&](const std::string& m) { logged.push_back(m); });
+  p.select("3+3_horizontal");  // many writes and reads (validation polls)
+  p.start(0);
+  p.stop();
+  CHECK(p.firmwareVersion() == "5.1.0");
+  REQUIRE(logged.size() == 1);
+  CHECK_THAT(logged[0], Catch::Contains("does not echo sequence numbers"));
 }
 
 TEST_CASE("select uploads and validates; start and stop") {
@@ -148,14 +202,26 @@ TEST_CASE("select uploads and validates; start and stop") {
     p.select("3+3_horizontal");
     CHECK(rig.state.written.size() == n);
   }
-  SECTION("white and black use the 1-bit fill pattern") {
+  SECTION("black is the 1-bit fill pattern 24, white the same inverted") {
+    // dlpc350::fillPattern cites the source (Programmer's Guide pattern
+    // number mapping; TI API v4.0.0 comment vs code; sl_sensor's correction).
+    auto lutWord = [&] {
+      const auto& m = rig.state.mailbox_writes[rig.state.mailbox_writes.size() - 2];  // pattern LUT
+      REQUIRE(m.size() == 3);
+      return dl::decodePatternLutEntry(m[0] | (m[1] << 8) | (m[2] << 16));
+    };
     p.select("black");
-    const std::uint32_t w = rig.state.mailbox_writes[2][0] | (rig.state.mailbox_writes[2][1] << 8) |
-                            (rig.state.mailbox_writes[2][2] << 16);
-    const auto e = dl::decodePatternLutEntry(w);
-    CHECK(e.pattern_number == 24);
-    CHECK(e.bit_depth == 1);
-    CHECK(e.invert);
+    const auto black = lutWord();
+    CHECK(black.pattern_number == 24);
+    CHECK(black.bit_depth == 1);
+    CHECK_FALSE(black.invert);
+    CHECK_FALSE(black.insert_black);
+    p.select("white");
+    const auto white = lutWord();
+    CHECK(white.pattern_number == 24);
+    CHECK(white.bit_depth == 1);
+    CHECK(white.invert);
+    CHECK(dl::encodePatternLutEntry(white) == dl::encodePatternLutEntry(black) + (1u << 16));
   }
   SECTION("unknown names") { CHECK_THROWS_AS(p.select("nope"), std::invalid_argument); }
 }

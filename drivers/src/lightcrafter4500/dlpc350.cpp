@@ -38,6 +38,8 @@ std::string commandName(Command command) {
       return "GetVersion";
     case Command::kLedCurrent:
       return "LedCurrent";
+    case Command::kLedPwmPolarity:
+      return "LedPwmPolarity";
     case Command::kInputSource:
       return "InputSource";
     case Command::kLedEnable:
@@ -193,8 +195,8 @@ std::uint8_t triggerDelayRaw(double delay_us) {
 
 // --- Dlpc350 -------------------------------------------------------------------
 
-Dlpc350::Dlpc350(HidTransport& transport, std::chrono::milliseconds reply_timeout)
-    : transport_(transport), reply_timeout_(reply_timeout) {}
+Dlpc350::Dlpc350(HidTransport& transport, std::chrono::milliseconds reply_timeout, Log log)
+    : transport_(transport), reply_timeout_(reply_timeout), log_(std::move(log)) {}
 
 std::vector<std::uint8_t> Dlpc350::transact(Command command, std::uint8_t flags,
                                             std::span<const std::uint8_t> data,
@@ -203,37 +205,64 @@ std::vector<std::uint8_t> Dlpc350::transact(Command command, std::uint8_t flags,
   const std::uint8_t seq = sequence_++;
   const auto reports =
       encodeMessage(static_cast<std::uint8_t>(flags | kFlagReply), seq, command, data);
+  // Reads one whole reply (first report + continuation reports), or nullopt
+  // when no first report arrives within `wait`.
+  auto readReply = [&](std::chrono::milliseconds wait)
+      -> std::optional<std::pair<ReplyHeader, std::vector<std::uint8_t>>> {
+    std::optional<Report> first = transport_.read(wait);
+    if (!first) return std::nullopt;
+    const ReplyHeader h = decodeReplyHeader(*first);
+    // Reply payload continues in further reports (guide 1.2).
+    std::vector<std::uint8_t> payload(first->begin() + kHeaderSize, first->end());
+    while (payload.size() < h.length) {
+      std::optional<Report> more = transport_.read(reply_timeout_);
+      if (!more)
+        throw Dlpc350Error(Kind::kTimeout, command,
+                           "reply of " + std::to_string(h.length) + " bytes ended after " +
+                               std::to_string(payload.size()));
+      payload.insert(payload.end(), more->begin(), more->end());
+    }
+    payload.resize(h.length);
+    return std::make_pair(h, std::move(payload));
+  };
   try {
+    // Replies still waiting belong to earlier requests that timed out.
+    while (readReply(std::chrono::milliseconds(0))) ++stale_;
     for (const Report& r : reports) transport_.write(r);
     const auto deadline = std::chrono::steady_clock::now() + reply_timeout_;
     for (;;) {
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
           deadline - std::chrono::steady_clock::now());
-      std::optional<Report> first =
-          left.count() > 0 ? transport_.read(left) : std::optional<Report>{};
-      if (!first)
+      auto reply = left.count() > 0 ? readReply(left) : std::nullopt;
+      if (!reply)
         throw Dlpc350Error(Kind::kTimeout, command,
                            "no reply within " + std::to_string(reply_timeout_.count()) + " ms");
-      const ReplyHeader h = decodeReplyHeader(*first);
-      // Reply payload continues in further reports (guide 1.2).
-      std::vector<std::uint8_t> payload(first->begin() + kHeaderSize, first->end());
-      while (payload.size() < h.length) {
-        std::optional<Report> more = transport_.read(reply_timeout_);
-        if (!more)
-          throw Dlpc350Error(Kind::kTimeout, command,
-                             "reply of " + std::to_string(h.length) + " bytes ended after " +
-                                 std::to_string(payload.size()));
-        payload.insert(payload.end(), more->begin(), more->end());
+      const ReplyHeader& h = reply->first;
+      if (h.sequence == seq) {
+        if (mismatches_ == 0) ++echoed_;
+      } else if (echoed_ >= kEchoProof) {
+        ++stale_;  // an echoing device: a late reply to an earlier request
+        continue;
+      } else {
+        // The device numbers its replies its own way (TI's API never checks
+        // them): this is the reply to the one outstanding request.
+        ++mismatches_;
+        echoed_ = 0;
+        if (!mismatch_logged_ && log_) {
+          mismatch_logged_ = true;
+          log_("DLPC350 " + commandName(command) + ": reply carries sequence " +
+               std::to_string(h.sequence) + " for request " + std::to_string(seq) +
+               "; the device does not echo sequence numbers, replies are matched to the one "
+               "outstanding request (logged once)");
+        }
       }
-      payload.resize(h.length);
-      if (h.sequence != seq) continue;  // a stale reply to an earlier, timed-out command
       if (h.error())
         throw Dlpc350Error(Kind::kNack, command, "the projector rejected the command (NACK)");
-      if (payload.size() < min_length)
+      if (reply->second.size() < min_length)
         throw Dlpc350Error(Kind::kProtocol, command,
-                           "reply has " + std::to_string(payload.size()) +
+                           "reply has " + std::to_string(reply->second.size()) +
                                " data bytes, expected " + std::to_string(min_length));
-      return payload;
+      return std::move(reply->second);
     }
   } catch (const HidError& e) {
     throw Dlpc350Error(Kind::kDevice, command, e.what());
@@ -377,6 +406,12 @@ std::array<std::uint8_t, 3> Dlpc350::ledCurrents() {
   const auto d = read(Command::kLedCurrent, 3);
   return {d[0], d[1], d[2]};
 }
+
+void Dlpc350::setLedPwmInverted(bool inverted) {
+  const std::uint8_t d[] = {static_cast<std::uint8_t>(inverted ? 1 : 0)};
+  write(Command::kLedPwmPolarity, d);
+}
+bool Dlpc350::ledPwmInverted() { return (read(Command::kLedPwmPolarity, 1)[0] & 0x01) != 0; }
 
 void Dlpc350::setLedEnables(bool sequencer_controlled, bool red, bool green, bool blue) {
   const std::uint8_t d[] = {static_cast<std::uint8_t>(

@@ -21,14 +21,17 @@ std::uint8_t ledValue(std::uint8_t v, bool inverted) {
 }  // namespace
 
 std::vector<LightCrafter4500Sequence> builtinSequences(std::uint32_t period_us) {
-  LightCrafter4500Sequence white;
-  white.name = "white";
-  white.patterns = {LightCrafter4500Pattern{0, 24, 1, false}};  // 1-bit fill pattern
-  white.exposure_us = white.frame_period_us = period_us;
-  LightCrafter4500Sequence black = white;
-  black.name = "black";
-  black.patterns[0].invert = true;  // inverted fill = black (Table 2-65 / 2-66)
-  return {white, black};
+  // The 1-bit fill pattern: black, white when inverted (dlpc350::fillPattern
+  // gives the source).
+  auto fill = [&](bool is_white) {
+    const dl::FillPattern f = dl::fillPattern(is_white);
+    LightCrafter4500Sequence s;
+    s.name = is_white ? "white" : "black";
+    s.patterns = {LightCrafter4500Pattern{0, f.pattern_number, f.bit_depth, f.invert}};
+    s.exposure_us = s.frame_period_us = period_us;
+    return s;
+  };
+  return {fill(true), fill(false)};
 }
 
 void validateSequence(const LightCrafter4500Sequence& s) {
@@ -103,8 +106,9 @@ LightCrafter4500Upload buildSingleUpload(const LightCrafter4500Sequence& s, int 
 }
 
 LightCrafter4500Projector::LightCrafter4500Projector(LightCrafter4500Config config,
-                                                     TransportFactory open_transport)
-    : config_(std::move(config)), open_transport_(std::move(open_transport)) {
+                                                     TransportFactory open_transport,
+                                                     dl::Dlpc350::Log log)
+    : config_(std::move(config)), open_transport_(std::move(open_transport)), log_(std::move(log)) {
   std::set<std::string> names;
   for (const auto& s : config_.sequences) all_.push_back(s);
   for (const auto& s : builtinSequences(config_.white_black_period_us)) all_.push_back(s);
@@ -159,7 +163,7 @@ auto LightCrafter4500Projector::withDevice(F&& f) -> decltype(f()) {
 
 void LightCrafter4500Projector::connectLocked() {
   transport_ = open_transport_();
-  device_ = std::make_unique<dl::Dlpc350>(*transport_, config_.reply_timeout);
+  device_ = std::make_unique<dl::Dlpc350>(*transport_, config_.reply_timeout, log_);
   uploaded_.clear();
   version_ = dl::Version::format(device_->version().application);
   const auto deadline = std::chrono::steady_clock::now() + config_.power_up_timeout;
@@ -185,6 +189,14 @@ void LightCrafter4500Projector::connectLocked() {
   }
   device_->setPatternAction(dl::PatternAction::kStop);
   running_ = false;
+  // LED PWM polarity explicitly (not the power-on default), read back.
+  device_->setLedPwmInverted(config_.led_pwm_polarity_inverted);
+  if (device_->ledPwmInverted() != config_.led_pwm_polarity_inverted)
+    throw std::runtime_error(
+        config_.id + ": LED PWM polarity (DLPC350 " +
+        dl::commandName(dl::Command::kLedPwmPolarity) + ", USB 0x1A05) reads back " +
+        (config_.led_pwm_polarity_inverted ? "normal" : "inverted") + " after setting it " +
+        (config_.led_pwm_polarity_inverted ? "inverted" : "normal"));
   const bool inv = config_.led_pwm_inverted;
   device_->setLedCurrents(ledValue(config_.led_current_red, inv),
                           ledValue(config_.led_current_green, inv),

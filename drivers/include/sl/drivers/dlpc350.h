@@ -12,7 +12,10 @@
 //   byte 0  flags: bit 7 = 1 read / 0 write, bit 6 = reply requested,
 //           bit 5 = error (set by the device in a reply: command not found or
 //           failed, i.e. NACK), bits 2:0 = destination (0 = projector control)
-//   byte 1  sequence number, echoed by the device in its reply
+//   byte 1  sequence number. Whether the device echoes it is not certain:
+//           TI's host API (v4.0.0, dlpc350_api.cpp) increments it on writes
+//           only, sends 0 on reads and never checks the reply's. Replies are
+//           therefore matched to the one outstanding request (see Dlpc350).
 //   byte 2-3 payload length, little endian (command code + data bytes)
 //   byte 4.. payload: 2-byte command code, little endian (0x1A1B goes out as
 //           1B 1A), then the command's data
@@ -24,6 +27,7 @@
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <stdexcept>
@@ -63,6 +67,7 @@ enum class Command : std::uint16_t {
   kPowerControl = 0x0200,         // "Power Control"
   kGetVersion = 0x0205,           // "Retrieve Firmware Version" (read only)
   kLedCurrent = 0x0B01,           // "LED Driver Current Control"
+  kLedPwmPolarity = 0x1A05,       // "LED PWM Polarity" (TI API: PWM_INVERT, 1 byte)
   kInputSource = 0x1A00,          // "Input Source Selection" (not used in pattern mode)
   kLedEnable = 0x1A07,            // "LED Enable Outputs"
   kHardwareStatus = 0x1A0A,       // "Hardware Status" (read only)
@@ -139,6 +144,28 @@ enum class TriggerType : std::uint8_t {
   kExternalNegative = 2,  // wait for a falling TRIG_IN_1 edge
   kNone = 3,              // continue from the previous pattern
 };
+// The 1-bit fill pattern and its polarity. The Programmer's Guide's pattern
+// number mapping (DLPU010, "Pattern Number Mapping" with Table 2-65/2-66)
+// maps the 1-bit numbers 0..23 to the bit planes G0..G7, R0..R7, B0..B7 of
+// the flash image; 24 is no bit plane of the image but the fill that the
+// sequencer also uses for "insert black" (bit 17: a black-fill pattern after
+// the entry), and "invert pattern" (bit 16) complements whatever the entry
+// shows. So 24 is black and 24 inverted is white. TI's API v4.0.0 comment of
+// DLPC350_AddToPatLut says "25 = white, inverted = black", but its own code
+// rejects numbers above 24, and the SL sensor's vendored copy (ethz-asl/
+// sl_sensor, lc4500api) corrected the comment to "24 -> black; inverted ->
+// white" after running it on the device; its colour sequence shows white as
+// 24 inverted. Every white/black frame of this driver (the built-in "white"
+// and "black" sequences, Gray-code reference frames written as "white" /
+// "black" channels in the hardware config) goes through fillPattern().
+inline constexpr int kFillPattern = 24;
+struct FillPattern {
+  int pattern_number = kFillPattern;
+  int bit_depth = 1;
+  bool invert = false;
+};
+inline constexpr FillPattern fillPattern(bool white) { return {kFillPattern, 1, white}; }
+
 // LED select of a pattern LUT entry (Table 2-65, bits 14:12): bit 0 red,
 // bit 1 green, bit 2 blue; 7 = white, 0 = none (pass through).
 inline constexpr std::uint8_t kLedRed = 1, kLedGreen = 2, kLedBlue = 4, kLedWhite = 7;
@@ -148,7 +175,8 @@ inline constexpr std::uint8_t kLedRed = 1, kLedGreen = 2, kLedBlue = 4, kLedWhit
 //   bits 7:2   pattern number: which bit planes of the 24-bit flash image are
 //              shown (Table 2-66): for bit depth d, 0 .. floor(24 / d) - 1,
 //              e.g. 0..2 = G, R, B planes of an 8-bit image; for d = 1 the
-//              number 24 is the fill pattern (white; black when inverted)
+//              number 24 is the fill pattern: BLACK, white when inverted
+//              (kFillPattern below says why)
 //   bits 11:8  bit depth 1..8
 //   bits 14:12 LED select
 //   bit 16     invert pattern
@@ -206,13 +234,25 @@ struct DeviceStatus {
 // --- command layer -----------------------------------------------------------
 
 // One method per command. Every write requests a reply and checks it for the
-// error flag, as the guide recommends; reads match the reply's sequence
-// number and skip stale replies. Errors throw Dlpc350Error naming the command.
-// Thread-compatible: callers serialise (LightCrafter4500Projector holds a mutex).
+// error flag, as the guide recommends. Errors throw Dlpc350Error naming the
+// command. Thread-compatible: callers serialise (LightCrafter4500Projector
+// holds a mutex).
+//
+// Reply matching: only one request is ever outstanding. Before a request,
+// replies already waiting (to an earlier request that timed out) are read
+// and dropped (staleReplies()); the first reply after the request is its
+// reply, whatever its sequence byte. A device that echoes the sequence and a
+// device that answers like TI's API expects (its own numbering, 0 on reads)
+// both work; the first mismatch is logged once through `log`
+// (sequenceMismatches() counts all). Once the device has echoed every
+// sequence so far (at least kEchoProof replies), a mismatching reply is taken
+// as a late stale one and skipped instead.
 class Dlpc350 {
  public:
+  using Log = std::function<void(const std::string&)>;
+  static constexpr int kEchoProof = 4;
   // `transport` must outlive this object.
-  Dlpc350(HidTransport& transport, std::chrono::milliseconds reply_timeout);
+  Dlpc350(HidTransport& transport, std::chrono::milliseconds reply_timeout, Log log = {});
 
   void setPowerStandby(bool standby);  // Power Control: 1 standby, 0 normal
   bool powerStandby();                 // bits 1:0 non-zero = standby
@@ -243,6 +283,10 @@ class Dlpc350 {
   // LED Driver Current Control: PWM values 0..255 for red, green, blue.
   void setLedCurrents(std::uint8_t red, std::uint8_t green, std::uint8_t blue);
   std::array<std::uint8_t, 3> ledCurrents();
+  // LED PWM Polarity (0x1A05): false = normal (PWM value 0 = LED off), true =
+  // inverted. TI's GUI and SLStudio set it to normal at connect.
+  void setLedPwmInverted(bool inverted);
+  bool ledPwmInverted();
   // LED Enable Outputs: bit 3 = sequencer controls the LEDs, bits 0..2 = R, G, B.
   void setLedEnables(bool sequencer_controlled, bool red, bool green, bool blue);
   // Trigger Out1/Out2 Control: polarity and edge delays in 107.2 ns steps,
@@ -264,7 +308,15 @@ class Dlpc350 {
 
   HidTransport& transport_;
   std::chrono::milliseconds reply_timeout_;
+  Log log_;
   std::uint8_t sequence_ = 0;
+  int echoed_ = 0;  // replies whose sequence matched, while none mismatched
+  bool mismatch_logged_ = false;
+  std::uint64_t mismatches_ = 0, stale_ = 0;
+
+ public:
+  std::uint64_t sequenceMismatches() const { return mismatches_; }
+  std::uint64_t staleReplies() const { return stale_; }
 };
 
 // Trigger output edge delay (Trigger Out1/Out2 Control): raw = 0xBB + round(us

@@ -49,6 +49,10 @@ struct LightCrafter4500Config {
   // 255 - value (what the GUI and sl_sensor write).
   std::uint8_t led_current_red = 0, led_current_green = 60, led_current_blue = 0;
   bool led_pwm_inverted = true;
+  // LED PWM Polarity register (0x1A05), set and read back at every connect
+  // instead of trusting the power-on default: false = normal, as TI's GUI and
+  // SLStudio set it (they too write 255 - value into the current register).
+  bool led_pwm_polarity_inverted = false;
   // TRIG_OUT_1 (drives the cameras when the projector paces them).
   bool trigger_out1_invert = false;
   double trigger_out1_rising_delay_us = 0;   // -20.05 .. +2.787 us
@@ -58,7 +62,8 @@ struct LightCrafter4500Config {
   std::chrono::milliseconds validation_poll{20};
   std::chrono::milliseconds power_up_timeout{10000};  // leaving standby takes ~5 s
   // Sequences selectable by name, besides the built-in "white" and "black"
-  // (1-bit fill pattern, inverted for black) which use white_black_period_us.
+  // (1-bit fill pattern 24: black, inverted white, see dlpc350::fillPattern)
+  // which use white_black_period_us.
   std::vector<LightCrafter4500Sequence> sequences;
   std::uint32_t white_black_period_us = 16667;
 };
@@ -96,9 +101,12 @@ class LightCrafter4500Projector : public Projector {
  public:
   using TransportFactory = std::function<std::unique_ptr<dlpc350::HidTransport>()>;
 
-  // Opens the device, leaves standby, sets LED currents and trigger outputs.
-  // Throws if the device is missing or does not answer.
-  LightCrafter4500Projector(LightCrafter4500Config config, TransportFactory open_transport);
+  // Opens the device, leaves standby, sets the LED PWM polarity, LED
+  // currents and trigger outputs. Throws if the device is missing or does not
+  // answer. `log` receives notes worth a warning (e.g. a device that does not
+  // echo sequence numbers), once each.
+  LightCrafter4500Projector(LightCrafter4500Config config, TransportFactory open_transport,
+                            dlpc350::Dlpc350::Log log = {});
   ~LightCrafter4500Projector() override;  // stops the sequence (errors ignored)
 
   std::string id() const override;
@@ -137,6 +145,7 @@ class LightCrafter4500Projector : public Projector {
 
   const LightCrafter4500Config config_;
   const TransportFactory open_transport_;
+  const dlpc350::Dlpc350::Log log_;
   std::vector<LightCrafter4500Sequence> all_;  // config sequences + white + black
   mutable std::mutex mutex_;
   std::unique_ptr<dlpc350::HidTransport> transport_;  // guarded by mutex_; null = reconnect
