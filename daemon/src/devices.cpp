@@ -80,7 +80,8 @@ EngineDevices openHardware(const DaemonConfig& config) {
   }
 
   if (config.hardware.trigger == HardwareConfig::Trigger::kVersavis) {
-    devices.trigger = std::make_shared<drivers::VersavisTriggerSource>(config.hardware.versavis);
+    return composeVersavis(config, std::move(devices.cameras), std::move(devices.projector),
+                           openVersavis(config));
   } else {
     // The projector triggers the cameras: camera 0's stamps give the sequence
     // starts; the projector tells their length and frame period.
@@ -101,6 +102,45 @@ EngineDevices openHardware(const DaemonConfig& config) {
 }
 
 }  // namespace
+
+std::shared_ptr<drivers::VersavisTriggerSource> openVersavis(const DaemonConfig& config) {
+  // Board log messages and the driver's notes into the daemon's log, by level.
+  auto log = [](int level, const std::string& message) {
+    if (level >= 3)
+      logError(message);
+    else if (level == 2)
+      logWarning(message);
+    else
+      logInfo(message);
+  };
+  return std::make_shared<drivers::VersavisTriggerSource>(config.hardware.versavis, log);
+}
+
+EngineDevices composeVersavis(const DaemonConfig& config,
+                              std::vector<std::shared_ptr<drivers::Camera>> cameras,
+                              std::shared_ptr<drivers::Projector> projector,
+                              std::shared_ptr<drivers::VersavisTriggerSource> board) {
+  const auto& channels = config.hardware.versavis.camera_channels;
+  EngineDevices devices;
+  devices.projector = std::move(projector);
+  devices.trigger = board;
+  if (channels.empty()) {
+    logWarning(config.source_path +
+               ": trigger.versavis.camera_channels is empty: camera frames keep their own "
+               "stamps and the board's clock offset to the host (about +100 ms after a board "
+               "start) separates them from the projector trigger times");
+    devices.cameras = std::move(cameras);
+    return devices;
+  }
+  if (channels.size() != cameras.size())
+    throw std::runtime_error(config.source_path + ": key 'trigger.versavis.camera_channels': " +
+                             std::to_string(channels.size()) + " channels for " +
+                             std::to_string(cameras.size()) + " cameras (one per camera)");
+  for (std::size_t i = 0; i < cameras.size(); ++i)
+    devices.cameras.push_back(
+        std::make_shared<drivers::VersavisRestampCamera>(std::move(cameras[i]), board, i));
+  return devices;
+}
 
 EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
   if (config.sensor == "sim") return openSimulated(config, keep_alive);

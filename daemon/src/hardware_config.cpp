@@ -203,6 +203,28 @@ void parseTrigger(const YamlMap& m, HardwareConfig& h) {
     c.offset_ns = std::llround(1000 * v.get<double>("offset_us", 0));
     c.reconnect_interval = millis(v, "reconnect_interval_s", c.reconnect_interval);
     c.negotiation_retry = millis(v, "negotiation_retry_s", c.negotiation_retry);
+    if (v.has("camera_channels")) {
+      const YAML::Node node = v.raw("camera_channels");
+      if (!node.IsSequence()) v.fail("camera_channels", "expected a list of topic prefixes");
+      c.camera_channels.clear();
+      for (const auto& item : node) {
+        const std::string prefix = item.IsScalar() ? item.Scalar() : std::string();
+        if (prefix.empty() || prefix.front() != '/' || prefix.back() != '/')
+          v.fail("camera_channels",
+                 "expected topic prefixes like /versavis/cam1/, not '" + prefix + "'");
+        c.camera_channels.push_back(prefix);
+      }
+    }
+    c.init_matches = v.get<int>("init_matches", c.init_matches);
+    if (c.init_matches < 1) v.fail("init_matches", "must be >= 1");
+    c.max_arrival_delay = millis(v, "max_arrival_delay_s", c.max_arrival_delay);
+    c.restamp_wait = millis(v, "restamp_wait_s", c.restamp_wait);
+    c.camera_offset_ns = std::llround(1000 * v.get<double>("camera_offset_us", 0));
+    c.sync_timeout = millis(v, "sync_timeout_s", c.sync_timeout);
+    c.watchdog = millis(v, "watchdog_s", c.watchdog);
+    c.reset_at_start = v.get<bool>("reset_at_start", c.reset_at_start);
+    c.reset_topic = v.get<std::string>("reset_topic", c.reset_topic);
+    c.tx_stop_at_close = v.get<bool>("tx_stop_at_close", c.tx_stop_at_close);
     v.done();
   } else if (type == "camera_stamps") {
     h.trigger = HardwareConfig::Trigger::kCameraStamps;

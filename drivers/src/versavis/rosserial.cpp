@@ -166,4 +166,28 @@ std::optional<std::int64_t> decodeTime(std::span<const std::uint8_t> message) {
   return static_cast<std::int64_t>(secs) * 1000000000 + static_cast<std::int64_t>(nsecs);
 }
 
+std::vector<std::uint8_t> encodeBool(bool value) {
+  return {static_cast<std::uint8_t>(value ? 1 : 0)};
+}
+
+std::optional<bool> decodeBool(std::span<const std::uint8_t> message) {
+  if (message.size() != 1) return std::nullopt;
+  return message[0] != 0;
+}
+
+std::vector<std::uint8_t> encodeLog(const LogMessage& m) {
+  std::vector<std::uint8_t> out{m.level};
+  putString(out, m.text);
+  return out;
+}
+
+std::optional<LogMessage> decodeLog(std::span<const std::uint8_t> message) {
+  Reader r(message);
+  LogMessage m;
+  m.level = static_cast<std::uint8_t>(r.uint(1));
+  m.text = r.string();
+  if (!r.ok() || !r.atEnd()) return std::nullopt;
+  return m;
+}
+
 }  // namespace sl::drivers::rosserial

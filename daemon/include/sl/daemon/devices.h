@@ -6,6 +6,7 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
+#include "sl/drivers/versavis.h"
 
 namespace sl::daemon {
 
@@ -13,5 +14,19 @@ namespace sl::daemon {
 // `keep_alive` receives an owner that must outlive the devices (the simulated
 // sensor's shared world).
 EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive);
+
+// The VersaVIS part of `sensor: hardware` (also used by the tests with fake
+// devices): the trigger source from config.hardware.versavis, whose board
+// log messages and notes go to the daemon's log.
+std::shared_ptr<drivers::VersavisTriggerSource> openVersavis(const DaemonConfig& config);
+// Cameras (in config order), projector and board composed: each camera is
+// wrapped in a VersavisRestampCamera for its trigger.versavis.camera_channels
+// entry, so frames carry the board's camera trigger times and group with its
+// projector trigger times on one clock. Throws std::runtime_error naming the
+// key when the channel count does not match the cameras.
+EngineDevices composeVersavis(const DaemonConfig& config,
+                              std::vector<std::shared_ptr<drivers::Camera>> cameras,
+                              std::shared_ptr<drivers::Projector> projector,
+                              std::shared_ptr<drivers::VersavisTriggerSource> board);
 
 }  // namespace sl::daemon
