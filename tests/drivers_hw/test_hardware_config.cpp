@@ -59,6 +59,18 @@ TEST_CASE("config/hardware-paper.yaml loads into the driver structs") {
   CHECK(c.hardware.versavis.topic == "/versavis/projector/image_time");
   CHECK(c.synchroniser.image_interval_ns == 33333000);
   CHECK_FALSE(p.led_pwm_polarity_inverted);
+  const auto& v = c.hardware.versavis;
+  CHECK(v.camera_channels == std::vector<std::string>{"/versavis/cam1/", "/versavis/cam1/"});
+  CHECK(v.init_matches == 2);
+  CHECK(v.restamp_wait == std::chrono::milliseconds(200));
+  CHECK(v.sync_timeout == std::chrono::milliseconds(15000));
+  CHECK(v.watchdog == std::chrono::milliseconds(3000));
+  CHECK(v.reset_at_start);
+  CHECK(v.tx_stop_at_close);
+  CHECK_THROWS_WITH(loadVariant("camera_channels: [/versavis/cam1/, /versavis/cam1/]",
+                                "camera_channels: [/versavis/cam1, /versavis/cam1/]"),
+                    Catch::Contains("key 'trigger.versavis.camera_channels': expected topic "
+                                    "prefixes like /versavis/cam1/, not '/versavis/cam1'"));
 }
 
 TEST_CASE("white / black channels (Gray-code reference frames) follow the fill polarity") {
