@@ -356,6 +356,18 @@ void parseSynchroniser(const YamlMap& m, double camera_fps, pipeline::Synchronis
   m.done();
 }
 
+void parseTopicQos(const YamlMap& m, TopicQos& q) {
+  const std::string reliability = m.get<std::string>("reliability", q.reliable ? "reliable" : "best_effort");
+  if (reliability != "reliable" && reliability != "best_effort")
+    m.fail("reliability", "must be reliable or best_effort, not '" + reliability + "'");
+  q.reliable = reliability == "reliable";
+  q.depth = m.get<int>("depth", q.depth);
+  if (q.depth < 1 || q.depth > 64) m.fail("depth", "must be in 1..64");
+  q.max_blocking_s = nonNegative(m, "max_blocking_s", q.max_blocking_s);
+  if (q.max_blocking_s > 10) m.fail("max_blocking_s", "must be at most 10 s");
+  m.done();
+}
+
 void parseDds(const YamlMap& m, DdsConfig& d) {
   d.domain_id = m.get<int>("domain_id", d.domain_id);
   if (d.domain_id < 0 || d.domain_id > 232) m.fail("domain_id", "must be in 0..232");
@@ -369,6 +381,12 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   d.publish_image_sets = m.get<bool>("publish_image_sets", d.publish_image_sets);
   d.publish_images = m.get<bool>("publish_images", d.publish_images);
   d.status_period_s = positive(m, "status_period_s", d.status_period_s);
+  const YamlMap qos = m.optionalMap("qos");
+  parseTopicQos(qos.optionalMap("points"), d.points_qos);
+  parseTopicQos(qos.optionalMap("images"), d.images_qos);
+  parseTopicQos(qos.optionalMap("projector_maps"), d.maps_qos);
+  parseTopicQos(qos.optionalMap("image_sets"), d.image_sets_qos);
+  qos.done();
   m.done();
 }
 

@@ -5,7 +5,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <string>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "msg_convert.h"
 #include "sl/daemon/dds.h"
@@ -89,6 +92,16 @@ std::string describeStart(const Request& request) {
   return text;
 }
 
+// A writer's QoS from the configuration (README "Topics").
+dds::Qos writerQos(const TopicQos& q) {
+  dds::Qos qos;
+  if (q.reliable)
+    qos.reliable(static_cast<dds_duration_t>(std::llround(q.max_blocking_s * 1e9)));
+  else
+    qos.bestEffort();
+  return qos.keepLast(q.depth).xcdr1();
+}
+
 }  // namespace
 
 TopicNames TopicNames::forNamespace(const std::string& ns) {
@@ -116,23 +129,21 @@ struct DdsBridge::Impl {
         depth_topic(participant, names.depth_image, sensor_msgs_msg_dds__Image__desc),
         shading_topic(participant, names.shading_image, sensor_msgs_msg_dds__Image__desc),
         info_topic(participant, names.camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
-        // Clouds: reliable, a short history; a slow reader makes a write
-        // time out (counted) rather than stall the pipeline for long.
-        points_writer(participant, points_topic,
-                      dds::Qos().reliable(DDS_MSECS(200)).keepLast(4).xcdr1()),
-        maps_writer(participant, maps_topic,
-                    dds::Qos().reliable(DDS_MSECS(200)).keepLast(2).xcdr1()),
+        sets_topic(participant, names.image_sets, sl_msgs_msg_ImageSet_desc),
+        // Clouds, maps, images: as configured (dds.qos; by default reliable
+        // with a short keep-last history: a write waits at most
+        // max_blocking_s for acknowledgements, then it is counted as timed out).
+        points_writer(participant, points_topic, writerQos(config.points_qos)),
+        maps_writer(participant, maps_topic, writerQos(config.maps_qos)),
         // Status: the latest value for late joiners.
         status_writer(participant, status_topic,
                       dds::Qos().reliable().transientLocal().keepLast(1).xcdr1()),
         request_reader(participant, request_topic, dds::Qos().reliable().keepLast(64)),
         reply_writer(participant, reply_topic, dds::Qos().reliable().keepLast(64).xcdr1()),
-        // Images: as the clouds (reliable, short history, bounded blocking).
-        depth_writer(participant, depth_topic,
-                     dds::Qos().reliable(DDS_MSECS(200)).keepLast(2).xcdr1()),
-        shading_writer(participant, shading_topic,
-                       dds::Qos().reliable(DDS_MSECS(200)).keepLast(2).xcdr1()),
-        info_writer(participant, info_topic, dds::Qos().reliable().keepLast(2).xcdr1()),
+        depth_writer(participant, depth_topic, writerQos(config.images_qos)),
+        shading_writer(participant, shading_topic, writerQos(config.images_qos)),
+        info_writer(participant, info_topic, writerQos(config.images_qos)),
+        sets_writer(participant, sets_topic, writerQos(config.image_sets_qos)),
         request_condition(request_reader),
         wake(participant),
         waitset(participant) {
@@ -153,6 +164,7 @@ struct DdsBridge::Impl {
   dds::Topic<Image> depth_topic;
   dds::Topic<Image> shading_topic;
   dds::Topic<CameraInfo> info_topic;
+  dds::Topic<ImageSetMsg> sets_topic;
   dds::Writer<PointCloud2> points_writer;
   dds::Writer<Maps> maps_writer;
   dds::Writer<Status> status_writer;
@@ -161,6 +173,7 @@ struct DdsBridge::Impl {
   dds::Writer<Image> depth_writer;
   dds::Writer<Image> shading_writer;
   dds::Writer<CameraInfo> info_writer;
+  dds::Writer<ImageSetMsg> sets_writer;
   dds::ReadCondition request_condition;
   dds::GuardCondition wake;
   dds::WaitSet waitset;
@@ -170,10 +183,14 @@ struct DdsBridge::Impl {
 
   // Publish-thread scratch buffer (metres), reused between clouds.
   std::vector<float> cloud_buffer;
+  // The image set published last (a set triangulated by two cameras gives
+  // two results; it is published once). Publish thread only.
+  pipeline::TimestampNs last_set_stamp_ns = -1;
 
   void publishCloud(const pipeline::PointCloud& cloud, const std::string& frame_id);
   void publishMaps(const pipeline::ProjectorMaps& maps, const ScanResult& result);
   void publishImages(const ScanResult& result);
+  void publishImageSet(const pipeline::ImageSet& set);
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
   void answer(ScanEngine& engine, const Request& request);
 };
@@ -294,6 +311,53 @@ void DdsBridge::Impl::publishImages(const ScanResult& result) {
   info_writer.write(info);
 }
 
+// All images of one sequence as acquired, camera-major, each stamped with
+// its exposure time (see idl/sl_msgs/msg/ImageSet.idl).
+void DdsBridge::Impl::publishImageSet(const pipeline::ImageSet& set) {
+  std::size_t total = 0;
+  for (const auto& c : set.cameras) total += c.frames.size();
+  std::vector<Image> images(total);
+  std::vector<std::string> optical_frames, camera_ids;
+  std::vector<std::uint8_t> bit_depths;
+  std::vector<cv::Mat> continuous;  // copies only of non-continuous frames (none from cameras)
+  continuous.reserve(total);
+  std::string mono8 = "mono8", mono16 = "mono16", pattern = set.pattern_name;
+  for (std::size_t k = 0; k < set.cameras.size(); ++k) {
+    optical_frames.push_back(frame_ids.of(set.cameras[k].camera_id));
+    camera_ids.push_back(set.cameras[k].camera_id);
+    bit_depths.push_back(static_cast<std::uint8_t>(set.cameras[k].bit_depth));
+  }
+  std::size_t i = 0;
+  for (std::size_t k = 0; k < set.cameras.size(); ++k) {
+    const pipeline::CameraImages& c = set.cameras[k];
+    for (std::size_t f = 0; f < c.frames.size(); ++f, ++i) {
+      continuous.push_back(c.frames[f].isContinuous() ? c.frames[f] : c.frames[f].clone());
+      const cv::Mat& m = continuous.back();
+      Image& msg = images[i];
+      msg.header.stamp = toTime(c.stamps_ns[f]);
+      msg.header.frame_id = optical_frames[k].data();
+      msg.height = static_cast<std::uint32_t>(m.rows);
+      msg.width = static_cast<std::uint32_t>(m.cols);
+      msg.encoding = m.elemSize() == 1 ? mono8.data() : mono16.data();
+      msg.is_bigendian = 0;  // little endian, as in memory
+      msg.step = static_cast<std::uint32_t>(m.cols * m.elemSize());
+      borrow(msg.data, const_cast<std::uint8_t*>(m.ptr<std::uint8_t>()), m.total() * m.elemSize());
+    }
+  }
+  StringList ids(camera_ids);
+  std::string empty;
+  ImageSetMsg msg{};
+  msg.header.stamp = toTime(set.trigger_stamp_ns);
+  msg.header.frame_id = empty.data();
+  msg.pattern = pattern.data();
+  msg.sequence_id = set.sequence_id;
+  msg.camera_count = static_cast<std::uint32_t>(set.cameras.size());
+  borrow(msg.camera_ids, ids.pointers.data(), ids.pointers.size());
+  borrow(msg.bit_depths, bit_depths.data(), bit_depths.size());
+  borrow(msg.images, images.data(), images.size());
+  if (!sets_writer.write(msg)) ++writes_timed_out;
+}
+
 void DdsBridge::Impl::publishStatus(const EngineStatus& s,
                                     const std::vector<std::string>& patterns) {
   std::string pattern = s.pattern, last_error = s.last_error, recording = s.recording;
@@ -384,6 +448,12 @@ DdsBridge::~DdsBridge() = default;
 
 void DdsBridge::publish(const ScanResult& result) {
   if (result.cloud) impl_->publishCloud(*result.cloud, impl_->frame_ids.of(result.camera_id));
+  // After the cloud, which then does not wait for the set's serialization.
+  if (impl_->config.publish_image_sets && result.images &&
+      result.images->trigger_stamp_ns != impl_->last_set_stamp_ns) {
+    impl_->publishImageSet(*result.images);
+    impl_->last_set_stamp_ns = result.images->trigger_stamp_ns;
+  }
   if (impl_->config.publish_projector_maps && result.maps) impl_->publishMaps(*result.maps, result);
   if (impl_->config.publish_images && result.cloud) impl_->publishImages(result);
 }

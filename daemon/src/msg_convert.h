@@ -15,6 +15,7 @@
 #include "sl/daemon/scan_engine.h"
 #include "sl_msgs/msg/CommandReply.h"
 #include "sl_msgs/msg/CommandRequest.h"
+#include "sl_msgs/msg/ImageSet.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
 #include "sl_msgs/msg/Status.h"
 
@@ -28,6 +29,7 @@ using Request = sl_msgs_msg_CommandRequest;
 using Reply = sl_msgs_msg_CommandReply;
 using Status = sl_msgs_msg_Status;
 using Maps = sl_msgs_msg_ProjectorMaps;
+using ImageSetMsg = sl_msgs_msg_ImageSet;
 
 constexpr std::uint8_t kFloat32 = 7;  // sensor_msgs/PointField FLOAT32
 

@@ -44,7 +44,11 @@
 #include "sl/daemon/client.h"
 #include "sl/daemon/dds.h"
 #include "sl_msgs/msg/CommandReply.h"
+#include "sl_msgs/msg/ImageSet.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
+#include "sl/pipeline/codec.h"
+#include "sl/pipeline/scan_processor.h"
+#include "sl/pipeline/triangulator.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/recording.h"
 #include "sl/drivers/sim.h"
@@ -995,4 +999,110 @@ TEST_CASE("a second camera gives the cloud its intensity") {
   // independent 6-frame means, interpolation across 1 px).
   CHECK(median < 0.6);
   CHECK(p95 < 2.0);
+}
+
+// dds.publish_image_sets: every synchronized image set on rt/<ns>/image_sets,
+// with its stamps, pattern and camera ids; decoding a received set with the
+// offline pipeline (ScanProcessor, as sl_process does) gives the daemon's
+// cloud bit for bit.
+namespace {
+std::int64_t stampNs(const builtin_interfaces_msg_dds__Time_& t) {
+  return std::int64_t(t.sec) * 1'000'000'000 + t.nanosec;
+}
+}  // namespace
+
+TEST_CASE("image sets published by the daemon decode offline to its clouds, bit for bit") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("sets");
+  YAML::Node root = sl::test::simConfig(ns);
+  root["dds"]["publish_image_sets"] = true;
+  const std::string path = sl::test::writeConfigFile(root, ns);
+  const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(path);
+  sl::test::DaemonProcess daemon(path);
+  REQUIRE(daemon.started());
+
+  using SetMsg = sl_msgs_msg_ImageSet;
+  using CloudMsg = sensor_msgs_msg_dds__PointCloud2_;
+  sl::dds::Participant participant(0);
+  sl::dds::Topic<SetMsg> sets_topic(participant, "rt/" + ns + "/image_sets",
+                                    sl_msgs_msg_ImageSet_desc);
+  sl::dds::Topic<CloudMsg> points_topic(participant, "rt/" + ns + "/points",
+                                        sensor_msgs_msg_dds__PointCloud2__desc);
+  sl::dds::Reader<SetMsg> sets_reader(participant, sets_topic, sl::dds::Qos().reliable().keepLast(4));
+  sl::dds::Reader<CloudMsg> points_reader(participant, points_topic,
+                                          sl::dds::Qos().reliable().keepLast(4));
+  const auto client_owner = connect(ns, false);
+  REQUIRE(sets_reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(points_reader.waitForWriters(1, DDS_SECS(10)));
+  constexpr std::size_t kScans = 2;
+  startScans(*client_owner, "3+3_horizontal", 0);  // continuous: a lost sequence is no failure
+
+  // The offline pipeline with the daemon's configuration.
+  const sl::pipeline::PatternSpec& pattern = *config.findPattern("3+3_horizontal");
+  const sl::pipeline::Decoder decoder(pattern, config.decoder);
+  const sl::pipeline::Triangulator triangulator(config.calibration, config.triangulator);
+  sl::pipeline::ScanProcessor processor(2);
+  std::map<sl::pipeline::TimestampNs, std::vector<float>> offline;  // by stamp, metres as published
+  std::map<sl::pipeline::TimestampNs, std::vector<std::uint8_t>> received;
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  auto matched = [&] {
+    std::size_t n = 0;
+    for (const auto& entry : offline) n += received.count(entry.first);
+    return n;
+  };
+  while (matched() < kScans && std::chrono::steady_clock::now() < deadline) {
+    for (auto loan = sets_reader.take(1); !loan.empty(); loan = sets_reader.take(1)) {
+      if (!loan.isValid(0)) continue;
+      const SetMsg& m = loan[0];
+      REQUIRE(std::string(m.pattern) == "3+3_horizontal");
+      REQUIRE(m.camera_count == 1);
+      REQUIRE(m.camera_ids._length == 1);
+      CHECK(std::string(m.camera_ids._buffer[0]) == config.sim.camera_id);
+      REQUIRE(m.bit_depths._length == 1);
+      REQUIRE(m.images._length == static_cast<std::uint32_t>(pattern.frameCount()));
+      sl::pipeline::CameraImages images;
+      images.camera_id = m.camera_ids._buffer[0];
+      images.bit_depth = m.bit_depths._buffer[0];
+      const auto stamp = stampNs(m.header.stamp);
+      for (std::uint32_t i = 0; i < m.images._length; ++i) {
+        const sensor_msgs_msg_dds__Image_& im = m.images._buffer[i];
+        REQUIRE(std::string(im.encoding) == "mono8");
+        REQUIRE(im.data._length == im.step * im.height);
+        CHECK(std::string(im.header.frame_id) == config.dds.frame_id);
+        const auto t = stampNs(im.header.stamp);
+        // Frame i is exposed i image intervals after the trigger.
+        CHECK(std::llabs(t - stamp - i * config.synchroniser.image_interval_ns) < 1000);
+        images.frames.push_back(
+            cv::Mat(int(im.height), int(im.width), CV_8UC1, im.data._buffer, im.step).clone());
+        images.stamps_ns.push_back(t);
+      }
+      auto [maps, cloud] = processor.process(decoder.codec(), triangulator, images, stamp,
+                                             config.dds.frame_id,
+                                             sl::pipeline::ScanProcessor::Keep::kCloud);
+      std::vector<float> metres;
+      for (const auto& p : cloud->points)
+        metres.insert(metres.end(), {p.x * 1e-3f, p.y * 1e-3f, p.z * 1e-3f, p.intensity});
+      offline[stamp] = std::move(metres);
+    }
+    for (auto loan = points_reader.take(1); !loan.empty(); loan = points_reader.take(1)) {
+      if (!loan.isValid(0)) continue;
+      const CloudMsg& c = loan[0];
+      received[stampNs(c.header.stamp)].assign(c.data._buffer,
+                                                                 c.data._buffer + c.data._length);
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  const auto status = client_owner->status(2s);
+  INFO("sets decoded " << offline.size() << ", clouds " << received.size() << ", writes timed out "
+                       << (status ? status->writes_timed_out : 0));
+  REQUIRE(client_owner->request(Command::kStop, "", 0, 5s));
+  REQUIRE(matched() >= kScans);
+  for (const auto& [stamp, metres] : offline) {
+    INFO("set stamped " << stamp);
+    if (received.count(stamp) == 0) continue;  // its cloud came after the stop
+    const std::vector<std::uint8_t>& bytes = received.at(stamp);
+    REQUIRE(bytes.size() == metres.size() * sizeof(float));
+    CHECK(std::memcmp(bytes.data(), metres.data(), bytes.size()) == 0);  // NaN bits included
+  }
+  REQUIRE(daemon.terminate(5s) == 0);
 }

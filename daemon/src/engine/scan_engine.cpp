@@ -243,7 +243,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     ResultItem result{item->generation, {}};
     for (CameraScan& scan : outcome.scans)
       result.results.push_back({0, set.pattern_name, scan.camera_id, scan.bit_depth,
-                                std::move(scan.maps), std::move(scan.cloud)});
+                                std::move(scan.maps), std::move(scan.cloud), item->set});
     results.push(std::move(result));
   }
 }

@@ -27,6 +27,15 @@ class ConfigError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Writer QoS of one published topic (`dds.qos.<topic>`). Keep-last writers
+// never wait for a slow reader beyond their history: a reader that falls
+// `depth` samples behind misses the oldest (see README "Slow readers").
+struct TopicQos {
+  bool reliable = true;
+  int depth = 2;                // keep-last history, samples
+  double max_blocking_s = 0.2;  // reliable: a write blocked longer is dropped (counted)
+};
+
 struct DdsConfig {
   int domain_id = 0;
   std::string ns = "sl";              // topics are rt/<ns>/points, rq/<ns>/commandRequest, ...
@@ -36,6 +45,12 @@ struct DdsConfig {
   // Depth (32FC1, m) and shading (mono8) images and camera_info, ROS 2 types.
   bool publish_images = false;
   double status_period_s = 1.0;
+  // Per topic writer QoS (`dds.qos.points`, `.images` for depth, shading and
+  // camera_info, `.projector_maps`, `.image_sets`).
+  TopicQos points_qos{true, 4, 0.2};
+  TopicQos images_qos{true, 2, 0.2};
+  TopicQos maps_qos{true, 2, 0.2};
+  TopicQos image_sets_qos{true, 2, 0.2};
 };
 
 // Linear-motion compensation (paper section 2.4.2), off by default.

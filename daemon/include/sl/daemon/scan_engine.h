@@ -101,6 +101,9 @@ struct ScanResult {
   // the maps out (pipeline::ScanProcessor::Keep::kCloud).
   std::shared_ptr<const pipeline::ProjectorMaps> maps;
   std::shared_ptr<const pipeline::PointCloud> cloud;  // mm, the camera's optical frame
+  // The image set the scan came from, as acquired (before motion
+  // compensation): published on rt/<ns>/image_sets when enabled.
+  std::shared_ptr<const pipeline::ImageSet> images;
 };
 
 struct EngineDevices {
