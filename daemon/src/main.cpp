@@ -3,6 +3,7 @@
 #include <signal.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <string>
@@ -10,6 +11,7 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/dds_bridge.h"
+#include "sl/daemon/dds_environment.h"
 #include "sl/daemon/devices.h"
 #include "sl/daemon/log.h"
 #include "sl/daemon/scan_engine.h"
@@ -57,9 +59,25 @@ void reload(const std::string& path, const sl::daemon::DaemonConfig& running,
   systemdNotify("READY=1");
 }
 
+// One warning line per thing the DDS configuration asks for and the host
+// cannot give (socket buffers above the kernel's limits, shared memory
+// without RouDi): the daemon then still runs, slower, but never silently.
+void checkDdsEnvironment() {
+  using namespace sl::daemon;
+  const char* uri = std::getenv("CYCLONEDDS_URI");
+  if (uri == nullptr || *uri == '\0') return;
+  try {
+    for (const std::string& line : ddsEnvironmentProblems(readDdsRequirements(uri), currentDdsHost()))
+      logWarning(line);
+  } catch (const std::exception& e) {
+    logWarning(std::string("DDS environment not checked: ") + e.what());
+  }
+}
+
 int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
   const DaemonConfig config = loadConfig(config_path);
+  checkDdsEnvironment();
   std::shared_ptr<void> device_owner;
   EngineDevices devices = openDevices(config, device_owner);
   DdsBridge bridge(config.dds, devices.cameras.front()->id(), config.calibration.camera);

@@ -8,6 +8,7 @@
 
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
+#include "sl/daemon/dds_environment.h"
 #include "support/config_text.h"
 
 #include <unistd.h>
@@ -106,6 +107,12 @@ TEST_CASE("config mistakes are reported with file, line and key") {
       Case{"use: best", "use: diagonal", "key 'triangulator.use': must be best, columns or rows"},
       Case{"rotation_deg: [0, 15.25, 0],", "rotation_deg: [0, 15.25, 0], rotation: [1,0,0,0,1,0,0,0,1],",
            "give exactly one of 'rotation'"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  qos: {points: {reliability: maybe}}",
+           "key 'dds.qos.points.reliability': must be reliable or best_effort, not 'maybe'"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  qos: {images: {depth: 0}}",
+           "key 'dds.qos.images.depth': must be in 1..64"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  qos: {cloud: {depth: 1}}",
+           "unknown key 'dds.qos.cloud'"},
       Case{"patterns:\n", "patterns: []\nunused:\n", "key 'patterns': expected a non-empty list"});
   INFO("edit: '" << c.from << "' -> '" << c.to << "'");
   const std::string message = errorOf(edited(c.from, c.to));
@@ -113,6 +120,55 @@ TEST_CASE("config mistakes are reported with file, line and key") {
   CHECK(message.rfind("test.yaml", 0) == 0);  // names the file first
   CHECK(message.find(c.expected) != std::string::npos);
   CHECK(message.find('\n') == std::string::npos);  // one line
+}
+
+TEST_CASE("dds.qos sets each topic's writer QoS, the rest keep their defaults") {
+  const auto c = sl::daemon::parseConfig(
+      edited("status_period_s: 1.0",
+             "status_period_s: 1.0\n  qos:\n    points: {reliability: best_effort, depth: 1}\n"
+             "    image_sets: {depth: 3, max_blocking_s: 0.5}"),
+      "test.yaml");
+  CHECK_FALSE(c.dds.points_qos.reliable);
+  CHECK(c.dds.points_qos.depth == 1);
+  CHECK(c.dds.image_sets_qos.reliable);
+  CHECK(c.dds.image_sets_qos.depth == 3);
+  CHECK(c.dds.image_sets_qos.max_blocking_s == 0.5);
+  CHECK(c.dds.images_qos.depth == sl::daemon::DdsConfig{}.images_qos.depth);
+  const auto defaults = sl::daemon::parseConfig(shippedConfig(), "test.yaml");
+  CHECK(defaults.dds.points_qos.reliable);
+  CHECK(defaults.dds.points_qos.depth == sl::daemon::DdsConfig{}.points_qos.depth);
+}
+
+TEST_CASE("the DDS environment check names what the kernel or RouDi cannot give") {
+  using sl::daemon::DdsHost;
+  // The shipped LAN config asks for 32 MiB / 8 MiB buffers.
+  const auto lan = sl::daemon::readDdsRequirements("file://" + std::string(SL_SOURCE_DIR) +
+                                                   "/config/cyclonedds-lan.xml");
+  REQUIRE(lan.receive_buffer_bytes);
+  CHECK(*lan.receive_buffer_bytes == 32 << 20);
+  CHECK(lan.send_buffer_bytes == std::optional<std::int64_t>(8 << 20));
+  CHECK_FALSE(lan.shared_memory);
+  const auto small = sl::daemon::ddsEnvironmentProblems(lan, DdsHost{4 << 20, 4 << 20, false});
+  REQUIRE(small.size() == 2);
+  CHECK(small[0].find("32 MiB socket receive buffer but net.core.rmem_max is 4 MiB") !=
+        std::string::npos);
+  CHECK(small[0].find("99-sl-sensor-sysctl.conf") != std::string::npos);
+  CHECK(small[1].find("net.core.wmem_max") != std::string::npos);
+  CHECK(sl::daemon::ddsEnvironmentProblems(lan, DdsHost{64 << 20, 16 << 20, false}).empty());
+  // Inline XML, units, comments ignored; shared memory without RouDi.
+  const auto inline_xml = sl::daemon::readDdsRequirements(
+      "<CycloneDDS><Domain><!-- <SocketReceiveBufferSize max=\"1GiB\"/> -->"
+      "<Internal><SocketReceiveBufferSize min=\"default\" max=\"6000 KB\"/></Internal>"
+      "<SharedMemory><Enable>true</Enable></SharedMemory></Domain></CycloneDDS>");
+  CHECK(inline_xml.receive_buffer_bytes == std::optional<std::int64_t>(6'000'000));
+  CHECK(inline_xml.shared_memory);
+  const auto no_roudi =
+      sl::daemon::ddsEnvironmentProblems(inline_xml, DdsHost{4 << 20, 4 << 20, false});
+  REQUIRE(no_roudi.size() == 2);
+  CHECK(no_roudi[1].find("no iceoryx RouDi is running") != std::string::npos);
+  CHECK(sl::daemon::ddsEnvironmentProblems(inline_xml, DdsHost{8 << 20, 4 << 20, true}).empty());
+  CHECK_THROWS_WITH(sl::daemon::readDdsRequirements("file:///nonexistent/cyclone.xml"),
+                    Catch::Contains("cannot read '/nonexistent/cyclone.xml'"));
 }
 
 TEST_CASE("decoder.min_modulation takes a number or auto") {
