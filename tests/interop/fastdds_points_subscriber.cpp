@@ -125,6 +125,16 @@ int main(int argc, char** argv) {
            reader->take_next_sample(&cloud, &info) == ReturnCode_t::RETCODE_OK) {
       if (!info.valid_data) continue;
       ++received;
+      if (args.rx_times) {
+        const long long now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                  std::chrono::system_clock::now().time_since_epoch())
+                                  .count();
+        std::printf("rx %lld %lld\n",
+                    static_cast<long long>(cloud.header().stamp().sec()) * 1000000000LL +
+                        cloud.header().stamp().nanosec(),
+                    now);
+        continue;
+      }
       std::printf("%s\n", sl::interop::digestLine(describe(cloud)).c_str());
       std::fflush(stdout);
     }

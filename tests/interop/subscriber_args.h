@@ -17,6 +17,10 @@ struct SubscriberArgs {
   int domain = 0;
   long count = 1;
   double timeout_s = 30;
+  // --rx-times (no value): print "rx <header.stamp ns> <take time ns>"
+  // (CLOCK_REALTIME) per cloud instead of its digest line, for
+  // scripts/bench-delivery.sh.
+  bool rx_times = false;
 };
 
 inline SubscriberArgs parseSubscriberArgs(int argc, char** argv) {
@@ -28,6 +32,10 @@ inline SubscriberArgs parseSubscriberArgs(int argc, char** argv) {
   };
   for (int i = 1; i < argc; ++i) {
     const std::string opt = argv[i];
+    if (opt == "--rx-times") {
+      a.rx_times = true;
+      continue;
+    }
     if (i + 1 >= argc) bad(opt + " needs a value");
     const std::string value = argv[++i];
     char* end = nullptr;

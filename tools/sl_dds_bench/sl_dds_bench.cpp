@@ -4,6 +4,14 @@
 //
 //   sl_dds_bench sub [--topic T] [--count N] [--timeout S]
 //   sl_dds_bench pub [--topic T] [--count N] [--rate HZ] [--width W] [--height H]
+//   sl_dds_bench listen [--topic T] [--duration S] [--timeout S] [--depth N] [--best-effort 1]
+//
+// listen: a subscriber to the daemon's clouds (scripts/bench-delivery.sh):
+// waits at most --timeout S (default 60) for the first cloud, then takes
+// clouds for --duration S (default 30), reader reliable (or best effort)
+// keep-last --depth (default 4), and prints one line per cloud,
+// "rx <header.stamp ns> <take time ns>" (CLOCK_REALTIME after the take), then
+// "listen: done <clouds>". Exits 1 if no cloud came.
 //
 // The publisher waits (at most 10 s) for a reader, then writes N organized
 // clouds of W x H points x 16 bytes (default 1440 x 1080, the sensor's) at
@@ -27,6 +35,7 @@
 #include <limits>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "sensor_msgs/msg/PointCloud2.h"
@@ -45,6 +54,9 @@ struct Args {
   double rate_hz = 5;
   std::uint32_t width = 1440, height = 1080;
   double timeout_s = 120;
+  double duration_s = 30;
+  int depth = 4;
+  bool best_effort = false;
 };
 
 [[noreturn]] void usage(const std::string& why) {
@@ -52,7 +64,9 @@ struct Args {
                "sl_dds_bench: %s\n"
                "usage: sl_dds_bench sub [--topic T] [--count N] [--timeout S]\n"
                "       sl_dds_bench pub [--topic T] [--count N] [--rate HZ] [--width W] "
-               "[--height H]\n",
+               "[--height H]\n"
+               "       sl_dds_bench listen [--topic T] [--duration S] [--timeout S] [--depth N] "
+               "[--best-effort 1]\n",
                why.c_str());
   std::exit(2);
 }
@@ -61,7 +75,9 @@ Args parse(int argc, char** argv) {
   if (argc < 2) usage("missing mode");
   Args a;
   a.mode = argv[1];
-  if (a.mode != "pub" && a.mode != "sub") usage("mode must be pub or sub");
+  if (a.mode != "pub" && a.mode != "sub" && a.mode != "listen")
+    usage("mode must be pub, sub or listen");
+  if (a.mode == "listen") a.timeout_s = 60;
   for (int i = 2; i < argc; ++i) {
     const std::string opt = argv[i];
     if (i + 1 >= argc) usage(opt + " needs a value");
@@ -83,6 +99,12 @@ Args parse(int argc, char** argv) {
       a.height = static_cast<std::uint32_t>(number);
     else if (opt == "--timeout" && number > 0)
       a.timeout_s = number;
+    else if (opt == "--duration" && number > 0)
+      a.duration_s = number;
+    else if (opt == "--depth" && number >= 1)
+      a.depth = static_cast<int>(number);
+    else if (opt == "--best-effort")
+      a.best_effort = number != 0;
     else
       usage("bad option or value: " + opt + " " + v);
   }
@@ -230,11 +252,55 @@ int subscribe(const Args& a) {
   return received > 0 ? 0 : 1;
 }
 
+int listen(const Args& a) {
+  dds::Participant participant;
+  dds::Topic<Cloud> topic(participant, a.topic, sensor_msgs_msg_dds__PointCloud2__desc);
+  dds::Qos qos;
+  if (a.best_effort)
+    qos.bestEffort();
+  else
+    qos.reliable();
+  qos.keepLast(a.depth);
+  dds::Reader<Cloud> reader(participant, topic, qos);
+  dds::ReadCondition has_data(reader);
+  dds::WaitSet waitset(participant);
+  waitset.attach(has_data);
+  using Clock = std::chrono::steady_clock;
+  const Clock::time_point give_up =
+      Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(a.timeout_s));
+  Clock::time_point end = Clock::time_point::max();
+  long received = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>> rx;  // stamp, take time
+  rx.reserve(4096);
+  while (Clock::now() < (received == 0 ? give_up : end)) {
+    if (!waitset.wait(DDS_MSECS(100))) continue;
+    for (;;) {
+      dds::Loan<Cloud> loan = reader.take(8);
+      if (loan.empty()) break;
+      const std::int64_t now = realtimeNs();
+      for (std::size_t i = 0; i < loan.size(); ++i) {
+        if (!loan.isValid(i)) continue;
+        const Cloud& c = loan[i];
+        rx.emplace_back(static_cast<std::int64_t>(c.header.stamp.sec) * 1000000000 +
+                            c.header.stamp.nanosec,
+                        now);
+        if (received++ == 0)
+          end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                   std::chrono::duration<double>(a.duration_s));
+      }
+    }
+  }
+  for (const auto& [stamp, take] : rx) std::printf("rx %" PRId64 " %" PRId64 "\n", stamp, take);
+  std::printf("listen: done %ld\n", received);
+  return received > 0 ? 0 : 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const Args args = parse(argc, argv);
   try {
+    if (args.mode == "listen") return listen(args);
     return args.mode == "pub" ? publish(args) : subscribe(args);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "sl_dds_bench %s: %s\n", args.mode.c_str(), e.what());

@@ -1,0 +1,305 @@
+#!/usr/bin/env bash
+# Cloud delivery with the daemon in the loop (issue 13): sl_sensord on the
+# simulated sensor, subscribers in other processes, per shipped Cyclone DDS
+# configuration and per scenario, plus the bare DDS ceiling (sl_dds_bench
+# pub/sub, 25 MB clouds, no daemon) and a Fast DDS subscriber at 5 Hz.
+#
+#   bash scripts/bench-delivery.sh [BUILD_DIR]        (default: build; a Release build)
+#
+# Scenarios (SL_BENCH_SECONDS scales the windows, default 30):
+#   5hz      camera 30 fps (6-frame 3+3 sequences: 5 scans/s), one subscriber
+#   max      camera 180 fps (30 scans/s), one subscriber, 30 s
+#   3subs    camera 180 fps, three subscribers (the figures: the worst of the three)
+#   stalled  camera 30 fps, two subscribers, the second SIGSTOPped for 30 s
+#            (SL_BENCH_SECONDS) after 5 s; the figures are the first's; the second's clouds
+#            after it resumes are reported on their own line
+# Configurations: loopback (config/cyclonedds-loopback.xml, the default),
+# lan (config/cyclonedds-lan.xml bound to 127.0.0.1 with unicast discovery,
+# as tools/sl_dds_bench/run.sh does), shm (config/cyclonedds-shm.xml, with a
+# RouDi of config/iceoryx-roudi.toml started for the run).
+#
+# Figures per subscriber, over its window (from its first cloud):
+#   clouds_per_s  clouds taken / window
+#   lost          sequences missing between the first and the last cloud
+#                 taken (by header.stamp on the sequence grid: 6 frames at the
+#                 camera rate), whatever lost them (simulator, synchroniser,
+#                 queues, DDS)
+#   p50/p99/max   latency = take time (CLOCK_REALTIME after dds_take) - the
+#                 trigger time of the sequence's last pattern (header.stamp
+#                 + 5 image intervals): from the end of the sequence's
+#                 acquisition to the subscriber holding the cloud
+#   rss_mb        the daemon's peak resident set (VmHWM, reset before each
+#                 scenario through /proc/PID/clear_refs)
+# Ends with one line per configuration and scenario:
+#   delivery: <config> <scenario> clouds_per_s=<x> lost=<n> p50_ms=<x> p99_ms=<x> max_ms=<x> rss_mb=<x>
+#
+# As root it runs in a private network and mount namespace (its own
+# loopback, /tmp and /dev/shm), so its DDS traffic and its RouDi never meet
+# anyone else's; otherwise on the host's loopback, domain 0. Every wait is
+# bounded; daemons, subscribers and RouDi are stopped on exit.
+set -euo pipefail
+src=$(cd "$(dirname "$0")/.." && pwd)
+build=$(cd "${1:-$src/build}" && pwd)
+secs=${SL_BENCH_SECONDS:-30}
+
+if [ "${SL_BENCH_INSIDE:-0}" != 1 ] && [ "$(id -u)" = 0 ] && unshare -n -m true 2> /dev/null; then
+  exec env SL_BENCH_INSIDE=1 unshare -n -m --propagation private bash "$0" "$build"
+fi
+if [ "${SL_BENCH_INSIDE:-0}" = 1 ]; then
+  ip link set lo up
+  mount -t tmpfs -o mode=1777 tmpfs /tmp
+  mount -t tmpfs -o mode=1777 tmpfs /dev/shm
+  isolation="private network and mount namespace"
+else
+  isolation="host loopback (not root: no private namespace)"
+fi
+
+daemon=$build/daemon/sl_sensord
+slctl=$build/tools/slctl
+bench=$build/tools/sl_dds_bench/sl_dds_bench
+fastdds=$build/tests/interop/fastdds_points_subscriber
+for b in "$daemon" "$slctl" "$bench"; do
+  [ -x "$b" ] || { echo "bench-delivery: $b not built (cmake --build $build)" >&2; exit 2; }
+done
+grep -q 'CMAKE_BUILD_TYPE:STRING=Release' "$build/CMakeCache.txt" 2> /dev/null ||
+  echo "bench-delivery: warning: $build is not a Release build" >&2
+
+work=$(mktemp -d)
+pids=()
+roudi_pid=""
+cleanup() {
+  for p in "${pids[@]}"; do kill -CONT "$p" 2> /dev/null || true; kill -TERM "$p" 2> /dev/null || true; done
+  sleep 0.5
+  for p in "${pids[@]}"; do kill -KILL "$p" 2> /dev/null || true; done
+  if [ -n "$roudi_pid" ]; then
+    for _ in $(seq 1 20); do
+      kill -TERM "$roudi_pid" 2> /dev/null || break
+      sleep 0.5
+      case "$(ps -o stat= -p "$roudi_pid" 2> /dev/null)" in Z* | "") break ;; esac
+    done
+    kill -KILL "$roudi_pid" 2> /dev/null || true
+  fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+trap 'exit 130' INT TERM
+
+t_start=$SECONDS
+results=()
+notes=()
+note() { echo "$*"; notes+=("$*"); }
+
+# --- configurations ---
+sed -e 's#<NetworkInterface autodetermine="true"/>#<NetworkInterface address="127.0.0.1"/>#' \
+    -e 's#<AllowMulticast>spdp</AllowMulticast>#<AllowMulticast>false</AllowMulticast>#' \
+    -e 's#</Discovery>#  <Peers><Peer address="127.0.0.1"/></Peers>\n    </Discovery>#' \
+    "$src/config/cyclonedds-lan.xml" > "$work/lan-loopback.xml"
+grep -q 'address="127.0.0.1"' "$work/lan-loopback.xml" || { echo "bench-delivery: LAN config edit failed" >&2; exit 2; }
+configs=("loopback:$src/config/cyclonedds-loopback.xml" "lan:$work/lan-loopback.xml")
+if command -v iox-roudi > /dev/null; then
+  if [ "${SL_BENCH_INSIDE:-0}" = 1 ] || ! pgrep -x iox-roudi > /dev/null; then
+    iox-roudi -c "$src/config/iceoryx-roudi.toml" -l warning > "$work/roudi.log" 2>&1 &
+    roudi_pid=$!
+    sleep 2
+    kill -0 "$roudi_pid" 2> /dev/null || { cat "$work/roudi.log" >&2; roudi_pid=""; }
+  fi
+  [ -n "$roudi_pid" ] || pgrep -x iox-roudi > /dev/null && configs+=("shm:$src/config/cyclonedds-shm.xml")
+else
+  note "note: iox-roudi not installed: shm configuration skipped"
+fi
+
+# --- statistics ---
+# stats FILE PERIOD_NS OFFSET_NS -> "clouds_per_s=.. lost=.. p50_ms=.. p99_ms=.. max_ms=.."
+# from "rx STAMP TAKE" lines; latency = TAKE - (STAMP + OFFSET).
+stats() {
+  local file=$1 period=$2 offset=$3
+  local n
+  n=$(grep -c '^rx ' "$file" || true)
+  if [ "$n" -lt 1 ]; then
+    echo "clouds_per_s=0 lost=all p50_ms=nan p99_ms=nan max_ms=nan"
+    return
+  fi
+  local head
+  head=$(awk -v p="$period" '$1 == "rx" {
+      if (!(n++)) { s0 = $2; s1 = $2; r0 = $3; r1 = $3 }
+      if ($2 < s0) s0 = $2; if ($2 > s1) s1 = $2; if ($3 < r0) r0 = $3; if ($3 > r1) r1 = $3
+      seen[$2] = 1 }
+    END { u = 0; for (k in seen) u++
+      expected = int((s1 - s0) / p + 0.5) + 1
+      span = (r1 - r0) / 1e9
+      printf "clouds_per_s=%.2f lost=%d", (n > 1 && span > 0 ? (n - 1) / span : 0), expected - u }' "$file")
+  local lat
+  lat=$(awk -v o="$offset" '$1 == "rx" { printf "%.3f\n", ($3 - $2 - o) / 1e6 }' "$file" | sort -g |
+    awk '{ v[NR] = $1 } END {
+      i50 = int(0.50 * (NR - 1) + 0.5) + 1; i99 = int(0.99 * (NR - 1) + 0.5) + 1
+      printf "p50_ms=%.1f p99_ms=%.1f max_ms=%.1f", v[i50], v[i99], v[NR] }')
+  echo "$head $lat"
+}
+field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
+
+# --- the daemon ---
+daemon_pid=""
+ns=""
+start_daemon() {  # FPS [extra sed expression]
+  local fps=$1 extra=${2:-}
+  ns="bench_$$_$RANDOM"
+  sed -e "s/^  camera_fps: 30 /  camera_fps: $fps /" -e "s/^  namespace: sl$/  namespace: $ns/" \
+      ${extra:+-e "$extra"} "$src/config/sim.yaml" > "$work/sim.yaml"
+  grep -q "camera_fps: $fps " "$work/sim.yaml" && grep -q "namespace: $ns" "$work/sim.yaml" ||
+    { echo "bench-delivery: could not edit config/sim.yaml" >&2; exit 2; }
+  "$daemon" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
+  daemon_pid=$!
+  pids+=("$daemon_pid")
+  timeout 30 "$slctl" --ns "$ns" --timeout 20 status > /dev/null 2>&1 ||
+    { echo "bench-delivery: the daemon did not answer:" >&2; cat "$work/daemon.log" >&2; exit 1; }
+}
+stop_daemon() {
+  [ -n "$daemon_pid" ] || return 0
+  kill -TERM "$daemon_pid" 2> /dev/null || true
+  for _ in $(seq 1 50); do kill -0 "$daemon_pid" 2> /dev/null || break; sleep 0.1; done
+  kill -KILL "$daemon_pid" 2> /dev/null || true
+  wait "$daemon_pid" 2> /dev/null || true
+  daemon_pid=""
+}
+rss_mb() { awk '/^VmHWM/ { printf "%.0f", $2 / 1024 }' "/proc/$daemon_pid/status" 2> /dev/null || echo nan; }
+reset_rss() { echo 5 > "/proc/$daemon_pid/clear_refs" 2> /dev/null || true; }
+
+# scenario NAME CONFIG FPS SUBS DURATION [STALL]: subscribers 1..SUBS, each
+# "sl_dds_bench listen"; STALL=1: subscriber 2 stopped from 5 s for 30 s.
+scenario() {
+  local name=$1 cfg=$2 fps=$3 subs=$4 duration=$5 stall=${6:-0}
+  local period offset i
+  period=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 6e9 / f }')
+  offset=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 5e9 / f }')
+  local sub_pids=()
+  for i in $(seq 1 "$subs"); do
+    timeout $((duration + 90)) "$bench" listen --topic "rt/$ns/points" --duration "$duration" \
+      --timeout 30 > "$work/sub$i.log" 2> "$work/sub$i.err" &
+    sub_pids+=($!)
+    pids+=($!)
+  done
+  sleep 3  # discovery: the volatile cloud topic only reaches matched readers
+  reset_rss
+  local load
+  load=$(cut -d' ' -f1-3 /proc/loadavg)
+  timeout 20 "$slctl" --ns "$ns" start > /dev/null || { echo "bench-delivery: slctl start failed" >&2; cat "$work/daemon.log" >&2; exit 1; }
+  if [ "$stall" = 1 ]; then
+    sleep 5
+    kill -STOP "${sub_pids[1]}"
+    sleep "$secs"
+    kill -CONT "${sub_pids[1]}"
+  fi
+  for p in "${sub_pids[@]}"; do wait "$p" || true; done
+  local rss
+  rss=$(rss_mb)
+  local status
+  status=$(timeout 20 "$slctl" --ns "$ns" status 2>&1 | tr '\n' ' ' | tr -s ' ')
+  timeout 20 "$slctl" --ns "$ns" stop > /dev/null 2>&1 || true
+  sleep 1
+  # The figures: subscriber 1 (stalled), else the worst of the subscribers
+  # (lowest rate, most lost, highest latencies).
+  local lines=() line f
+  local measured=("$work/sub1.log")
+  [ "$stall" = 1 ] || measured=($(for i in $(seq 1 "$subs"); do echo "$work/sub$i.log"; done))
+  for f in "${measured[@]}"; do
+    line=$(stats "$f" "$period" "$offset")
+    echo "  $name/$cfg $(basename "$f" .log): $line"
+    lines+=("$line")
+  done
+  local worst
+  worst=$(printf '%s\n' "${lines[@]}" | tr '=' ' ' | awk '
+    { if (NR == 1) l = -1
+      if (NR == 1 || $2 < r) r = $2; if ($4 == "all" || l == "all") l = "all"; else if ($4 + 0 > l + 0) l = $4
+      for (k = 6; k <= 10; k += 2) if ($k == "nan" || v[k] == "nan") v[k] = "nan"; else if (NR == 1 || $k > v[k]) v[k] = $k }
+    END { printf "clouds_per_s=%s lost=%s p50_ms=%s p99_ms=%s max_ms=%s", r, l, v[6], v[8], v[10] }')
+  if [ "$stall" = 1 ]; then
+    # The stalled subscriber: clouds taken after it resumed, and how old the
+    # first of them was (the writer's and its own history hold the newest).
+    awk -v o="$offset" '$1 == "rx" { if (prev && $3 - prev > 5e9) { gap = ($3 - prev) / 1e9; age = ($3 - $2 - o) / 1e6; after = 0 }
+                         if (gap) after++; prev = $3 }
+      END { if (gap) printf "  stalled/%s sub2: resumed after %.1f s, first cloud %.0f ms old, %d clouds after resuming\n", cfg, gap, age, after
+            else printf "  stalled/%s sub2: no gap seen (%s)\n", cfg, (prev ? "it kept receiving" : "no cloud") }' cfg="$cfg" "$work/sub2.log"
+  fi
+  echo "  $name/$cfg: load average $load; daemon status: ${status:0:400}"
+  results+=("delivery: $cfg $name $worst rss_mb=$rss")
+}
+
+echo "bench-delivery: $(date -u +%FT%TZ), $(nproc) cores, $isolation, load average $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "bench-delivery: net.core.rmem_max=$(cat /proc/sys/net/core/rmem_max) wmem_max=$(cat /proc/sys/net/core/wmem_max)"
+
+# --- bare DDS ceiling: sl_dds_bench pub -> sub, no daemon ---
+declare -A ceiling_rate ceiling_p50
+for entry in "${configs[@]}"; do
+  cfg=${entry%%:*}
+  export CYCLONEDDS_URI=file://${entry#*:}
+  for rate in 5 0; do
+    count=$([ "$rate" = 0 ] && echo 120 || echo 50)
+    topic="rt/ceiling_$$_${cfg}_$rate/points"
+    timeout 90 "$bench" sub --topic "$topic" --count "$count" --timeout 60 > "$work/csub.log" 2>&1 &
+    csub=$!
+    pids+=("$csub")
+    sleep 1
+    timeout 90 "$bench" pub --topic "$topic" --count "$count" --rate "$rate" > "$work/cpub.log" 2>&1 || true
+    wait "$csub" || true
+    line=$(grep '^sub: received' "$work/csub.log" || echo "sub: no result")
+    echo "  ceiling/$cfg $([ "$rate" = 0 ] && echo "back to back" || echo "5 Hz"): $line"
+    if [ "$rate" = 0 ]; then
+      ceiling_rate[$cfg]=$(echo "$line" | sed -n 's/.* \([0-9.]*\) clouds\/s delivered.*/\1/p')
+    else
+      ceiling_p50[$cfg]=$(echo "$line" | sed -n 's/.*latency median \([0-9.]*\) ms.*/\1/p')
+    fi
+  done
+done
+
+# --- the daemon in the loop ---
+for entry in "${configs[@]}"; do
+  cfg=${entry%%:*}
+  export CYCLONEDDS_URI=file://${entry#*:}
+  start_daemon 30
+  scenario 5hz "$cfg" 30 1 "$((secs * 2 / 3))"
+  scenario stalled "$cfg" 30 2 "$((secs + 12))" 1
+  stop_daemon
+  start_daemon 180
+  scenario max "$cfg" 180 1 "$secs"
+  scenario 3subs "$cfg" 180 3 "$((secs * 2 / 3))"
+  stop_daemon
+done
+
+# --- a Fast DDS subscriber (ROS 2's default middleware) at 5 Hz, default config ---
+if [ -x "$fastdds" ]; then
+  export CYCLONEDDS_URI=file://$src/config/cyclonedds-loopback.xml
+  export FASTRTPS_DEFAULT_PROFILES_FILE=$src/config/fastdds-loopback.xml
+  start_daemon 30
+  n=$((secs * 5 * 2 / 3))
+  timeout $((secs + 60)) "$fastdds" --topic "rt/$ns/points" --count "$n" --timeout $((secs + 50)) --rx-times \
+    > "$work/fastdds.log" 2> "$work/fastdds.err" &
+  fpid=$!
+  pids+=("$fpid")
+  for _ in $(seq 1 100); do grep -q '^ready' "$work/fastdds.log" && break; sleep 0.1; done
+  sleep 1
+  reset_rss
+  timeout 20 "$slctl" --ns "$ns" start > /dev/null
+  wait "$fpid" || echo "  fastdds: $(tail -n 2 "$work/fastdds.err")"
+  rss=$(rss_mb)
+  timeout 20 "$slctl" --ns "$ns" stop > /dev/null 2>&1 || true
+  stop_daemon
+  line=$(stats "$work/fastdds.log" 200000000 166666667)
+  echo "  fastdds-5hz/loopback: $line"
+  results+=("delivery: loopback fastdds-5hz $line rss_mb=$rss")
+else
+  note "note: $fastdds not built (Fast DDS missing): Fast DDS subscriber skipped"
+fi
+
+echo
+for entry in "${configs[@]}"; do
+  cfg=${entry%%:*}
+  echo "bench-delivery: bare DDS ceiling ($cfg, sl_dds_bench, 25 MB clouds): ${ceiling_rate[$cfg]:-?} clouds/s back to back, median ${ceiling_p50[$cfg]:-?} ms at 5 Hz"
+  for r in "${results[@]}"; do
+    case "$r" in "delivery: $cfg max "*)
+      awk -v got="$(field "$r" clouds_per_s)" -v bare="${ceiling_rate[$cfg]:-0}" -v c="$cfg" \
+        'BEGIN { if (bare > 0) printf "bench-delivery: %s max / bare ceiling = %.2f\n", c, got / bare }' ;;
+    esac
+  done
+done
+echo "bench-delivery: load average at the end $(cut -d' ' -f1-3 /proc/loadavg); total $((SECONDS - t_start)) s"
+for r in "${results[@]}"; do echo "$r"; done
