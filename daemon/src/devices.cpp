@@ -22,6 +22,16 @@ EngineDevices openSimulated(const DaemonConfig& config, std::shared_ptr<void>& k
   } catch (const std::exception& e) {
     throw std::runtime_error(config.source_path + ": simulated sensor: " + e.what());
   }
+  // A static scene renders each pattern frame from its noise-free image,
+  // computed on first use: compute them all now, so that the first sequence
+  // of a scan renders as fast as the later ones (the live camera would
+  // otherwise fall behind on it and drop it).
+  if (!config.sim.motion.moving()) {
+    for (const drivers::ProjectorSequence& s : sim->projector()->sequences())
+      for (int frame = 0; frame < s.frame_count; ++frame)
+        for (int camera = 0; camera < static_cast<int>(sim->cameras().size()); ++camera)
+          sim->render(camera, s.name, frame, 0);
+  }
   keep_alive = sim;
   EngineDevices devices;
   devices.cameras = sim->cameras();  // the first, then the optional second camera
