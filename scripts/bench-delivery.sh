@@ -152,6 +152,7 @@ start_daemon() {  # FPS [extra sed expression]
   pids+=("$daemon_pid")
   timeout 30 "$slctl" --ns "$ns" --timeout 20 status > /dev/null 2>&1 ||
     { echo "bench-delivery: the daemon did not answer:" >&2; cat "$work/daemon.log" >&2; exit 1; }
+  grep -m 3 'warning' "$work/daemon.log" | sed 's/^/  daemon: /' || true
 }
 stop_daemon() {
   [ -n "$daemon_pid" ] || return 0
@@ -218,7 +219,7 @@ scenario() {
     awk -v o="$offset" '$1 == "rx" { if (prev && $3 - prev > 5e9) { gap = ($3 - prev) / 1e9; age = ($3 - $2 - o) / 1e6; after = 0 }
                          if (gap) after++; prev = $3 }
       END { if (gap) printf "  stalled/%s sub2: resumed after %.1f s, first cloud %.0f ms old, %d clouds after resuming\n", cfg, gap, age, after
-            else printf "  stalled/%s sub2: no gap seen (%s)\n", cfg, (prev ? "it kept receiving" : "no cloud") }' cfg="$cfg" "$work/sub2.log"
+            else printf "  stalled/%s sub2: no gap of more than 5 s between its takes: it took no cloud after resuming (%s)\n", cfg, (prev ? "or never stopped" : "nor before") }' cfg="$cfg" "$work/sub2.log"
   fi
   echo "  $name/$cfg: load average $load; daemon status: ${status:0:400}"
   results+=("delivery: $cfg $name $worst rss_mb=$rss")
