@@ -402,7 +402,7 @@ inline int threeStepIndex(int e1, int e2) { return (e1 + 255) * kThreeStepSide +
 // (SSE2) fast atan2, but not the 8-wide AVX2 variant (measured on 1440 x 1080
 // 3+3: decode 7.4 vs 10.2 ms with SSE2, 5.5 vs 4.9 ms with AVX2).
 inline bool threeStepTablesPay() {
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#if SL_MULTIVERSION_ENABLED
   return !__builtin_cpu_supports("avx2");  // see multiversion.h
 #else
   return true;

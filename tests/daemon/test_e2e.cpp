@@ -21,6 +21,7 @@
 // measured points, the mean error (bias) is below 0.05 mm
 // and at most 0.1 % of points are outliers (> 10 predicted sigma; wrong fringe
 // order).
+#include "support/time_scale.h"
 #include <catch2/catch.hpp>
 
 #include <chrono>
@@ -334,13 +335,13 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   // Watchdog pings follow, well within the interval systemd asked for.
   int pings = 0;
   const auto watch_start = std::chrono::steady_clock::now();
-  while (pings < 5 && std::chrono::steady_clock::now() - watch_start < 3s) {
+  while (pings < 5 && std::chrono::steady_clock::now() - watch_start < sl::test::scaledBound(3s)) {
     const ssize_t m = ::recv(fd, buffer, sizeof buffer - 1, 0);
     if (m > 0 && std::string(buffer, m) == "WATCHDOG=1") ++pings;
   }
   const auto watch_elapsed = std::chrono::steady_clock::now() - watch_start;
   CHECK(pings == 5);
-  CHECK(watch_elapsed < 1500ms);  // 5 pings at 0.1 s intervals
+  CHECK(watch_elapsed < sl::test::scaledBound(1500ms));  // 5 pings at 0.1 s intervals
   // The daemon answers requests once it said it is ready.
   const auto client_owner = connect(ns, /*points=*/false);
   sl::daemon::SensorClient& client = *client_owner;

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Sanitizer suites: builds the tree with AddressSanitizer + UndefinedBehavior-
+# Sanitizer (build-asan/) and with ThreadSanitizer (build-tsan/) and runs the
+# test executables that exercise our threads and parsers under each, in a
+# private network namespace when possible (DDS traffic stays local).
+#
+#   bash scripts/sanitize.sh            # both
+#   bash scripts/sanitize.sh asan       # or: tsan
+#   TESTS='test_engine|test_pipeline' bash scripts/sanitize.sh tsan
+#
+# Not part of scripts/test.sh: the two builds take ~2x a release build each,
+# and the tests run 2-15x slower. Timing bounds in the tests are scaled in
+# these builds (tests/support/time_scale.h), so a failure here is a finding.
+# Exit status: non-zero if any build or test failed.
+set -uo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+which=${1:-all}
+jobs=${JOBS:-2}
+# Daemon/DDS tests are included: Cyclone itself is not instrumented, which
+# ASan does not mind; under TSan races inside Cyclone's own threads are not
+# seen (only the accesses of our code), see tests/tsan.supp.
+asan_tests=${TESTS:-test_pipeline|test_engine|test_codecs|test_config|test_replay|test_sim|test_dds|test_drivers_hw|test_e2e|e2e_cli}
+tsan_tests=${TESTS:-test_pipeline|test_engine|test_replay|test_dds|test_drivers_hw|test_e2e}
+targets_for() { echo "$1" | tr '|' ' ' | sed 's/\be2e_cli\b/sl_sensord slctl sl_points_listener/'; }
+
+export CCACHE_DIR=${CCACHE_DIR:-/work/.ccache} CCACHE_BASEDIR=${CCACHE_BASEDIR:-$(dirname "$root")}
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+
+run_suite() {  # name sanitizers tests
+  local name=$1 sanitize=$2 tests=$3 dir=$root/build-$1
+  echo "=== $name: -fsanitize=$sanitize, build in $dir"
+  cmake -S "$root" -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSL_SANITIZE="$sanitize" \
+    -DSL_BUILD_BENCHMARKS=OFF "${launcher[@]}" >/dev/null || return 1
+  # shellcheck disable=SC2046
+  cmake --build "$dir" -j"$jobs" --target $(targets_for "$tests") || return 1
+  local ctest_cmd="cd '$dir' && ctest --output-on-failure --timeout 1800 -R '^($tests)\$'"
+  export CYCLONEDDS_URI=file://$root/config/cyclonedds-loopback.xml
+  export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:detect_stack_use_after_return=0}
+  export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+  export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$root/tests/lsan.supp}
+  export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=0:second_deadlock_stack=1:suppressions=$root/tests/tsan.supp}
+  if unshare -rn true 2>/dev/null; then
+    unshare -rn sh -c "ip link set lo up && $ctest_cmd"
+  elif unshare -n true 2>/dev/null; then
+    unshare -n sh -c "ip link set lo up && $ctest_cmd"
+  else
+    sh -c "$ctest_cmd"
+  fi
+}
+
+status=0
+case $which in
+  asan|all) run_suite asan address,undefined "$asan_tests" || status=1 ;;&
+  tsan|all) run_suite tsan thread "$tsan_tests" || status=1 ;;
+  asan) ;;
+  *) echo "usage: $0 [asan|tsan|all]" >&2; exit 2 ;;
+esac
+exit $status
