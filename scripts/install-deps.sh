@@ -29,6 +29,11 @@ packages=(
   # wire-format / browser tests; Chromium for the headless page test.
   libwebsocketpp-dev libboost-dev libboost-system-dev libjsoncpp-dev libzstd-dev liblz4-dev
   nodejs chromium
+  # DDS Security material (scripts/dds-security.sh, test dds_security); the
+  # plugins themselves come with libddsc0debian (cyclonedds-dev's dependency).
+  openssl
+  # libFuzzer targets (scripts/fuzz.sh, SL_BUILD_FUZZERS=ON): clang with libFuzzer.
+  clang-14 libfuzzer-14-dev
 )
 # Debian's npm package; a Node.js that brings its own npm (e.g. NodeSource's
 # nodejs) conflicts with it, so it is asked for only when npm is missing.
