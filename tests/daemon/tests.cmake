@@ -30,3 +30,8 @@ set_tests_properties(e2e_cli PROPERTIES TIMEOUT 120)
 # The systemd unit passes systemd-analyze verify.
 add_test(NAME systemd_unit COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/verify_unit.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
+
+# DDS Security: identities, governance and permissions (scripts/dds-security.sh).
+add_test(NAME dds_security COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/security.sh
+  ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
+set_tests_properties(dds_security PROPERTIES TIMEOUT 180)

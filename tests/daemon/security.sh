@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# DDS Security end to end (README "DDS Security"): material from
+# scripts/dds-security.sh, sl_sensord as `sensor`, clients as `operator`
+# (permitted), `viewer` (authenticated, not permitted to write requests), an
+# operator certified by another CA, and a participant without security.
+# usage: security.sh SOURCE_DIR BINARY_DIR
+set -euo pipefail
+src=$1
+bin=$2
+work=$(mktemp -d)
+daemon_pid=""
+cleanup() {
+  [ -n "$daemon_pid" ] && kill -9 "$daemon_pid" 2>/dev/null || true
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() { echo "FAIL: $*" >&2; [ -f "$work/daemon.log" ] && tail -20 "$work/daemon.log" >&2; exit 1; }
+
+ns="sec_$$"
+bash "$src/scripts/dds-security.sh" "$work/sec" --ns "$ns" >/dev/null
+bash "$src/scripts/dds-security.sh" "$work/rogue" --ns "$ns" >/dev/null
+sed "s/^  namespace: sl$/  namespace: $ns/" "$src/config/sim.yaml" > "$work/sim.yaml"
+grep -q "namespace: $ns" "$work/sim.yaml" || fail "could not set the namespace"
+
+plain=file://$src/config/cyclonedds-loopback.xml
+secure=$plain,file://$src/config/cyclonedds-security.xml
+# as ROLE [DIR] -- command: runs with the role's identity
+as() {
+  local role=$1 dir=$work/sec
+  shift
+  if [ "$1" != "--" ]; then dir=$1; shift; fi
+  shift
+  SL_DDS_SECURITY_DIR=$dir SL_DDS_IDENTITY=$role CYCLONEDDS_URI=$secure "$@"
+}
+unsecured() { CYCLONEDDS_URI=$plain "$@"; }
+
+start_daemon() {  # governance
+  export SL_DDS_GOVERNANCE=$1
+  # Not through as(): $! must be the daemon itself, not a subshell.
+  SL_DDS_SECURITY_DIR=$work/sec SL_DDS_IDENTITY=sensor CYCLONEDDS_URI=$secure \
+    "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
+  daemon_pid=$!
+}
+stop_daemon() {
+  kill -TERM "$daemon_pid"
+  wait "$daemon_pid" || fail "daemon exit status $?"
+  daemon_pid=""
+}
+expect() {  # rc-expected message-pattern what -- command...
+  local want=$1 pattern=$2 what=$3 rc=0 msg
+  shift 4
+  msg=$("$@" 2>&1) || rc=$?
+  [ "$rc" -eq "$want" ] || fail "$what: exit $rc, expected $want: $msg"
+  echo "$msg" | grep -qi -- "$pattern" || fail "$what: message '$msg' lacks '$pattern'"
+  echo "ok: $what -> exit $rc: $(echo "$msg" | grep -v "dq.builtin" | head -2 | tr '\n' ' ')"
+}
+
+# --- governance_control: requests, replies and status protected, data open ---
+start_daemon governance_control
+expect 0 "3+3_horizontal" "operator lists patterns" -- \
+  as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 20 patterns
+expect 1 "not allowed by security" "viewer cannot even create a request writer" -- \
+  as viewer -- "$bin/tools/slctl" --ns "$ns" --timeout 3 patterns
+expect 3 "no sl_sensord answered" "participant without security gets no request through" -- \
+  unsecured "$bin/tools/slctl" --ns "$ns" --timeout 3 start
+expect 3 "no sl_sensord answered" "operator certified by another CA is not admitted" -- \
+  as operator "$work/rogue" -- "$bin/tools/slctl" --ns "$ns" --timeout 3 start
+# Nothing of the above started a scan.
+expect 0 "idle" "status still idle (through security)" -- \
+  as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 10 status
+# Data topics are open under governance_control: a plain subscriber gets a cloud.
+unsecured "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 30 \
+  > "$work/open_listener.log" 2>&1 &
+listener=$!
+expect 0 "scan 1/1" "operator scans" -- \
+  as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 1 --out "$work/scan1"
+wait "$listener" || fail "open data: plain listener got no cloud: $(cat "$work/open_listener.log")"
+echo "ok: governance_control: a plain subscriber reads clouds"
+stop_daemon
+
+# --- governance_all: every topic protected ---
+start_daemon governance_all
+unsecured "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 8 \
+  > "$work/closed_listener.log" 2>&1 &
+closed=$!
+as viewer -- "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 30 \
+  > "$work/viewer_listener.log" 2>&1 &
+viewer=$!
+expect 0 "scan 1/1" "operator scans with data encrypted" -- \
+  as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 30 scan --count 1 --out "$work/scan2"
+wait "$viewer" || fail "viewer got no cloud: $(cat "$work/viewer_listener.log")"
+echo "ok: governance_all: the viewer reads clouds"
+if wait "$closed"; then fail "governance_all: a plain subscriber received a cloud"; fi
+echo "ok: governance_all: a plain subscriber receives nothing"
+expect 3 "no sl_sensord answered" "governance_all: participant without security" -- \
+  unsecured "$bin/tools/slctl" --ns "$ns" --timeout 3 status
+stop_daemon
+echo "security: all checks passed"
