@@ -10,6 +10,7 @@
 #include <fstream>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "sl/drivers/recording.h"
 #include "sl/drivers/replay.h"
@@ -92,6 +93,42 @@ TEST_CASE("an incomplete set is skipped and a broken one is a clear error") {
   std::filesystem::remove_all(dir);
 }
 
+TEST_CASE("a set whose frames contradict meta.yml, or whose ids leave the folder, is refused") {
+  const std::string dir = tempDir("contradict");
+  sl::drivers::createRecording(dir, "");
+  sl::drivers::writeRecordedSet(dir, 1, makeSet(1, "p", 3, 8));
+  const auto set = std::filesystem::path(dir) / "set_000001";
+  const auto meta = (set / "meta.yml").string();
+  auto rewrite = [&](const std::string& from, const std::string& to) {
+    std::ifstream in(meta);
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    const auto at = text.find(from);
+    REQUIRE(at != std::string::npos);
+    text.replace(at, from.size(), to);
+    std::ofstream(meta, std::ios::trunc) << text;
+  };
+  // A 16-bit frame in an 8-bit camera's set.
+  cv::imwrite((set / "left_01.png").string(), cv::Mat(48, 64, CV_16UC1, cv::Scalar(1000)));
+  CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()),
+                    Catch::Contains("left_01.png: 16-bit frame, but meta.yml says bit_depth 8"));
+  // A frame of another size.
+  cv::imwrite((set / "left_01.png").string(), cv::Mat(40, 64, CV_8UC1, cv::Scalar(10)));
+  CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()),
+                    Catch::Contains("left_01.png: 64x40, other frames of the camera are 64x48"));
+  // A truncated PNG is named.
+  {
+    std::ifstream in(set / "top_00.png", std::ios::binary);
+    std::string png((std::istreambuf_iterator<char>(in)), {});
+    std::ofstream(set / "top_00.png", std::ios::binary | std::ios::trunc) << png.substr(0, png.size() / 2);
+  }
+  CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()), Catch::Contains("top_00.png"));
+  // An id that would read frames from elsewhere.
+  rewrite("id: top", "id: \"../../etc/x\"");
+  CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()),
+                    Catch::Contains("is not a plain name"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST_CASE("the replay sensor plays sets with their recorded timing") {
   const std::string dir = tempDir("replay");
   sl::drivers::createRecording(dir, "");
@@ -143,6 +180,25 @@ TEST_CASE("the replay sensor plays sets with their recorded timing") {
   }
   // The two played sets are one recorded period apart (400 ms in the recording).
   CHECK(triggers[1].stamp_ns - triggers[0].stamp_ns == 400'000'000);
+  projector->stop();
+  std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("a replayed set of another size or depth than the first is refused, naming the file") {
+  const std::string dir = tempDir("replay_sizes");
+  sl::drivers::createRecording(dir, "");
+  sl::drivers::writeRecordedSet(dir, 1, makeSet(1, "p", 3, 8));
+  ImageSet other = makeSet(2, "p", 3, 12);  // 16-bit frames where the first set has 8-bit
+  sl::drivers::writeRecordedSet(dir, 2, other);
+  const auto replay = sl::drivers::ReplaySensor::open({dir, /*loop=*/false, 0});
+  auto cameras = replay->cameras();
+  auto projector = replay->projector();
+  projector->select("p");
+  projector->start(0);
+  for (int i = 0; i < 3; ++i) REQUIRE(cameras[0]->grab(2s));
+  CHECK_THROWS_WITH(cameras[0]->grab(2s),
+                    Catch::Contains("set_000002/top_00.png: 64x48 16-bit frame, the recording's "
+                                    "camera 'top' is 64x48 8-bit"));
   projector->stop();
   std::filesystem::remove_all(dir);
 }

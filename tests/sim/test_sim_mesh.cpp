@@ -147,7 +147,28 @@ TEST_CASE("PLY: ascii and binary little-endian, extra properties skipped, polygo
                     Catch::Contains("out of range") && Catch::Contains(broken));
   CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(tempPath("missing.ply")),
                     Catch::Contains("cannot be opened"));
-  for (const std::string& path : {ascii, binary, broken}) std::remove(path.c_str());
+  // Sizes and kinds checked before reading or allocating: a device, a
+  // directory, a header claiming more entries than the file holds, an index
+  // beyond int32.
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh("/dev/zero"),
+                    Catch::Contains("/dev/zero") && Catch::Contains("not a regular file"));
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh("/tmp"), Catch::Contains("is a directory"));
+  const std::string huge = tempPath("huge.ply");
+  {
+    std::ofstream out(huge);
+    out << "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000000\nproperty float x\n"
+           "property float y\nproperty float z\nend_header\n";
+  }
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(huge),
+                    Catch::Contains("declares 4000000000000 entries") && Catch::Contains(huge));
+  {
+    std::ofstream out(broken);
+    out << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+           "property float z\nelement face 1\nproperty list uchar double vertex_indices\nend_header\n"
+           "0 0 0\n1 0 0\n0 1 0\n3 0 1 1e300\n";
+  }
+  CHECK_THROWS_WITH(sl::drivers::loadPlyMesh(broken), Catch::Contains("vertex index"));
+  for (const std::string& path : {ascii, binary, broken, huge}) std::remove(path.c_str());
 }
 
 TEST_CASE("mesh of a box = the analytic box: depth, validity and projector shadow", "[sim][mesh]") {

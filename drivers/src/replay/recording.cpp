@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <stdexcept>
 
 #include <opencv2/core.hpp>
@@ -108,15 +110,39 @@ std::vector<std::string> listRecordedSets(const std::string& dir) {
   return sets;
 }
 
+namespace {
+pipeline::ImageSet readSet(const std::string& set_dir, const std::string& meta, bool load_images);
+}  // namespace
+
 pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images) {
   const std::string meta = (fs::path(set_dir) / "meta.yml").string();
   if (!fs::exists(meta)) throw std::runtime_error(meta + ": missing");
-  cv::FileStorage in;
+  // OpenCV's FileStorage throws cv::Exception, and on some malformed files
+  // std::length_error or bad_alloc (found by fuzz_recording): all become
+  // the one error type naming the file.
   try {
-    in.open(meta, cv::FileStorage::READ);
+    return readSet(set_dir, meta, load_images);
+  } catch (const std::runtime_error&) {
+    throw;
   } catch (const cv::Exception& e) {
     throw std::runtime_error(meta + ": malformed: " + e.msg);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(meta + ": malformed (" + e.what() + ")");
   }
+}
+
+namespace {
+
+pipeline::ImageSet readSet(const std::string& set_dir, const std::string& meta, bool load_images) {
+  {  // OpenCV 4.6's parsers mishandle NUL bytes; a meta.yml never has one.
+    std::ifstream text(meta, std::ios::binary);
+    char buffer[4096];
+    while (text.read(buffer, sizeof buffer) || text.gcount() > 0)
+      if (std::memchr(buffer, 0, static_cast<std::size_t>(text.gcount())))
+        throw std::runtime_error(meta + ": contains a NUL byte, not a meta.yml");
+  }
+  cv::FileStorage in;
+  in.open(meta, cv::FileStorage::READ);
   if (!in.isOpened()) throw std::runtime_error(meta + ": cannot read");
   auto int64 = [&](const cv::FileNode& node, const char* what) {
     try {
@@ -141,17 +167,48 @@ pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images)
     if (camera.camera_id.empty() || frame_count <= 0 || !stamps.isSeq() ||
         static_cast<int>(stamps.size()) != frame_count)
       throw std::runtime_error(meta + ": camera entry needs id, frame_count and as many stamps_ns");
+    // The id names the frame files: a plain name, so that no frame is read
+    // from outside the set folder ("../x"), and bounded counts.
+    if (camera.camera_id.size() > 64 ||
+        camera.camera_id.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
+                                           "0123456789_-") != std::string::npos)
+      throw std::runtime_error(meta + ": camera id '" + camera.camera_id.substr(0, 64) +
+                               "' is not a plain name (letters, digits, _ and -, at most 64)");
+    if (frame_count > 1024)
+      throw std::runtime_error(meta + ": frame_count " + std::to_string(frame_count) +
+                               " is more than 1024");
+    if (camera.bit_depth < 1 || camera.bit_depth > 16)
+      throw std::runtime_error(meta + ": bit_depth " + std::to_string(camera.bit_depth) +
+                               " is not 1..16");
     for (const auto& s : stamps) camera.stamps_ns.push_back(int64(s, "stamps_ns"));
     for (int i = 0; load_images && i < frame_count; ++i) {
       const std::string path = (fs::path(set_dir) / frameName(camera.camera_id, i)).string();
-      cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
-      if (image.empty()) throw std::runtime_error(path + ": missing or unreadable frame");
+      cv::Mat image;
+      try {
+        image = cv::imread(path, cv::IMREAD_UNCHANGED);
+      } catch (const cv::Exception& e) {
+        throw std::runtime_error(path + ": unreadable frame: " + e.msg);
+      }
+      if (image.empty()) throw std::runtime_error(path + ": missing or unreadable frame (truncated PNG?)");
       if (image.channels() != 1) throw std::runtime_error(path + ": not a single-channel image");
+      // The depth the metadata promises: 8-bit frames up to 8 bits, 16-bit above.
+      const int expected_depth = camera.bit_depth > 8 ? CV_16U : CV_8U;
+      if (image.depth() != expected_depth)
+        throw std::runtime_error(path + ": " + (image.depth() == CV_16U ? "16" : "8 or other") +
+                                 "-bit frame, but meta.yml says bit_depth " +
+                                 std::to_string(camera.bit_depth));
+      if (!camera.frames.empty() && image.size() != camera.frames.front().size())
+        throw std::runtime_error(path + ": " + std::to_string(image.cols) + "x" +
+                                 std::to_string(image.rows) + ", other frames of the camera are " +
+                                 std::to_string(camera.frames.front().cols) + "x" +
+                                 std::to_string(camera.frames.front().rows));
       camera.frames.push_back(image);
     }
     set.cameras.push_back(std::move(camera));
   }
   return set;
 }
+
+}  // namespace
 
 }  // namespace sl::drivers

@@ -128,6 +128,20 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
             lock.unlock();
             pipeline::Frame frame;
             frame.image = loadFrame(folder, c, i);
+            // A frame of another size or depth than the recording's first set
+            // would be dropped later without a name: refused here, naming
+            // the file (the engine reports it; the set counts as incomplete).
+            if (c < camera_sizes_.size() && (frame.image.cols != camera_sizes_[c].width ||
+                                              frame.image.rows != camera_sizes_[c].height ||
+                                              frame.image.depth() != camera_depths_[c]))
+              throw std::runtime_error(
+                  folder + "/" + camera_ids_[c] + "_" + (i < 10 ? "0" : "") + std::to_string(i) +
+                  ".png: " + std::to_string(frame.image.cols) + "x" +
+                  std::to_string(frame.image.rows) +
+                  (frame.image.depth() == CV_16U ? " 16-bit" : " 8-bit") + " frame, the recording's camera '" +
+                  camera_ids_[c] + "' is " + std::to_string(camera_sizes_[c].width) + "x" +
+                  std::to_string(camera_sizes_[c].height) +
+                  (camera_depths_[c] == CV_16U ? " 16-bit" : " 8-bit"));
             frame.stamp_ns = stamp;
             frame.frame_id = j;
             frame.bit_depth = bit_depth;
@@ -169,6 +183,9 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
   }
 
   const std::vector<std::string>& cameraIds() const { return camera_ids_; }
+  // The first set's frame size and depth per camera (set by cameras()).
+  std::vector<cv::Size> camera_sizes_;
+  std::vector<int> camera_depths_;
 
  private:
   bool runningLocked() const {
@@ -290,6 +307,8 @@ std::vector<std::shared_ptr<Camera>> Replay::cameras() {
   std::vector<std::shared_ptr<Camera>> out;
   for (std::size_t c = 0; c < camera_ids_.size(); ++c) {
     const cv::Mat& image = first.cameras[c].frames.front();
+    camera_sizes_.push_back(image.size());
+    camera_depths_.push_back(image.depth());
     out.push_back(std::make_shared<ReplayCamera>(shared_from_this(), c, image.cols, image.rows));
   }
   return out;

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <sstream>
@@ -262,15 +263,33 @@ class PlyReader {
 
 namespace sl::drivers {
 
+namespace {
+// Larger than any mesh the simulator can ray-cast at a useful rate (a 1 GiB
+// binary PLY holds ~45 M triangles).
+constexpr std::uintmax_t kMaxPlyBytes = std::uintmax_t{1} << 30;
+}  // namespace
+
 using sim::PlyElement;
 using sim::PlyProperty;
 using sim::PlyReader;
 
 SimMesh loadPlyMesh(const std::string& path, double scale) {
-  std::ifstream in(path, std::ios::binary);
   auto fail = [&](const std::string& problem) -> void {
     throw std::runtime_error("PLY file '" + path + "': " + problem);
   };
+  // Only regular files of bounded size: a device (/dev/zero) or a FIFO would
+  // be read without end, a huge file into memory.
+  std::error_code error;
+  const auto status = std::filesystem::status(path, error);
+  if (error || !std::filesystem::exists(status)) fail("cannot be opened (no such file)");
+  if (std::filesystem::is_directory(status)) fail("is a directory, not a PLY file");
+  if (!std::filesystem::is_regular_file(status)) fail("is not a regular file (a device or FIFO?)");
+  const std::uintmax_t file_bytes = std::filesystem::file_size(path, error);
+  if (error) fail("cannot be read: " + error.message());
+  if (file_bytes > kMaxPlyBytes)
+    fail("is " + std::to_string(file_bytes) + " bytes, more than the limit of " +
+         std::to_string(kMaxPlyBytes));
+  std::ifstream in(path, std::ios::binary);
   if (!in) fail("cannot be opened");
   std::string line;
   if (!std::getline(in, line) || line.substr(0, 3) != "ply") fail("does not start with 'ply'");
@@ -297,6 +316,12 @@ SimMesh loadPlyMesh(const std::string& path, double scale) {
       long long count = -1;
       words >> e.name >> count;
       if (count < 0) fail("bad element line '" + line + "'");
+      // Every entry takes at least one byte (binary) or character (ascii):
+      // a count beyond the file's size is a broken header, refused before
+      // anything is allocated for it.
+      if (static_cast<std::uintmax_t>(count) > file_bytes)
+        fail("element '" + e.name + "' declares " + std::to_string(count) +
+             " entries, more than the file's " + std::to_string(file_bytes) + " bytes can hold");
       e.count = static_cast<std::size_t>(count);
       elements.push_back(e);
     } else if (keyword == "property") {
@@ -363,6 +388,9 @@ SimMesh loadPlyMesh(const std::string& path, double scale) {
         if (keep) polygon.clear();
         for (int j = 0; j < static_cast<int>(n); ++j) {
           const double v = reader.read(p.type);
+          if (keep && !(v >= 0 && v < 2147483647.0))
+            reader.fail("face " + std::to_string(i) + ": vertex index " + std::to_string(v) +
+                        " out of range");
           if (keep) polygon.push_back(static_cast<std::int32_t>(v));
         }
       }
