@@ -1,5 +1,6 @@
 #include "sl/daemon/client.h"
 
+#include <algorithm>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -140,9 +141,23 @@ std::optional<CommandReplyInfo> SensorClient::Impl::send(Request& req,
                                                          std::chrono::milliseconds timeout) {
   req.client_id = const_cast<char*>(client_id.c_str());
   req.request_id = next_request_id++;
-  if (!request_writer.write(req)) return std::nullopt;
   const auto deadline = Clock::now() + timeout;
+  // Requests other than START are idempotent: sent again with the same id
+  // (after 0.5, 1, 2, 2, ... s) while no reply came, e.g. when a flood of
+  // other clients' requests delayed or pushed out ours. The daemon answers a
+  // repeated STOP / SET_PATTERN with its first reply (RequestGuard), so a
+  // retry never turns "stopped" into "not running".
+  const bool idempotent = req.command != sl_msgs_msg_COMMAND_START;
+  auto interval = std::chrono::milliseconds(500);
+  bool written = request_writer.write(req);
+  if (!written && !idempotent) return std::nullopt;
+  auto next_send = Clock::now() + interval;
   while (Clock::now() < deadline) {
+    if (idempotent && Clock::now() >= next_send) {
+      written = request_writer.write(req) || written;
+      interval = std::min(interval * 2, std::chrono::milliseconds(2000));
+      next_send = Clock::now() + interval;
+    }
     dds::Loan<Reply> replies = reply_reader.take(16);
     for (std::size_t i = 0; i < replies.size(); ++i) {
       if (!replies.isValid(i)) continue;
@@ -260,6 +275,11 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.sets_recorded = s.sets_recorded;
       info.patterns = toStrings(s.patterns);
       info.stamp_ns = fromTime(s.stamp);
+      info.requests_received = s.requests_received;
+      info.requests_answered = s.requests_answered;
+      info.requests_rate_limited = s.requests_rate_limited;
+      info.requests_invalid = s.requests_invalid;
+      info.replies_timed_out = s.replies_timed_out;
       latest = info;
     }
     if (!latest) std::this_thread::sleep_for(std::chrono::milliseconds(10));

@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "msg_convert.h"
+#include "request_guard.h"
 #include "sl/daemon/dds.h"
 #include "sl/daemon/log.h"
 
@@ -138,7 +139,11 @@ struct DdsBridge::Impl {
         // Status: the latest value for late joiners.
         status_writer(participant, status_topic,
                       dds::Qos().reliable().transientLocal().keepLast(1).xcdr1()),
-        request_reader(participant, request_topic, dds::Qos().reliable().keepLast(64)),
+        // Requests: keep-all with a bound, so that a flood is held back by
+        // the reliable protocol (the writer blocks) instead of overwriting
+        // unread requests without a trace.
+        request_reader(participant, request_topic,
+                       dds::Qos().reliable().keepAll().resourceLimits(256, -1, -1)),
         reply_writer(participant, reply_topic, dds::Qos().reliable().keepLast(64).xcdr1()),
         depth_writer(participant, depth_topic, writerQos(config.images_qos)),
         shading_writer(participant, shading_topic, writerQos(config.images_qos)),
@@ -180,6 +185,12 @@ struct DdsBridge::Impl {
   std::atomic<bool> stopping{false};
   std::atomic<double> status_period_s{config.status_period_s};  // reloadable
   std::atomic<std::uint64_t> writes_timed_out{0};
+  // Requests: size checks, rate limits, repeated ids, counters (request
+  // loop only). Replies that could not be written within the reliable
+  // writer's blocking time count separately.
+  RequestGuard guard;
+  std::uint64_t replies_timed_out = 0;
+  std::uint64_t rate_limited_logged = 0;
 
   // Publish-thread scratch buffer (metres), reused between clouds.
   std::vector<float> cloud_buffer;
@@ -389,13 +400,35 @@ void DdsBridge::Impl::publishStatus(const EngineStatus& s,
   msg.recording = recording.data();
   msg.sets_recorded = s.sets_recorded;
   borrow(msg.patterns, names.pointers.data(), names.pointers.size());
+  msg.requests_received = guard.counters.received;
+  msg.requests_answered = guard.counters.answered;
+  msg.requests_rate_limited = guard.counters.rate_limited;
+  msg.requests_invalid = guard.counters.invalid;
+  msg.replies_timed_out = replies_timed_out;
   status_writer.write(msg);
 }
 
 void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
   CommandResult result;
   const std::string pattern = request.pattern ? request.pattern : "";
-  switch (request.command) {
+  // Oversized fields are refused before anything else reads them; the reply
+  // and the log carry a short excerpt only.
+  const std::string size_problem = guard.checkSizes(request);
+  const std::string client_id =
+      request.client_id && std::strlen(request.client_id) <= guard.limits().max_string
+          ? request.client_id
+          : excerpt(request.client_id);
+  const bool changes_state = request.command == sl_msgs_msg_COMMAND_START ||
+                             request.command == sl_msgs_msg_COMMAND_STOP ||
+                             request.command == sl_msgs_msg_COMMAND_SET_PATTERN;
+  const CommandResult* earlier =
+      changes_state ? guard.repeated(client_id, request.request_id) : nullptr;
+  if (!size_problem.empty()) {
+    ++guard.counters.invalid;
+    result = {CommandResult::Code::kInvalidOption, size_problem};
+  } else if (earlier) {
+    result = *earlier;  // a client's retry: the first answer again
+  } else switch (request.command) {
     case sl_msgs_msg_COMMAND_START: {
       std::string error;
       const StartRequest start = toStartRequest(request, error);
@@ -416,20 +449,25 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
       result = {CommandResult::Code::kInvalidCommand,
                 "unknown command " + std::to_string(static_cast<int>(request.command))};
   }
-  std::string client_id = request.client_id ? request.client_id : "";
+  if (changes_state && size_problem.empty() && !earlier)
+    guard.remember(client_id, request.request_id, result);
+  std::string reply_client_id = client_id;
   std::string reason = result.reason;
   static const char* kCommands[] = {"start", "stop", "set_pattern", "list_patterns",
                                     "get_config"};
   const int command = static_cast<int>(request.command);
-  if (command < 3 || !result.accepted())  // queries are not worth a log line
-    logInfo("request " + std::to_string(request.request_id) + " from client " + client_id + ": " +
+  if ((command < 3 || !result.accepted()) && !earlier)  // queries are not worth a log line
+    logInfo("request " + std::to_string(request.request_id) + " from client " +
+          excerpt(request.client_id, 64) + ": " +
           (command >= 0 && command < 5 ? kCommands[command] : "unknown") +
-          (pattern.empty() ? "" : " '" + pattern + "'") +
-          (request.command == sl_msgs_msg_COMMAND_START ? describeStart(request) : "") +
+          (pattern.empty() ? "" : " '" + excerpt(request.pattern, 64) + "'") +
+          (request.command == sl_msgs_msg_COMMAND_START && size_problem.empty()
+               ? describeStart(request)
+               : "") +
           (result.accepted() ? ": accepted" : ": rejected: " + reason));
   StringList names(engine.patterns());
   Reply reply{};
-  reply.client_id = client_id.data();
+  reply.client_id = reply_client_id.data();
   reply.request_id = request.request_id;
   reply.accepted = result.accepted();
   reply.code = toReplyCode(result.code);
@@ -438,7 +476,8 @@ void DdsBridge::Impl::answer(ScanEngine& engine, const Request& request) {
       request.command == sl_msgs_msg_COMMAND_GET_CONFIG ? engine.config().source_text : "";
   reply.detail = detail.data();
   borrow(reply.patterns, names.pointers.data(), names.pointers.size());
-  reply_writer.write(reply);
+  if (reply_writer.write(reply)) ++guard.counters.answered;
+  else ++replies_timed_out;
 }
 
 DdsBridge::DdsBridge(const DdsConfig& config, const std::string& camera_id,
@@ -469,8 +508,24 @@ void DdsBridge::serve(ScanEngine& engine) {
     for (;;) {
       dds::Loan<Request> requests = d.request_reader.take(16);
       if (requests.empty()) break;
-      for (std::size_t i = 0; i < requests.size(); ++i)
-        if (requests.isValid(i)) d.answer(engine, requests[i]);
+      for (std::size_t i = 0; i < requests.size(); ++i) {
+        if (!requests.isValid(i)) continue;
+        ++d.guard.counters.received;
+        const Request& request = requests[i];
+        if (!d.guard.admit(request.client_id ? request.client_id : "", std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                       std::chrono::steady_clock::now().time_since_epoch()).count())) {
+          // Counted, not answered (a flood must not cost a reply each);
+          // logged at most every 10 s.
+          if (d.guard.counters.rate_limited++ == d.rate_limited_logged) {
+            logWarning("requests over the rate limit of " +
+                       std::to_string(d.guard.limits().rate_hz) + "/s from client " +
+                       excerpt(request.client_id, 64) + " are not answered (counted in status)");
+            d.rate_limited_logged = d.guard.counters.rate_limited + 200;
+          }
+          continue;
+        }
+        d.answer(engine, request);
+      }
     }
     const EngineStatus status = engine.status();
     if (status.version != published_version || Clock::now() >= next_periodic) {

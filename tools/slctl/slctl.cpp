@@ -107,6 +107,9 @@ Args parseArgs(int argc, char** argv) {
       std::exit(0);
     } else if (a == "--domain") {
       args.domain = parseInt(a, value());
+      // DDS domain ids the default RTPS port mapping can address (0..230).
+      if (args.domain < 0 || args.domain > 230)
+        usageError("--domain expects 0..230, not " + std::to_string(args.domain));
     } else if (a == "--ns") {
       args.ns = value();
     } else if (a == "--timeout") {
@@ -114,7 +117,8 @@ Args parseArgs(int argc, char** argv) {
       const auto seconds = sl::tools::toNumber(v);
       if (!seconds) usageError("--timeout expects seconds, not '" + v + "'");
       args.timeout_s = *seconds;
-      if (!(args.timeout_s > 0)) usageError("--timeout must be > 0");
+      if (!(args.timeout_s > 0 && args.timeout_s <= 86400))
+        usageError("--timeout must be > 0 and at most 86400 s, not '" + v + "'");
     } else if (a == "--count") {
       args.count = parseInt(a, value());
       count_given = true;
@@ -142,7 +146,10 @@ Args parseArgs(int argc, char** argv) {
     } else if (a == "--at") {
       const std::string v = value();
       const auto seconds = sl::tools::toNumber(v);
-      if (!seconds || !(*seconds > 0)) usageError("--at expects Unix seconds, not '" + v + "'");
+      // Checked before the conversion to int64 ns, which overflows past 9.2e9 s
+      // (the daemon takes at most an hour ahead and says so).
+      if (!seconds || !(*seconds > 0 && *seconds < 9.2e9))
+        usageError("--at expects Unix seconds (before the year 2261), not '" + v + "'");
       args.start.start_at_ns = static_cast<std::int64_t>(*seconds * 1e9);
       args.start_options_given = true;
     } else if (a == "--cameras") {
@@ -330,6 +337,9 @@ int printStatus(SensorClient& client, const Args& args) {
               s->recording.empty() ? "-" : s->recording.c_str(),
               static_cast<unsigned long long>(s->sets_recorded));
   std::printf("last error:       %s\n", s->last_error.empty() ? "-" : s->last_error.c_str());
+  std::printf("requests:         %llu (answered %llu, rate-limited %llu, invalid %llu, reply timed out %llu)\n",
+              u(s->requests_received), u(s->requests_answered), u(s->requests_rate_limited),
+              u(s->requests_invalid), u(s->replies_timed_out));
   return 0;
 }
 

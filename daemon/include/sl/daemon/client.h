@@ -48,6 +48,9 @@ struct StatusInfo {
   std::vector<std::string> cameras;
   bool motion_compensation = false;
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
+  // Requests since start-up (see sl_msgs/Status.idl).
+  std::uint64_t requests_received = 0, requests_answered = 0, requests_rate_limited = 0,
+                requests_invalid = 0, replies_timed_out = 0;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

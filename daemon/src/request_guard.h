@@ -1,0 +1,81 @@
+// What the daemon checks of a request before the engine sees it (private to
+// daemon/): string and list sizes (refused with INVALID_OPTION, the value
+// never echoed beyond a short prefix) and a rate limit per client id (a
+// token bucket each, plus one bucket shared by all clients beyond
+// kMaxClients, so rotating ids buys no more). Counters feed the status
+// topic: every request taken from DDS is either answered or counted here.
+// Not thread-safe: used by the bridge's request loop only.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <string>
+#include <unordered_map>
+
+#include "msg_convert.h"
+
+namespace sl::daemon {
+
+struct RequestLimits {
+  std::size_t max_string = 256;   // client_id, pattern, recording, each camera id
+  std::size_t max_cameras = 16;   // entries in cameras
+  double rate_hz = 20;            // sustained requests per second per client
+  double burst = 40;              // requests a client may send at once
+  std::size_t max_clients = 256;  // buckets kept; further ids share one
+};
+
+struct RequestCounters {
+  std::uint64_t received = 0;      // samples taken from the request reader
+  std::uint64_t answered = 0;      // replies written
+  std::uint64_t rate_limited = 0;  // not answered: the client exceeded its rate
+  std::uint64_t invalid = 0;       // answered with INVALID_OPTION by the size checks
+};
+
+class RequestGuard {
+ public:
+  explicit RequestGuard(RequestLimits limits = {}) : limits_(limits) {}
+
+  // The reason to refuse `request` for its sizes (empty: sizes fine). Names
+  // the field, its length and at most 32 of its first bytes, log-safe.
+  std::string checkSizes(const msg::Request& request) const;
+
+  // True if the client may send this request now (takes one token).
+  // `client_id` is used up to max_string bytes.
+  bool admit(const std::string& client_id, std::int64_t now_ns);
+
+  // The reply already sent to (client_id, request_id), if it is among the
+  // last kRememberedReplies: a client's retry of a request whose reply it
+  // missed gets the same answer instead of a second execution.
+  using Answer = CommandResult;
+  const Answer* repeated(const std::string& client_id, std::uint64_t request_id) const;
+  void remember(const std::string& client_id, std::uint64_t request_id, Answer answer);
+  static constexpr std::size_t kRememberedReplies = 64;
+
+  RequestCounters counters;
+  const RequestLimits& limits() const { return limits_; }
+
+ private:
+  struct Bucket {
+    double tokens = 0;
+    std::int64_t updated_ns = 0;
+  };
+  bool take(Bucket& bucket, std::int64_t now_ns);
+
+  RequestLimits limits_;
+  std::unordered_map<std::string, Bucket> buckets_;
+  Bucket shared_;
+  struct Remembered {
+    std::string client_id;
+    std::uint64_t request_id = 0;
+    Answer answer;
+  };
+  std::deque<Remembered> replies_;
+  bool shared_started_ = false;
+};
+
+// `text` cut to `max` bytes for a reply or log line, with the full length:
+// "abc...(1048576 bytes)".
+std::string excerpt(const char* text, std::size_t max = 32);
+
+}  // namespace sl::daemon
