@@ -2,6 +2,7 @@
 // arguments, load the config, open the devices, run until SIGINT/SIGTERM.
 #include <signal.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
@@ -16,8 +17,17 @@
 #include "sl/daemon/log.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/daemon/systemd_notify.h"
+#include "other_daemon.h"
 
 namespace {
+
+std::atomic<bool> startup_done{false};
+std::thread startup_watch;  // watchStartup() until the daemon is ready
+
+void endStartupWatch() {
+  startup_done = true;
+  if (startup_watch.joinable()) startup_watch.join();
+}
 
 constexpr const char* kUsage =
     "usage: sl_sensord --config FILE\n"
@@ -73,11 +83,19 @@ void checkDdsEnvironment() {
     logWarning(std::string("DDS environment not checked: ") + e.what());
   }
 }
+// How long start-up looks for another daemon on the same domain and
+// namespace (discovery on a LAN or loopback takes well under this).
+constexpr std::chrono::milliseconds kOtherDaemonWindow{1000};
 
 int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
   const DaemonConfig config = loadConfig(config_path);
   checkDdsEnvironment();
+  if (otherDaemonServes(config.dds, kOtherDaemonWindow))
+    throw ConfigError("another sl_sensord already serves requests on '" +
+                      TopicNames::forNamespace(config.dds.ns).request + "' (domain " +
+                      std::to_string(config.dds.domain_id) +
+                      "); stop it, or give this one its own dds.namespace");
   std::shared_ptr<void> device_owner;
   EngineDevices devices = openDevices(config, device_owner);
   DdsBridge bridge(config.dds, devices.cameras.front()->id(), config.calibration.camera);
@@ -86,6 +104,7 @@ int run(const std::string& config_path, const sigset_t& signals) {
   std::thread server([&] { bridge.serve(engine); });
 
   const TopicNames topics = TopicNames::forNamespace(config.dds.ns);
+  endStartupWatch();  // from here on the loop below takes the signals
   logInfo("ready: sensor '" + config.sensor + "', pattern '" + config.runtime.default_pattern +
           "', domain " + std::to_string(config.dds.domain_id) + ", clouds on '" + topics.points +
           "', requests on '" + topics.request + "'");
@@ -108,6 +127,21 @@ int run(const std::string& config_path, const sigset_t& signals) {
   bridge.stop();
   server.join();
   return 0;
+}
+
+// Start-up (config, devices, DDS) can take a while: a signal in that time
+// ends the process at once instead of waiting for the main loop.
+void watchStartup(const sigset_t& signals) {
+  while (!startup_done) {
+    timespec timeout{0, 100'000'000};
+    const int signal_number = sigtimedwait(&signals, nullptr, &timeout);
+    if (signal_number == SIGINT || signal_number == SIGTERM) {
+      sl::daemon::logInfo(std::string("received ") + strsignal(signal_number) +
+                          " during start-up, exiting");
+      std::_Exit(0);
+    }
+    // SIGHUP before READY: nothing to reload yet.
+  }
 }
 
 }  // namespace
@@ -140,13 +174,18 @@ int main(int argc, char** argv) {
   sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
+  startup_watch = std::thread(watchStartup, std::cref(signals));
   try {
-    return run(config_path, signals);
+    const int rc = run(config_path, signals);
+    endStartupWatch();
+    return rc;
   } catch (const sl::daemon::ConfigError& e) {
     sl::daemon::logError(std::string("config error: ") + e.what());
+    endStartupWatch();
     return 2;
   } catch (const std::exception& e) {
     sl::daemon::logError(std::string("fatal: ") + e.what());
+    endStartupWatch();
     return 1;
   }
 }
