@@ -1,12 +1,14 @@
 #include "sl/daemon/calibration_io.h"
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <optional>
 #include <sstream>
 #include <utility>
+
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
@@ -19,8 +21,15 @@ pipeline::PinholeModel parsePinhole(const YamlMap& m) {
   pipeline::PinholeModel model;
   model.width = m.get<int>("width");
   model.height = m.get<int>("height");
-  if (model.width <= 0) m.fail("width", "must be > 0");
-  if (model.height <= 0) m.fail("height", "must be > 0");
+  // Bounded before anything is sized by them (maps, LUTs, images).
+  if (model.width <= 0 || model.width > kMaxImageSide)
+    m.fail("width", "must be 1.." + std::to_string(kMaxImageSide));
+  if (model.height <= 0 || model.height > kMaxImageSide)
+    m.fail("height", "must be 1.." + std::to_string(kMaxImageSide));
+  if (std::int64_t{model.width} * model.height > kMaxImagePixels)
+    m.fail("height", std::to_string(model.width) + " x " + std::to_string(model.height) +
+                         " is more than " + std::to_string(kMaxImagePixels / 1'000'000) +
+                         " megapixels");
   model.fx = positive(m, "fx", 0);
   model.fy = positive(m, "fy", 0);
   model.cx = m.get<double>("cx");
@@ -119,8 +128,19 @@ class StorageReader {
  public:
   StorageReader(const std::string& path, std::string expected)
       : path_(path), expected_(std::move(expected)) {
+    // OpenCV 4.6's XML parser dereferences null on a NUL byte inside a tag
+    // (found by fuzz_calibration); text files never hold one.
+    {
+      std::ifstream in(path, std::ios::binary);
+      char buffer[4096];
+      while (in.read(buffer, sizeof buffer) || in.gcount() > 0)
+        if (std::memchr(buffer, 0, static_cast<std::size_t>(in.gcount())))
+          throw ConfigError(path + ": contains a NUL byte, not a text calibration file");
+    }
     try {
       fs_.open(path, cv::FileStorage::READ);
+    } catch (const std::length_error&) {
+      throw ConfigError(path + ": cannot parse as OpenCV FileStorage");
     } catch (const cv::Exception& e) {
       throw ConfigError(path + ": cannot parse as OpenCV FileStorage: " + e.msg);
     }
@@ -152,7 +172,8 @@ class StorageReader {
       throw ConfigError(path_ + ": key '" + key + "' missing or not an integer (expected " +
                         expected_ + ")");
     const int value = static_cast<int>(node);
-    if (value <= 0) throw ConfigError(path_ + ": key '" + key + "' must be > 0");
+    if (value <= 0 || value > kMaxImageSide)  // integer() reads image sizes only
+      throw ConfigError(path_ + ": key '" + key + "' must be 1.." + std::to_string(kMaxImageSide));
     return value;
   }
 
@@ -164,6 +185,10 @@ class StorageReader {
 
   pipeline::PinholeModel pinhole(const char* K_key, const char* k_key, int width,
                                  int height) const {
+    if (std::int64_t{width} * height > kMaxImagePixels)
+      throw ConfigError(path_ + ": " + std::to_string(width) + " x " + std::to_string(height) +
+                        " is more than " + std::to_string(kMaxImagePixels / 1'000'000) +
+                        " megapixels");
     const cv::Mat K = matrix(K_key, 3, 3), k = matrix(k_key, 5, 1);
     pipeline::PinholeModel model;
     model.width = width;
@@ -238,7 +263,17 @@ void writePinhole(std::ostream& out, const char* name, const pipeline::PinholeMo
 }  // namespace
 
 CalibrationFile loadCalibration(const std::string& path) {
-  if (!std::filesystem::exists(path)) throw ConfigError(path + ": calibration file not found");
+  std::error_code error;
+  const auto status = std::filesystem::status(path, error);
+  if (error || !std::filesystem::exists(status))
+    throw ConfigError(path + ": calibration file not found");
+  if (std::filesystem::is_directory(status))
+    throw ConfigError(path + ": is a directory, not a calibration file");
+  if (!std::filesystem::is_regular_file(status))
+    throw ConfigError(path + ": is not a regular file (a device or FIFO?), not a calibration file");
+  constexpr std::uintmax_t kMaxCalibrationBytes = 16 << 20;  // real ones are a few KB
+  if (std::filesystem::file_size(path, error) > kMaxCalibrationBytes)
+    throw ConfigError(path + ": more than 16 MiB, not a calibration file");
   if (hasSuffix(path, ".xml")) return loadSlStudioXml(path);
   if (hasSuffix(path, ".yaml") || hasSuffix(path, ".yml"))
     return startsWithOpenCvYamlHeader(path) ? loadSlStudioXml(path) : loadOwnYaml(path);

@@ -1,6 +1,7 @@
 #include "sl/daemon/config.h"
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
@@ -305,9 +306,12 @@ void parseExtraCalibrations(const YamlMap& root, const std::filesystem::path& ba
       root.fail("calibrations", "the calibration of camera '" + id + "' must be a file path");
     std::filesystem::path path(entry.second.Scalar());
     if (path.is_relative()) path = base_dir / path;
-    if (!std::filesystem::exists(path))
+    if (!std::filesystem::is_regular_file(path))
       root.fail("calibrations", "cannot read calibration file '" + path.string() + "' of camera '" +
-                                    id + "'");
+                                    id + "': " +
+                                    (std::filesystem::is_directory(path) ? "a directory"
+                                     : std::filesystem::exists(path)      ? "not a regular file"
+                                                                          : "no such file"));
     config.extra_calibrations[id] = loadCalibration(path.string()).calibration;
   }
 }
@@ -374,9 +378,12 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   d.ns = m.get<std::string>("namespace", d.ns);
   if (d.ns.empty() || d.ns.find_first_not_of(
                           "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_/") !=
-                          std::string::npos || d.ns.front() == '/' || d.ns.back() == '/')
-    m.fail("namespace", "must be non-empty letters, digits, '_' or inner '/'");
+                          std::string::npos || d.ns.front() == '/' || d.ns.back() == '/' ||
+      d.ns.size() > 128)  // topic names stay far below DDS's limits
+    m.fail("namespace", "must be 1..128 letters, digits, '_' or inner '/'");
   d.frame_id = m.get<std::string>("frame_id", d.frame_id);
+  if (d.frame_id.empty() || d.frame_id.size() > 128)
+    m.fail("frame_id", "must be 1..128 characters");
   d.publish_projector_maps = m.get<bool>("publish_projector_maps", d.publish_projector_maps);
   d.publish_image_sets = m.get<bool>("publish_image_sets", d.publish_image_sets);
   d.publish_images = m.get<bool>("publish_images", d.publish_images);
@@ -486,8 +493,11 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   } else {
     std::filesystem::path path(calibration);
     if (path.is_relative()) path = base_dir / path;
-    if (!std::filesystem::exists(path))
-      root.fail("calibration", "cannot read calibration file '" + path.string() + "'");
+    if (!std::filesystem::is_regular_file(path))
+      root.fail("calibration", "cannot read calibration file '" + path.string() + "': " +
+                                   (std::filesystem::is_directory(path) ? "a directory"
+                                    : std::filesystem::exists(path)      ? "not a regular file"
+                                                                         : "no such file"));
     config.calibration = loadCalibration(path.string()).calibration;
   }
   if (simulated &&
@@ -511,9 +521,17 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parseDds(root.optionalMap("dds"), config.dds);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   parseSoftwareTrigger(root.optionalMap("software_trigger"), config.software_trigger);
-  if (std::filesystem::path(config.runtime.recording_root).is_relative())
+  // Relative: under the service's state directory when systemd gives one
+  // (StateDirectory=, $STATE_DIRECTORY; the config's folder is read-only
+  // there), else beside the config file.
+  if (std::filesystem::path(config.runtime.recording_root).is_relative()) {
+    const char* state = std::getenv("STATE_DIRECTORY");
+    const std::filesystem::path base =
+        state && *state ? std::filesystem::path(std::string(state).substr(0, std::string(state).find(':')))
+                        : base_dir;
     config.runtime.recording_root =
-        std::filesystem::absolute(base_dir / config.runtime.recording_root).lexically_normal().string();
+        std::filesystem::absolute(base / config.runtime.recording_root).lexically_normal().string();
+  }
   if (config.runtime.default_pattern.empty()) {
     config.runtime.default_pattern = config.patterns.front().name;
   } else if (!config.findPattern(config.runtime.default_pattern)) {
@@ -548,7 +566,14 @@ DaemonConfig parseText(const std::string& text, const std::string& origin,
                       e.msg);
   }
   if (!root.IsMap()) throw ConfigError(origin + ": expected a map of keys at the top level");
-  DaemonConfig config = parseRoot(root, origin, base_dir);
+  DaemonConfig config;
+  try {
+    config = parseRoot(root, origin, base_dir);
+  } catch (const YAML::Exception& e) {
+    // A conversion the readers did not foresee (e.g. a key that is a list):
+    // still one line naming the file and line (found by fuzz_config).
+    throw ConfigError(origin + ":" + std::to_string(e.mark.line + 1) + ": unexpected YAML: " + e.msg);
+  }
   config.source_text = text;
   return config;
 }

@@ -22,6 +22,28 @@ const char* typeName() {
   else return "a list of numbers";
 }
 
+// yaml-cpp keeps both entries of a key given twice and finds the first, so
+// the second would be silently ignored: refused, in every map of the file.
+void rejectDuplicateKeys(const YAML::Node& node, const std::string& origin, const std::string& path,
+                         int depth) {
+  if (depth > 64) throw ConfigError(where(origin, node) + ": nested more than 64 levels deep");
+  if (node.IsMap()) {
+    std::set<std::string> seen;
+    for (const auto& entry : node) {
+      const std::string key = entry.first.IsScalar() ? entry.first.Scalar() : "<complex key>";
+      const std::string key_path = path.empty() ? key : path + "." + key;
+      if (!seen.insert(key).second)
+        throw ConfigError(where(origin, entry.first) + ": key '" + key_path +
+                          "' appears twice in the same map");
+      rejectDuplicateKeys(entry.second, origin, key_path, depth + 1);
+    }
+  } else if (node.IsSequence()) {
+    std::size_t i = 0;
+    for (const auto& item : node)
+      rejectDuplicateKeys(item, origin, path + "[" + std::to_string(i++) + "]", depth + 1);
+  }
+}
+
 }  // namespace
 
 YamlMap::YamlMap(const YAML::Node& node, std::string origin, std::string path)
@@ -29,6 +51,8 @@ YamlMap::YamlMap(const YAML::Node& node, std::string origin, std::string path)
   if (node_ && !node_.IsNull() && !node_.IsMap())
     throw ConfigError(where(origin_, node_) + ": key '" + (path_.empty() ? "<root>" : path_) +
                       "': expected a map of keys");
+  // A file's root map checks the whole document once.
+  if (path_.empty() && node_) rejectDuplicateKeys(node_, origin_, "", 0);
 }
 
 std::string YamlMap::keyPath(const std::string& key) const {
@@ -119,7 +143,10 @@ YAML::Node YamlMap::raw(const std::string& key) const {
 void YamlMap::done() const {
   if (!node_ || !node_.IsMap()) return;
   for (const auto& entry : node_) {
-    const std::string key = entry.first.as<std::string>();
+    if (!entry.first.IsScalar())
+      throw ConfigError(where(origin_, entry.first) + ": key '" + keyPath("<list or map>") +
+                        "': keys must be plain names");
+    const std::string key = entry.first.Scalar();
     if (!used_.count(key))
       throw ConfigError(where(origin_, entry.first) + ": unknown key '" + keyPath(key) + "'");
   }

@@ -9,11 +9,13 @@
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
 #include "sl/daemon/dds_environment.h"
+#include "sl/daemon/log.h"
 #include "support/config_text.h"
 
 #include <unistd.h>
 
 #include <cstdio>
+#include <cstdlib>
 
 namespace {
 
@@ -113,7 +115,22 @@ TEST_CASE("config mistakes are reported with file, line and key") {
            "key 'dds.qos.images.depth': must be in 1..64"},
       Case{"status_period_s: 1.0", "status_period_s: 1.0\n  qos: {cloud: {depth: 1}}",
            "unknown key 'dds.qos.cloud'"},
-      Case{"patterns:\n", "patterns: []\nunused:\n", "key 'patterns': expected a non-empty list"});
+      Case{"patterns:\n", "patterns: []\nunused:\n", "key 'patterns': expected a non-empty list"},
+      // Limits checked before anything is allocated or created (issue 17).
+      Case{"namespace: sl", "namespace: " + std::string(65600, 'n'),
+           "key 'dds.namespace': must be 1..128 letters"},
+      Case{"frame_id: sl_camera_optical_frame", "frame_id: " + std::string(300, 'f'),
+           "key 'dds.frame_id': must be 1..128 characters"},
+      Case{"projector:   {width: 1824, height: 1140,", "projector:   {width: 100000, height: 100000,",
+           "key 'sim.rig.calibration.projector.width': must be 1..16384"},
+      Case{"camera:      {width: 1440, height: 1080,", "camera:      {width: 1440, height: 2000000,",
+           "key 'sim.rig.calibration.camera.height': must be 1..16384"},
+      Case{"camera:      {width: 1440, height: 1080,", "camera:      {width: 16000, height: 16000,",
+           "key 'sim.rig.calibration.camera.height': 16000 x 16000 is more than 50 megapixels"},
+      Case{"  seed: 1", "  seed: 1\n  seed: 2", "test.yaml:10: key 'sim.seed' appears twice in the same map"},
+      Case{"calibration: sim", "calibration: /tmp", "key 'calibration': cannot read calibration file '/tmp': a directory"},
+      Case{"calibration: sim", "calibration: /dev/null",
+           "key 'calibration': cannot read calibration file '/dev/null': not a regular file"});
   INFO("edit: '" << c.from << "' -> '" << c.to << "'");
   const std::string message = errorOf(edited(c.from, c.to));
   INFO("message: " << message);
@@ -242,4 +259,26 @@ TEST_CASE("sensor: replay needs a readable recording and a calibration file") {
   text.replace(text.find("sensor: sim"), 11, "sensor: replay");
   message = errorOf(text);
   CHECK(message.find("key 'replay' is required") != std::string::npos);
+}
+
+TEST_CASE("log lines escape control characters and are bounded", "[log]") {
+  using sl::daemon::logSafe;
+  CHECK(logSafe("client a\nsl_sensord: forged\x1b[2J") ==
+        "client a\\x0asl_sensord: forged\\x1b[2J");
+  CHECK(logSafe("back\\slash\x7f") == "back\\\\slash\\x7f");
+  CHECK(logSafe("caf\xc3\xa9") == "caf\xc3\xa9");  // UTF-8 stays readable
+  const std::string big(1'000'000, 'x');
+  const std::string cut = logSafe(big, 100);
+  CHECK(cut.size() < 130);
+  CHECK(cut.find("(1000000 bytes)") != std::string::npos);
+}
+
+TEST_CASE("a relative recording_root goes under systemd's state directory when there is one") {
+  ::setenv("STATE_DIRECTORY", "/var/lib/sl-sensor", 1);
+  const auto under_unit = sl::daemon::parseConfig(shippedConfig(), "/etc/sl-sensor/sim.yaml");
+  ::unsetenv("STATE_DIRECTORY");
+  CHECK(under_unit.runtime.recording_root == "/var/lib/sl-sensor/recordings");
+  const auto by_hand = sl::daemon::parseConfig(shippedConfig(), "/etc/sl-sensor/sim.yaml");
+  CHECK(by_hand.runtime.recording_root.rfind("/var/lib/sl-sensor", 0) == std::string::npos);
+  CHECK(by_hand.runtime.recording_root.size() > std::string("/recordings").size());
 }

@@ -17,9 +17,16 @@ namespace {
 
 std::string shippedSimConfig() { return sl::test::shippedSimConfigText(); }
 
-// The shipped config with `lines` inserted under `sim.radiometry:`.
+// The shipped config with `lines` inserted under `sim.radiometry:`, the
+// shipped lines of the same keys removed (a key given twice is an error).
 std::string withRadiometry(const std::string& lines) {
   std::string text = shippedSimConfig();
+  std::istringstream given(lines);
+  for (std::string line; std::getline(given, line);) {
+    const std::string key = line.substr(0, line.find(':') + 1);  // "    name:"
+    const auto old = text.find("\n" + key);
+    if (old != std::string::npos) text.erase(old + 1, text.find('\n', old + 1) - old);
+  }
   const std::string anchor = "  radiometry:\n";
   const auto at = text.find(anchor);
   REQUIRE(at != std::string::npos);

@@ -31,17 +31,19 @@ std::map<std::string, std::vector<std::string>> checkedPatternCameras(
     const std::vector<std::string> ids = listed != config.pattern_cameras.end()
                                              ? listed->second
                                              : std::vector<std::string>{camera_ids.front()};
+    // Config mistakes found only against the sensor's cameras: ConfigError,
+    // so sl_sensord exits 2 (systemd does not restart it in a loop).
     for (const auto& id : ids)
       if (!calibrations.count(id))
-        throw std::runtime_error(config.source_path + ": pattern '" + p.name + "' names camera '" +
+        throw ConfigError(config.source_path + ": pattern '" + p.name + "' names camera '" +
                                  id + "', which the sensor lacks or which has no calibration "
                                  "(calibration: for the first camera, calibrations: for others)");
     result[p.name] = ids;
   }
   for (const auto& [pattern, id] : config.pattern_intensity_camera)
     if (!calibrations.count(id))
-      throw std::runtime_error(config.source_path + ": pattern '" + pattern +
-                               "' takes its intensity from camera '" + id +
+      throw ConfigError(config.source_path + ": pattern '" + pattern +
+                        "' takes its intensity from camera '" + id +
                                "', which the sensor lacks or which has no calibration");
   return result;
 }

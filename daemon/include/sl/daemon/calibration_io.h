@@ -15,12 +15,20 @@
 //   source: "free text"                                         # optional
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 
 #include "sl/pipeline/camera_model.h"
 
 namespace sl::daemon {
+
+// The largest camera or projector width or height any reader accepts
+// (a 16384 x 16384 float map is 1 GiB); checked before anything is sized by it.
+inline constexpr int kMaxImageSide = 16384;
+// ... and width x height (a 4K projector is 8.3 MP, the paper's camera 1.6 MP;
+// a 50 MP camera's cloud is 800 MB).
+inline constexpr std::int64_t kMaxImagePixels = 50'000'000;
 
 struct CalibrationErrors {
   double camera_rms_px = 0;

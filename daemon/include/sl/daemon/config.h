@@ -76,7 +76,8 @@ struct RuntimeConfig {
   int queue_depth = 2;   // image sets / clouds waiting between stages (drop oldest)
   std::string default_pattern;  // selected at startup; first pattern if empty
   // Recordings requested over DDS go to <recording_root>/<name>; absolute
-  // after loading (a relative key is resolved against the config file).
+  // after loading (a relative key is resolved against $STATE_DIRECTORY
+  // under systemd, else against the config file's folder).
   std::string recording_root = "recordings";
   TriggerMode trigger = TriggerMode::kHardware;  // default of start requests
 };
