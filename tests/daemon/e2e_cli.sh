@@ -41,6 +41,31 @@ set -e
 echo "$msg" | grep -q "no sl_sensord answered" || fail "no daemon message: $msg"
 echo "ok: no daemon -> $msg"
 
+# 2a. A signal during start-up ends the daemon at once (here during the
+# 1 s look for another daemon), not after start-up.
+"$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/early.log" 2>&1 &
+early=$!
+sleep 0.3
+kill -INT "$early"
+t0=$(date +%s%N)
+wait "$early" || true
+ms=$(( ($(date +%s%N) - t0) / 1000000 ))
+[ "$ms" -lt 1500 ] || fail "SIGINT during start-up: exit after $ms ms"
+grep -q "during start-up, exiting" "$work/early.log" || fail "early signal: $(cat "$work/early.log")"
+echo "ok: SIGINT during start-up -> exit after $ms ms"
+
+# 2b. Arguments out of range are usage errors (exit 2), checked before DDS.
+for bad in "--domain -1 status" "--domain 231 status" "--timeout 1e300 status" \
+           "--at 1e20 start" "--at 9.3e9 start"; do
+  set +e
+  # shellcheck disable=SC2086
+  msg=$("$bin/tools/slctl" --ns "$ns" $bad 2>&1)
+  rc=$?
+  set -e
+  [ "$rc" -eq 2 ] || fail "slctl $bad: exit code $rc, expected 2 ($msg)"
+  echo "ok: slctl $bad -> $(echo "$msg" | head -1)"
+done
+
 # 3. The daemon, the C listener and slctl.
 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
 daemon_pid=$!
@@ -119,6 +144,40 @@ sleep 0.5
 "$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
 grep -q "^sets incomplete: *0$" "$work/status.log" || fail "stops counted as incomplete: $(cat "$work/status.log")"
 echo "ok: rates, stops not counted as incomplete sequences"
+
+# A second daemon on the same domain and namespace refuses to start (exit 2,
+# one line naming the topic); one with its own namespace starts.
+set +e
+msg=$(timeout 20 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" 2>&1)
+rc=$?
+set -e
+[ "$rc" -eq 2 ] || fail "second daemon: exit code $rc, expected 2 ($msg)"
+echo "$msg" | grep -q "another sl_sensord already serves requests on 'rq/$ns/commandRequest'" \
+  || fail "second daemon message: $msg"
+echo "ok: second daemon -> $msg"
+sed "s/^  namespace: $ns$/  namespace: ${ns}_b/" "$work/sim.yaml" > "$work/sim_b.yaml"
+"$bin/daemon/sl_sensord" --config "$work/sim_b.yaml" > "$work/daemon_b.log" 2>&1 &
+pid_b=$!
+"$bin/tools/slctl" --ns "${ns}_b" --timeout 20 patterns > /dev/null || fail "daemon with its own namespace"
+kill -TERM "$pid_b"; wait "$pid_b" || fail "daemon b exit code $?"
+echo "ok: a daemon with its own namespace runs beside the first"
+
+# Requests: an oversized string is refused with INVALID_OPTION and not echoed;
+# the status counts every request.
+big=$(head -c 100000 /dev/zero | tr '\0' 'p')
+set +e
+msg=$("$bin/tools/slctl" --ns "$ns" pattern set "$big" 2>&1)
+rc=$?
+set -e
+[ "$rc" -eq 4 ] || fail "oversized pattern: exit code $rc, expected 4"
+echo "$msg" | grep -q "rejected (invalid option): pattern is 100000 bytes, more than 256" \
+  || fail "oversized pattern message: ${msg:0:300}"
+[ "${#msg}" -lt 400 ] || fail "oversized pattern echoed: ${#msg} bytes"
+grep -q "$big" "$work/daemon.log" && fail "oversized pattern in the log"
+"$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
+grep -Eq "^requests: *[0-9]+ \(answered [0-9]+, rate-limited 0, invalid 1, reply timed out 0\)" \
+  "$work/status.log" || fail "request counters: $(grep requests "$work/status.log")"
+echo "ok: oversized request refused, $(grep '^requests' "$work/status.log")"
 
 kill -TERM "$daemon_pid"
 for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
