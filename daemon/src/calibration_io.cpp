@@ -151,8 +151,21 @@ class StorageReader {
 
   cv::Mat matrix(const char* key, int rows, int cols) const {
     cv::Mat m;
+    // OpenCV allocates the declared rows x cols before reading the data: a
+    // small file declaring a huge matrix took > 2 GB (found by
+    // fuzz_calibration), so the declared size is checked first.
+    const cv::FileNode node = fs_[key];
+    if (node.isMap()) {
+      const cv::FileNode r = node["rows"], c = node["cols"];
+      const bool declared_ok =
+          r.isInt() && c.isInt() &&
+          std::int64_t{static_cast<int>(r)} * static_cast<int>(c) == std::int64_t{rows} * cols;
+      if (!declared_ok)
+        throw ConfigError(path_ + ": key '" + key + "' must have " + std::to_string(rows * cols) +
+                          " elements");
+    }
     try {
-      fs_[key] >> m;
+      node >> m;
     } catch (const cv::Exception& e) {
       throw ConfigError(path_ + ": key '" + key + "' is not a matrix: " + e.msg);
     }
