@@ -1,8 +1,8 @@
 // The daemon's request handling end to end in one process: sl_sensord's
 // DdsBridge and ScanEngine on a small simulated rig (data/request_daemon.yaml)
 // serve rq/fuzz_request/commandRequest, and each input becomes one
-// CommandRequest (arbitrary strings up to 300 KB, commands and enums outside
-// their ranges, counts, delays, start times, camera lists) written by a
+// CommandRequest (arbitrary strings up to 300 KB, every command and enum
+// value, counts, delays, start times, camera lists) written by a
 // client participant. The target waits for the reply (or for the request to
 // be counted as rate-limited) and checks it: same client and request id, a
 // reason never longer than the bound. An accepted START is stopped again.
@@ -111,20 +111,22 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   msg::Request req{};
   req.client_id = client.data();
   req.request_id = d.next_id++;
-  // Within the IDL enums mostly (out-of-range enums are refused by the
-  // serializer on our side), sometimes just past them.
-  req.command = static_cast<sl_msgs_msg_Command>(in.ConsumeIntegralInRange(0, 5));
+  // Within the IDL enums: Cyclone 0.10.2 refuses to serialize a value past
+  // them (dds_write: BAD_PARAMETER) and leaks 256 bytes doing so (found by
+  // this target; a writer-side library bug, the daemon never sees such a
+  // sample).
+  req.command = static_cast<sl_msgs_msg_Command>(in.ConsumeIntegralInRange(0, 4));
   req.pattern = pattern.data();
   req.recording = recording.data();
   req.count = in.ConsumeIntegral<std::int32_t>();
-  req.trigger = static_cast<sl_msgs_msg_TriggerMode>(in.ConsumeIntegralInRange(0, 3));
+  req.trigger = static_cast<sl_msgs_msg_TriggerMode>(in.ConsumeIntegralInRange(0, 2));
   req.delay_s = in.ConsumeFloatingPoint<double>();
   req.start_at.sec = in.ConsumeIntegral<std::int32_t>();
   req.start_at.nanosec = in.ConsumeIntegral<std::uint32_t>();
   req.cameras._maximum = req.cameras._length = static_cast<std::uint32_t>(camera_ptrs.size());
   req.cameras._buffer = camera_ptrs.data();
   req.cameras._release = false;
-  req.motion_compensation = static_cast<sl_msgs_msg_MotionCompensation>(in.ConsumeIntegralInRange(0, 3));
+  req.motion_compensation = static_cast<sl_msgs_msg_MotionCompensation>(in.ConsumeIntegralInRange(0, 2));
 
   try {
     if (!d.writer->write(req)) return 0;
