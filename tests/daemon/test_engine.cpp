@@ -75,14 +75,14 @@ TEST_CASE("the engine reports unhealthy while a device thread is stuck, and stil
     std::this_thread::sleep_for(300ms);
     CHECK(engine.healthy());
     REQUIRE(engine.start("", 1).accepted());
-    for (int i = 0; i < 100 && clouds == 0; ++i) std::this_thread::sleep_for(50ms);
+    for (int i = 0; i < 100 * sl::test::kTimeScale && clouds == 0; ++i) std::this_thread::sleep_for(50ms);
     CHECK(clouds == 1);
     CHECK(with_maps == 0);
     CHECK(engine.healthy());
 
     camera->hang = true;  // the next grab() never returns on its own
     const auto start = std::chrono::steady_clock::now();
-    while (engine.healthy() && std::chrono::steady_clock::now() - start < 5s)
+    while (engine.healthy() && std::chrono::steady_clock::now() - start < sl::test::scaledBound(5s))
       std::this_thread::sleep_for(50ms);
     CHECK_FALSE(engine.healthy());
     // Unhealthy after the 2 s heartbeat limit (plus the grab timeout), not before.
@@ -171,12 +171,12 @@ TEST_CASE("start options are validated with a code and a reason naming the optio
   CHECK(s.motion_compensation);
   CHECK(s.cameras == std::vector<std::string>{"sim_top"});
   while (engine.status().state == ScanState::kWaiting &&
-         std::chrono::steady_clock::now() - requested < 3s)
+         std::chrono::steady_clock::now() - requested < sl::test::scaledBound(3s))
     std::this_thread::sleep_for(5ms);
   const auto began = std::chrono::steady_clock::now() - requested;
   CHECK(began >= 300ms);
   CHECK(began < sl::test::scaledBound(450ms));
-  for (int i = 0; i < 100 && clouds == 0; ++i) std::this_thread::sleep_for(50ms);
+  for (int i = 0; i < 100 * sl::test::kTimeScale && clouds == 0; ++i) std::this_thread::sleep_for(50ms);
   CHECK(clouds == 1);
 }
 
@@ -247,7 +247,7 @@ TEST_CASE("software trigger: a switch waits for the sequence in progress, never 
   r.trigger = TriggerMode::kSoftware;
   REQUIRE(engine.start(r).accepted());
   auto waitFor = [&](const std::string& pattern, long n) {
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(10s);
     while (count(pattern) < n && std::chrono::steady_clock::now() < deadline)
       std::this_thread::sleep_for(5ms);
     return count(pattern) >= n;

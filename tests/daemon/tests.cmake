@@ -25,7 +25,7 @@ target_link_libraries(test_config PRIVATE sl_daemon opencv_imgcodecs)
 # End to end through slctl and the plain C subscriber.
 add_test(NAME e2e_cli COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/e2e_cli.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
-set_tests_properties(e2e_cli PROPERTIES TIMEOUT 120)
+set_tests_properties(e2e_cli PROPERTIES TIMEOUT 300)
 
 # The systemd unit passes systemd-analyze verify.
 add_test(NAME systemd_unit COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/verify_unit.sh
