@@ -44,8 +44,10 @@ struct Daemon {
 
   Daemon() {
     config = loadConfig(std::string(SL_FUZZ_DIR) + "/data/request_daemon.yaml");
-    bridge = std::make_unique<DdsBridge>(config.dds, config.calibration.camera);
-    engine = std::make_unique<ScanEngine>(config, openDevices(config, owner),
+    EngineDevices devices = openDevices(config, owner);
+    bridge = std::make_unique<DdsBridge>(config.dds, devices.cameras.front()->id(),
+                                         config.calibration.camera);
+    engine = std::make_unique<ScanEngine>(config, std::move(devices),
                                           [this](const ScanResult& r) { bridge->publish(r); });
     server = std::thread([this] { bridge->serve(*engine); });
     const TopicNames names = TopicNames::forNamespace(config.dds.ns);
