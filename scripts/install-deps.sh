@@ -16,6 +16,7 @@ packages=(
   libusb-1.0-0-dev   # aravis-0.8.pc requires it (Requires.private), Debian does not pull it in
   libhidapi-dev
   pcl-tools
+  libopen3d-dev   # sl_register: ICP, normals, kd-trees, pose-graph optimisation
   systemd
   iproute2   # ss: the interop test checks Fast DDS binds only 127.0.0.1
   # ROS 2 interop test (tests/interop): Fast DDS, its IDL code generator
