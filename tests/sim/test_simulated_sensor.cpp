@@ -180,6 +180,43 @@ TEST_CASE("tilted plane and sphere match the analytic intersections", "[sim][geo
   CHECK(on_plane > 200);
 }
 
+TEST_CASE("setMotion moves the sensor: the view equals the scene moved the other way",
+          "[sim][geometry]") {
+  SimConfig config = realisticConfig();
+  config.scene.planes = {SimPlane{{0, 0, 700}, Eigen::Vector3d(0.3, -0.2, -1.0), 0.7}};
+  config.scene.spheres = {SimSphere{{30, -20, 500}, 80, 0.9}};
+  const auto sensor = SimulatedSensor::create(config);
+  Eigen::Isometry3d base = Eigen::Isometry3d::Identity();
+  base.linear() = Eigen::AngleAxisd(degrees(2), Eigen::Vector3d::UnitY()).toRotationMatrix();
+  base.translation() = Eigen::Vector3d(25, -10, 5);
+  sl::drivers::SimMotion motion;
+  motion.velocity_mm_s = Eigen::Vector3d(0, 30, 0);
+  sensor->setMotion(base, motion);
+  // Image 3 is seen from base * (0, 3 mm, 0): a static sensor looking at the
+  // scene moved by the inverse of that pose sees the same.
+  Eigen::Isometry3d at3 = base;
+  at3.translation() += base.linear() * Eigen::Vector3d(0, 3, 0);
+  SimConfig moved_config = config;
+  moved_config.scene = {};
+  sl::drivers::appendTransformed(moved_config.scene, config.scene, at3.inverse());
+  const auto moved = SimulatedSensor::create(moved_config);
+  const sl::drivers::SimGroundTruth got = sensor->groundTruthAt(0, 3);
+  int compared = 0;
+  for (int r = 0; r < 1080; r += 53)
+    for (int c = 0; c < 1440; c += 61) {
+      const float a = got.depth_mm.at<float>(r, c), b = moved->groundTruth().depth_mm.at<float>(r, c);
+      REQUIRE(std::isnan(a) == std::isnan(b));
+      if (std::isnan(a)) continue;
+      CHECK(std::abs(a - b) < 1e-3);
+      ++compared;
+    }
+  CHECK(compared > 300);
+  // Back at the configured pose, the configured view again.
+  sensor->setMotion(Eigen::Isometry3d::Identity(), {});
+  const cv::Mat back = sensor->groundTruthAt(0, 3).depth_mm;
+  CHECK(cv::norm(back, sensor->groundTruth().depth_mm, cv::NORM_INF) < 1e-4);
+}
+
 TEST_CASE("ground-truth projector coordinates reproject consistently", "[sim][geometry]") {
   SimConfig config = planeAt(750);
   config.scene.spheres = {SimSphere{{-40, 30, 520}, 70, 0.6}};

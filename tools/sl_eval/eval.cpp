@@ -1064,11 +1064,12 @@ EvalResult runGamma(const EvalOptions& requested) {
 }
 
 std::vector<std::string> experimentNames() {
-  return {"precision", "cones", "roughness", "motion", "vdi2634", "gamma"};
+  return {"precision", "cones", "roughness", "motion", "vdi2634", "gamma", "wall"};
 }
 
 int defaultScans(const std::string& name) {
   if (name == "vdi2634") return 1;  // the guideline measures each pose once
+  if (name == "wall") return 21;    // horizontal pass: 25 mm apart
   return 10;                        // the paper's 10 consecutive scans
 }
 
@@ -1079,6 +1080,7 @@ EvalResult runExperiment(const std::string& name, const EvalOptions& options) {
   if (name == "roughness") return runRoughness(options);
   if (name == "vdi2634") return runVdi2634(options);
   if (name == "gamma") return runGamma(options);
+  if (name == "wall") return runWall(options);
   std::string known;
   for (const std::string& n : experimentNames()) known += (known.empty() ? "" : ", ") + n;
   throw std::invalid_argument("unknown experiment '" + name + "' (known: " + known + ")");

@@ -97,6 +97,16 @@ EvalResult runVdi2634(const EvalOptions& options);
 // gamma.
 EvalResult runGamma(const EvalOptions& options);
 
+// 4.4 wall: a plaster-like wall larger than the field of view, a 50 cm
+// horizontal and a 30 cm vertical pass at 12.5 mm/s scanned through the
+// daemon's ScanEngine, registered by sl_register (pairwise and multi-way),
+// compared with the true surface (tools/sl_eval/wall.cpp). `scans`: scans of
+// the horizontal pass (default 21, 25 mm apart). Metrics:
+// <pairwise|multiway>_<horizontal|vertical|merged>_{within_0.5mm_pct,
+// p99_5_mm, mean_mm, std_mm, drift_mm, drift_deg}, refused_scans, scans,
+// total_s. Plots: wall_<method>_distances.png (named in the markdown).
+EvalResult runWall(const EvalOptions& options);
+
 // Names accepted by runExperiment, in the order `all` runs them.
 std::vector<std::string> experimentNames();
 // The number of scans an experiment uses when EvalOptions::scans <= 0.

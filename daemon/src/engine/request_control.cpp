@@ -284,11 +284,15 @@ void RequestControl::beginLocked() {
   scans_done_ = 0;
   // Time per sequence: one image interval per pattern with a trigger board;
   // in software, settle plus (at least) an exposure per pattern, doubled
-  // for transfer and processing.
+  // for transfer and processing, and at most settle plus the grab timeout
+  // per pattern (a slower image fails the acquisition itself, which is
+  // reported): a slow camera is not taken for lost sets.
   sequence_s_ = pattern->frameCount() * config_.synchroniser.image_interval_ns * 1e-9;
   if (trigger_ == TriggerMode::kSoftware)
-    sequence_s_ = 2 * pattern->frameCount() *
-                  (config_.software_trigger.settle_s + config_.synchroniser.image_interval_ns * 1e-9);
+    sequence_s_ = pattern->frameCount() *
+                  std::max(2 * (config_.software_trigger.settle_s +
+                                config_.synchroniser.image_interval_ns * 1e-9),
+                           config_.software_trigger.settle_s + config_.software_trigger.grab_timeout_s);
   deadline_ = count == 0 ? Clock::time_point::max()
                          : Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                               std::chrono::duration<double>(count * sequence_s_ + 2.0));

@@ -6,6 +6,7 @@
 #include <deque>
 #include <fstream>
 #include <limits>
+#include <mutex>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -270,6 +271,8 @@ bool sameImage(const cv::Mat& a, const cv::Mat& b) {
 class SceneRenderer {
  public:
   explicit SceneRenderer(SimConfig config) : config_(std::move(config)), geometry_(config_.scene) {
+    placement_.motion = config_.motion;
+    placement_.moving = config_.motion.moving();
     // Exposure and analog gain (see SimConfig): noise referred to the input.
     response_.signal_scale =
         config_.analog_gain * config_.exposure_ms / config_.reference_exposure_ms;
@@ -304,9 +307,19 @@ class SceneRenderer {
   SimGroundTruth groundTruthAt(int camera, int frame) const {
     const CameraView& c = checkedCamera(camera);
     if (frame < 0) throw std::out_of_range("SimulatedSensor::groundTruthAt: frame < 0");
-    if (!config_.motion.moving()) return c.view.ground_truth;
-    return sim::computeSceneView(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame), true)
+    const Placement place = placement();
+    if (!place.moving) return c.view.ground_truth;
+    return sim::computeSceneView(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame, place),
+                                 true)
         .ground_truth;
+  }
+
+  // const: the renderer is shared as const with the live camera's render
+  // function; the placement is its one mutable, locked state.
+  void setMotion(const Eigen::Isometry3d& base, const SimMotion& motion) const {
+    Placement place{base, motion, !base.matrix().isIdentity(0) || motion.moving()};
+    std::lock_guard lock(placement_mutex_);
+    placement_ = std::move(place);
   }
 
   cv::Mat render(int camera, std::size_t pattern, int frame, std::uint64_t noise_seed) const {
@@ -316,7 +329,8 @@ class SceneRenderer {
       throw std::out_of_range("SimulatedSensor::render: frame " + std::to_string(frame) +
                               " of pattern '" + names_[pattern] + "' out of range");
     const sim::ProjectorFrame& projected = *frames[static_cast<std::size_t>(frame)];
-    if (!config_.motion.moving()) {
+    const Placement place = placement();
+    if (!place.moving) {
       // A static scene: the noise-free signal of each (camera, projector
       // frame) is computed once; each image then costs only its noise.
       if (const std::shared_ptr<const cv::Mat> signal = cachedSignal(camera, projected))
@@ -327,8 +341,8 @@ class SceneRenderer {
     // Moving sensor: ray-cast this image's pose (camera rays undistorted once),
     // into per-thread buffers reused from image to image.
     thread_local sim::SceneView moved;
-    sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame), false,
-                              moved);
+    sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame, place),
+                              false, moved);
     assignDefocus(c, moved.maps);
     return sim::renderImage(moved.maps, projected, response_, noise_seed, projector_response_,
                             c.camera_blur_passes);
@@ -453,8 +467,20 @@ class SceneRenderer {
     return cameras_[static_cast<std::size_t>(camera)];
   }
 
-  Eigen::Isometry3d cameraToScene(const CameraView& c, int frame) const {
-    return config_.motion.poseAt(frame, config_.camera_fps) * c.to_first;
+  // Where the sensor is: SimConfig::motion from the configured pose, or what
+  // setMotion() said.
+  struct Placement {
+    Eigen::Isometry3d base = Eigen::Isometry3d::Identity();
+    SimMotion motion;
+    bool moving = false;
+  };
+  Placement placement() const {
+    std::lock_guard lock(placement_mutex_);
+    return placement_;
+  }
+
+  Eigen::Isometry3d cameraToScene(const CameraView& c, int frame, const Placement& place) const {
+    return place.base * place.motion.poseAt(frame, config_.camera_fps) * c.to_first;
   }
 
   const SimConfig config_;
@@ -478,6 +504,8 @@ class SceneRenderer {
   mutable std::map<std::pair<int, const sim::ProjectorFrame*>, std::shared_ptr<SignalEntry>>
       signals_;                           // guarded by signal_mutex_
   mutable std::size_t signal_bytes_ = 0;  // guarded by signal_mutex_
+  mutable std::mutex placement_mutex_;
+  mutable Placement placement_;  // guarded by placement_mutex_
 };
 
 // Thread-safe: the renderer is immutable, the live state is LiveSchedule's.
@@ -514,6 +542,9 @@ class SimulatedSensorImpl final : public SimulatedSensor {
   const SimGroundTruth& groundTruth() const override { return renderer_->groundTruth(0); }
   SimGroundTruth groundTruthAt(int camera, int frame) const override {
     return renderer_->groundTruthAt(camera, frame);
+  }
+  void setMotion(const Eigen::Isometry3d& base, const SimMotion& motion) override {
+    renderer_->setMotion(base, motion);
   }
   const SimConfig& config() const override { return renderer_->config(); }
 

@@ -345,6 +345,15 @@ class SimulatedSensor {
   virtual SimGroundTruth groundTruthAt(int camera, int frame) const = 0;
   virtual const SimConfig& config() const = 0;
 
+  // Moves the whole sensor, as a robot arm carrying it would: from the next
+  // image rendered on, image i of every sequence is seen from
+  // base * motion.poseAt(i) (sensor frame, i.e. the first camera's, in the
+  // scene's frame; mm), instead of SimConfig::motion from the configured
+  // pose. groundTruthAt() follows; groundTruth() stays at the configured
+  // pose, and defocus keeps the depths of the configured view (a sensor
+  // moving along a wall keeps its distance). Thread-safe.
+  virtual void setMotion(const Eigen::Isometry3d& base, const SimMotion& motion) = 0;
+
   // Renders frame `frame` of pattern `pattern_name` with noise drawn from
   // `noise_seed`: deterministic, for tests. The live camera uses the same path.
   // Throws std::invalid_argument on an unknown pattern, std::out_of_range on
