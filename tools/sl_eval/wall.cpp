@@ -212,7 +212,7 @@ EvalResult runWall(const EvalOptions& in) {
   config.sim.projector_gamma = options.projector_gamma;
   // The simulated cameras render a moving view in tens of ms per image (more
   // on a loaded machine): a software-triggered grab may take that long.
-  config.software_trigger.grab_timeout_s = 30;
+  config.software_trigger.grab_timeout_s = 120;
   say("setting up the simulated sensor (wall " + fmt(kWallWidth, 0) + " x " + fmt(kWallHeight, 0) +
       " mm)");
   const auto sim = drivers::SimulatedSensor::create(config.sim);
@@ -306,13 +306,13 @@ EvalResult runWall(const EvalOptions& in) {
       if (!started.accepted())
         throw std::runtime_error("wall: start request for " + plan.name + " scan " +
                                  std::to_string(k) + " refused: " + started.reason);
-      for (int waited = 0;; waited += 10) {
+      for (;;) {
         std::unique_lock lock(mutex);
         if (arrived.wait_for(lock, std::chrono::seconds(10), [&] { return captured.size() > before; }))
           break;
         lock.unlock();
         const daemon::EngineStatus st = engine.status();
-        if (waited >= 180 || st.state == daemon::ScanState::kIdle || st.state == daemon::ScanState::kError)
+        if (st.state == daemon::ScanState::kIdle || st.state == daemon::ScanState::kError)
           throw std::runtime_error("wall: no cloud for " + plan.name + " scan " + std::to_string(k) +
                                    " (engine " + daemon::toString(st.state) + ", last error: " +
                                    st.last_error + ")");
