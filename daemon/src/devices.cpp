@@ -132,7 +132,8 @@ EngineDevices composeVersavis(const DaemonConfig& config,
                               std::shared_ptr<drivers::VersavisTriggerSource> board) {
   const auto& channels = config.hardware.versavis.camera_channels;
   EngineDevices devices;
-  devices.projector = std::move(projector);
+  devices.projector =
+      std::make_shared<drivers::VersavisStartTapProjector>(std::move(projector), board);
   devices.trigger = board;
   if (channels.empty()) {
     logWarning(config.source_path +

@@ -331,3 +331,23 @@ TEST_CASE("VersaVIS: wrong message type, triggers per sequence, stop, missing de
                       "VersaVIS /nonexistent/versavis: cannot open: No such file or directory");
   }
 }
+
+TEST_CASE("VersaVIS: triggers received before the projector's start are dropped and counted") {
+  Board board;
+  VersavisTriggerSource src(testConfig(board.slavePath()));
+  negotiate(board, 126);
+  for (std::uint64_t n = 1; n <= 3; ++n)
+    board.publish(126, rs::encodeTimeNumbered({10, static_cast<std::uint32_t>(n), n}));
+  const auto first = nextEvent(src, 2000ms);  // reads all three, returns the first
+  REQUIRE(first);
+  std::this_thread::sleep_for(20ms);
+  timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  src.dropTriggersBefore(static_cast<std::int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec);
+  CHECK_FALSE(src.next(100ms));  // numbers 2 and 3 arrived before: dropped
+  CHECK(src.counters().triggers_before_start == 2);
+  board.publish(126, rs::encodeTimeNumbered({11, 0, 4}));
+  const auto after = nextEvent(src, 2000ms);
+  REQUIRE(after);
+  CHECK(after->stamp_ns == 11000000000);
+}

@@ -316,6 +316,7 @@ void VersavisTriggerSource::handle(const rosserial::Frame& frame) {
     e.stamp_ns = static_cast<std::int64_t>(m->secs) * 1000000000 + m->nsecs + config_.offset_ns;
     e.sequence_index = since_first / per;
     pending_.push_back(e);
+    pending_arrival_.push_back(realtimeNs());
     return;
   }
   std::lock_guard lock(cameras_mutex_);
@@ -437,10 +438,16 @@ std::optional<TriggerEvent> VersavisTriggerSource::next(std::chrono::millisecond
       pending_error_.clear();
       throw std::runtime_error(e);
     }
-    if (!pending_.empty()) {
+    while (!pending_.empty()) {
       const TriggerEvent e = pending_.front();
+      const std::int64_t arrival = pending_arrival_.front();
       pending_.pop_front();
+      pending_arrival_.pop_front();
       std::lock_guard lock(counters_mutex_);
+      if (arrival < drop_before_ns_.load()) {
+        ++counters_.triggers_before_start;  // the projector was not running yet
+        continue;
+      }
       ++counters_.triggers;
       return e;
     }
@@ -556,6 +563,15 @@ void VersavisTriggerSource::stop() {
 VersavisCounters VersavisTriggerSource::counters() const {
   std::lock_guard lock(counters_mutex_);
   return counters_;
+}
+
+void VersavisTriggerSource::dropTriggersBefore(std::int64_t host_ns) { drop_before_ns_ = host_ns; }
+
+void VersavisStartTapProjector::start(int count) {
+  projector_->start(count);
+  // Triggers the board sent before the projector was started (its clock can
+  // be ~100 ms ahead of the host's, so their stamps alone cannot tell).
+  source_->dropTriggersBefore(realtimeNs());
 }
 
 VersavisRestampCamera::VersavisRestampCamera(std::shared_ptr<Camera> camera,

@@ -39,6 +39,7 @@
 #include <vector>
 
 #include "sl/drivers/camera.h"
+#include "sl/drivers/projector.h"
 #include "sl/drivers/trigger_source.h"
 
 namespace sl::drivers {
@@ -179,7 +180,8 @@ struct VersavisCounters {
   std::uint64_t frames_unstamped = 0;    // frames dropped: no board time found for them
   std::uint64_t frames_before_init = 0;  // frames seen while the handshake matched
   std::uint64_t resets_sent = 0;
-  bool silent = false;  // the watchdog fired and no packet came since
+  std::uint64_t triggers_before_start = 0;  // dropped: received before the projector's start
+  bool silent = false;                      // the watchdog fired and no packet came since
 };
 
 // Outcome of VersavisTriggerSource::restamp for one camera frame.
@@ -226,6 +228,10 @@ class VersavisTriggerSource : public TriggerSource {
   RestampResult restamp(std::size_t camera, std::uint64_t frame_id, std::int64_t arrival_ns,
                         std::int64_t& stamp_ns);
   std::size_t cameraCount() const { return config_.camera_channels.size(); }
+  // Projector triggers that reached the host before `host_ns` (system clock)
+  // are dropped (counted in triggers_before_start): the projector was not
+  // running for them. Thread-safe.
+  void dropTriggersBefore(std::int64_t host_ns);
   bool cameraInitialised(std::size_t camera) const;
 
  private:
@@ -275,6 +281,8 @@ class VersavisTriggerSource : public TriggerSource {
   bool expect_hangup_ = false;            // after the reset: reconnect quietly
   bool rebooting_ = false;                // reopen retried every 100 ms meanwhile
   std::deque<TriggerEvent> pending_;
+  std::deque<std::int64_t> pending_arrival_;  // host arrival of each pending event
+  std::atomic<std::int64_t> drop_before_ns_{0};
   std::string pending_error_;
   mutable std::mutex counters_mutex_;
   VersavisCounters counters_;  // guarded by counters_mutex_
@@ -284,6 +292,29 @@ class VersavisTriggerSource : public TriggerSource {
   std::vector<Channel> channels_;
   std::vector<CameraState> cameras_;
   std::deque<std::vector<std::uint8_t>> outbox_;  // frames for the trigger thread to write
+};
+
+// Projector decorator of the VersaVIS hardware path: after each start() the
+// trigger source drops the triggers that reached the host before it (their
+// board stamps are on a clock up to ~100 ms off the host's, so the engine's
+// host-clock start time cannot tell them apart). Thread-safety as the
+// wrapped projector.
+class VersavisStartTapProjector : public Projector {
+ public:
+  VersavisStartTapProjector(std::shared_ptr<Projector> projector,
+                            std::shared_ptr<VersavisTriggerSource> source)
+      : projector_(std::move(projector)), source_(std::move(source)) {}
+  std::string id() const override { return projector_->id(); }
+  std::vector<ProjectorSequence> sequences() const override { return projector_->sequences(); }
+  void select(const std::string& name) override { projector_->select(name); }
+  void start(int count) override;
+  void stop() override { projector_->stop(); }
+  bool canProjectSingle() const override { return projector_->canProjectSingle(); }
+  void projectSingle(int index) override { projector_->projectSingle(index); }
+
+ private:
+  std::shared_ptr<Projector> projector_;
+  std::shared_ptr<VersavisTriggerSource> source_;
 };
 
 // Camera decorator of the VersaVIS hardware path: every frame gets the
