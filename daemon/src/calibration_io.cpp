@@ -1,5 +1,7 @@
 #include "sl/daemon/calibration_io.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -11,6 +13,7 @@
 
 
 #include <Eigen/Geometry>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 
 #include "calibration_yaml.h"
@@ -358,6 +361,219 @@ CalibrationFile loadSlSensorCalibration(const std::string& camera_path,
                                     stereo_error.value_or(0)};
   file.source = "sl_sensor " + std::filesystem::path(camera_path).filename().string() + " + " +
                 std::filesystem::path(projector_path).filename().string();
+  return file;
+}
+
+namespace {
+
+double translationScale(const std::string& unit, const std::string& where) {
+  if (unit == "mm") return 1.0;
+  if (unit == "cm") return 10.0;
+  if (unit == "m") return 1000.0;
+  throw ConfigError(where + ": translation_unit must be mm, cm or m, not '" + unit + "'");
+}
+
+void setPose(const std::string& value, const std::string& where, OpenCvCalibrationKeys& k) {
+  if (value == "camera_to_projector") k.projector_to_camera = false;
+  else if (value == "projector_to_camera") k.projector_to_camera = true;
+  else
+    throw ConfigError(where + ": pose must be camera_to_projector or projector_to_camera, not '" +
+                      value + "'");
+}
+
+void checkComplete(const OpenCvCalibrationKeys& k) {
+  const std::pair<const char*, const std::string*> required[] = {
+      {"camera.matrix", &k.camera.matrix},         {"camera.distortion", &k.camera.distortion},
+      {"camera.width", &k.camera.width},           {"camera.height", &k.camera.height},
+      {"projector.matrix", &k.projector.matrix},   {"projector.distortion", &k.projector.distortion},
+      {"projector.width", &k.projector.width},     {"projector.height", &k.projector.height},
+      {"rotation", &k.rotation},                   {"translation", &k.translation}};
+  for (const auto& [name, value] : required)
+    if (value->empty())
+      throw ConfigError(k.origin + ": key mapping lacks '" + name +
+                        "' (needed: camera/projector matrix, distortion, width, height; rotation, "
+                        "translation)");
+}
+
+}  // namespace
+
+OpenCvCalibrationKeys parseOpenCvCalibrationKeys(const std::string& text) {
+  OpenCvCalibrationKeys k;
+  std::error_code no_file;
+  if (text.find('=') == std::string::npos || std::filesystem::is_regular_file(text, no_file)) {
+    k.origin = text;
+    if (!std::filesystem::is_regular_file(text, no_file))
+      throw ConfigError(text + ": neither a key-mapping file nor inline pairs "
+                               "(camera.matrix=K1,...)");
+    YAML::Node root;
+    try {
+      root = YAML::LoadFile(text);
+    } catch (const YAML::Exception& e) {
+      throw ConfigError(text + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
+    }
+    const YamlMap m(root, text, "");
+    for (auto [name, device] : {std::pair{"camera", &k.camera}, std::pair{"projector", &k.projector}}) {
+      const YamlMap d = m.map(name);
+      device->matrix = d.get<std::string>("matrix");
+      device->distortion = d.get<std::string>("distortion");
+      device->width = d.get<std::string>("width");
+      device->height = d.get<std::string>("height");
+      d.done();
+    }
+    k.rotation = m.get<std::string>("rotation");
+    k.translation = m.get<std::string>("translation");
+    setPose(m.get<std::string>("pose", "camera_to_projector"), text + ": pose", k);
+    k.translation_to_mm =
+        translationScale(m.get<std::string>("translation_unit", "mm"), text + ": translation_unit");
+    m.done();
+  } else {
+    k.origin = "key mapping '" + text + "'";
+    std::stringstream pairs(text);
+    for (std::string pair; std::getline(pairs, pair, ',');) {
+      const auto eq = pair.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == pair.size())
+        throw ConfigError(k.origin + ": '" + pair + "' is not name=key");
+      const std::string name = pair.substr(0, eq), value = pair.substr(eq + 1);
+      std::string* slot = nullptr;
+      if (name == "camera.matrix") slot = &k.camera.matrix;
+      else if (name == "camera.distortion") slot = &k.camera.distortion;
+      else if (name == "camera.width") slot = &k.camera.width;
+      else if (name == "camera.height") slot = &k.camera.height;
+      else if (name == "projector.matrix") slot = &k.projector.matrix;
+      else if (name == "projector.distortion") slot = &k.projector.distortion;
+      else if (name == "projector.width") slot = &k.projector.width;
+      else if (name == "projector.height") slot = &k.projector.height;
+      else if (name == "rotation") slot = &k.rotation;
+      else if (name == "translation") slot = &k.translation;
+      else if (name == "pose") setPose(value, k.origin, k);
+      else if (name == "translation_unit") k.translation_to_mm = translationScale(value, k.origin);
+      else
+        throw ConfigError(k.origin + ": unknown name '" + name +
+                          "' (camera./projector.matrix, distortion, width, height; rotation, "
+                          "translation, pose, translation_unit)");
+      if (slot) {
+        if (!slot->empty()) throw ConfigError(k.origin + ": '" + name + "' given twice");
+        *slot = value;
+      }
+    }
+  }
+  checkComplete(k);
+  return k;
+}
+
+CalibrationFile loadOpenCvCalibration(const std::string& path, const OpenCvCalibrationKeys& keys) {
+  if (!std::filesystem::exists(path)) throw ConfigError(path + ": calibration file not found");
+  const std::string expected = "the keys of " + keys.origin;
+  cv::FileStorage fs;
+  try {
+    fs.open(path, cv::FileStorage::READ);
+  } catch (const cv::Exception& e) {
+    throw ConfigError(path + ": cannot parse as OpenCV FileStorage: " + e.msg);
+  }
+  if (!fs.isOpened()) throw ConfigError(path + ": cannot open as OpenCV FileStorage");
+  auto matrix = [&](const std::string& key) {
+    const cv::FileNode node = fs[key];
+    if (node.empty())
+      throw ConfigError(path + ": key '" + key + "' missing (named by " + keys.origin + ")");
+    cv::Mat m;
+    try {
+      node >> m;
+    } catch (const cv::Exception& e) {
+      throw ConfigError(path + ": key '" + key + "' is not a matrix: " + e.msg);
+    }
+    if (m.empty() || m.channels() != 1)
+      throw ConfigError(path + ": key '" + key + "' is not a single-channel matrix");
+    cv::Mat d;
+    m.convertTo(d, CV_64F);
+    if (!cv::checkRange(d)) throw ConfigError(path + ": key '" + key + "' is not finite");
+    return d;
+  };
+  auto size = [&](const std::string& value, const char* what) {
+    if (!value.empty() && std::all_of(value.begin(), value.end(), ::isdigit)) {
+      const int v = std::stoi(value);
+      if (v <= 0) throw ConfigError(keys.origin + ": " + what + " must be > 0");
+      return v;
+    }
+    const cv::FileNode node = fs[value];
+    if (node.empty() || !(node.isInt() || node.isReal()))
+      throw ConfigError(path + ": key '" + value + "' (" + what +
+                        ") missing or not a number; give the size as a number in " + keys.origin +
+                        " when the file does not store it");
+    const double v = static_cast<double>(node);
+    if (!(v > 0) || v != std::floor(v))
+      throw ConfigError(path + ": key '" + value + "' (" + what + ") must be a positive integer");
+    return static_cast<int>(v);
+  };
+  auto pinhole = [&](const OpenCvCalibrationKeys::Device& d, const char* device) {
+    pipeline::PinholeModel model;
+    model.width = size(d.width, (std::string(device) + " width").c_str());
+    model.height = size(d.height, (std::string(device) + " height").c_str());
+    const cv::Mat K = matrix(d.matrix);
+    if (K.total() != 9)
+      throw ConfigError(path + ": key '" + d.matrix + "' (" + device + " matrix) must be 3x3, has " +
+                        std::to_string(K.total()) + " elements");
+    const cv::Mat K3 = K.reshape(1, 3);
+    model.fx = K3.at<double>(0, 0);
+    model.fy = K3.at<double>(1, 1);
+    model.cx = K3.at<double>(0, 2);
+    model.cy = K3.at<double>(1, 2);
+    if (!(model.fx > 0 && model.fy > 0) || K3.at<double>(2, 2) != 1.0 ||
+        K3.at<double>(1, 0) != 0 || K3.at<double>(2, 0) != 0 || K3.at<double>(2, 1) != 0)
+      throw ConfigError(path + ": key '" + d.matrix + "' (" + device +
+                        " matrix) is not [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0");
+    if (std::abs(K3.at<double>(0, 1)) > 1e-9 * model.fx)
+      throw ConfigError(path + ": key '" + d.matrix + "' (" + device +
+                        " matrix) has a skew term, which the model does not have");
+    const cv::Mat k = matrix(d.distortion);
+    const std::size_t n = k.total();
+    if (n != 4 && n != 5 && n != 8 && n != 12 && n != 14)
+      throw ConfigError(path + ": key '" + d.distortion + "' (" + device +
+                        " distortion) has " + std::to_string(n) +
+                        " elements; expected 4, 5, 8, 12 or 14 (OpenCV's order)");
+    const cv::Mat flat = k.reshape(1, 1);
+    for (std::size_t i = 5; i < n; ++i)
+      if (flat.at<double>(0, static_cast<int>(i)) != 0.0)
+        throw ConfigError(path + ": key '" + d.distortion + "' (" + device + " distortion) term " +
+                          std::to_string(i) +
+                          " is not 0: the model has k1 k2 p1 p2 k3 only (rational or thin-prism "
+                          "terms are not supported)");
+    for (std::size_t i = 0; i < 5; ++i)
+      model.distortion[i] = i < n ? flat.at<double>(0, static_cast<int>(i)) : 0.0;
+    return model;
+  };
+  CalibrationFile file;
+  auto& c = file.calibration;
+  c.camera = pinhole(keys.camera, "camera");
+  c.projector = pinhole(keys.projector, "projector");
+  const cv::Mat r = matrix(keys.rotation);
+  cv::Mat R;
+  if (r.total() == 9) R = r.reshape(1, 3);
+  else if (r.total() == 3) cv::Rodrigues(r.reshape(1, 3), R);
+  else
+    throw ConfigError(path + ": key '" + keys.rotation +
+                      "' (rotation) must be a 3x3 matrix or a Rodrigues vector of 3");
+  const cv::Mat t = matrix(keys.translation);
+  if (t.total() != 3)
+    throw ConfigError(path + ": key '" + keys.translation + "' (translation) must have 3 elements");
+  Eigen::Matrix3d Re;
+  Eigen::Vector3d te;
+  const cv::Mat t3 = t.reshape(1, 3);
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) Re(i, j) = R.at<double>(i, j);
+    te(i) = t3.at<double>(i, 0) * keys.translation_to_mm;
+  }
+  if ((Re * Re.transpose() - Eigen::Matrix3d::Identity()).norm() > 1e-4 || Re.determinant() < 0)
+    throw ConfigError(path + ": key '" + keys.rotation + "' (rotation) is not a rotation matrix");
+  if (keys.projector_to_camera) {
+    // X_c = R X_p + T  <=>  X_p = R^T X_c - R^T T.
+    c.R = Re.transpose();
+    c.t = -Re.transpose() * te;
+  } else {
+    c.R = Re;
+    c.t = te;
+  }
+  file.source = "OpenCV FileStorage " + std::filesystem::path(path).filename().string() +
+                " through " + keys.origin;
   return file;
 }
 

@@ -482,7 +482,43 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   double replay_fps = 0;
   if (replay) replay_fps = parseReplay(root.map("replay"), base_dir, config.replay);
 
-  const std::string calibration = root.get<std::string>("calibration", "sim");
+  // `calibration:` sim, a file path, or {file, keys} for a foreign OpenCV
+  // FileStorage file read through a key mapping (calibration_io.h).
+  std::string calibration = "sim", calibration_keys;
+  if (root.has("calibration") && root.raw("calibration").IsMap()) {
+    const YamlMap c(root.raw("calibration"), root.origin(), root.keyPath("calibration"));
+    calibration = c.get<std::string>("file");
+    if (c.has("keys")) {
+      const YAML::Node keys = c.raw("keys");
+      if (keys.IsMap()) {
+        // Inline mapping: written back as dotted pairs for the one parser.
+        for (const auto& device : keys) {
+          const std::string name = device.first.as<std::string>();
+          if (device.second.IsMap()) {
+            for (const auto& entry : device.second)
+              calibration_keys += (calibration_keys.empty() ? "" : ",") + name + "." +
+                                  entry.first.as<std::string>() + "=" +
+                                  entry.second.as<std::string>();
+          } else {
+            calibration_keys += (calibration_keys.empty() ? "" : ",") + name + "=" +
+                                device.second.as<std::string>();
+          }
+        }
+      } else {
+        std::filesystem::path keys_path(keys.as<std::string>());
+        if (keys_path.is_relative()) keys_path = base_dir / keys_path;
+        if (!std::filesystem::exists(keys_path))
+          c.fail("keys", "cannot read key-mapping file '" + keys_path.string() + "'");
+        calibration_keys = keys_path.string();
+      }
+    } else {
+      c.fail("keys", "is required with `file` (the key mapping of the OpenCV file; a plain "
+                     "`calibration: PATH` reads the project's and SLStudio's formats)");
+    }
+    c.done();
+  } else {
+    calibration = root.get<std::string>("calibration", "sim");
+  }
   if (calibration == "sim") {
     if (!simulated)
       root.fail("calibration", "a " + config.sensor + " sensor needs a calibration file");
@@ -498,7 +534,11 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
                                    (std::filesystem::is_directory(path) ? "a directory"
                                     : std::filesystem::exists(path)      ? "not a regular file"
                                                                          : "no such file"));
-    config.calibration = loadCalibration(path.string()).calibration;
+    config.calibration =
+        calibration_keys.empty()
+            ? loadCalibration(path.string()).calibration
+            : loadOpenCvCalibration(path.string(), parseOpenCvCalibrationKeys(calibration_keys))
+                  .calibration;
   }
   if (simulated &&
       (config.calibration.camera.width != config.sim.rig.camera.width ||

@@ -51,10 +51,49 @@ void parseGray(const YamlMap& m, PatternSpec& p) {
   p.reference_frames = m.get<bool>("reference_frames", p.reference_frames);
 }
 
-std::vector<double> frequencies(const YamlMap& m) {
-  const auto f = m.get<std::vector<double>>("frequencies");
-  if (f.empty()) m.fail("frequencies", "must not be empty");
-  return f;
+// Axis (px) every sinusoid of `p` runs along; pitches in px need one axis.
+int pitchAxis(const YamlMap& m, const PatternSpec& p, const char* key) {
+  if (p.direction == pipeline::Direction::kBoth && p.projector_width != p.projector_height)
+    m.fail(key, "gives a different number of periods across the " +
+                    std::to_string(p.projector_width) + " columns and the " +
+                    std::to_string(p.projector_height) +
+                    " rows of direction both; give `frequencies` (periods across each axis) "
+                    "or one pattern per direction");
+  return p.direction == pipeline::Direction::kVertical ? p.projector_height : p.projector_width;
+}
+
+// `frequencies` (periods across the encoded axis) or `pitches_px` (period
+// in projector px, any positive number): exactly one. Returns the key used.
+std::string frequencies(const YamlMap& m, PatternSpec& p) {
+  const bool by_periods = m.has("frequencies"), by_pitch = m.has("pitches_px");
+  if (by_periods == by_pitch)
+    m.fail(by_periods ? "pitches_px" : "frequencies",
+           "give exactly one of 'frequencies' (periods across the projector axis) or "
+           "'pitches_px' (fringe period in projector px)");
+  const char* key = by_periods ? "frequencies" : "pitches_px";
+  const auto values = m.get<std::vector<double>>(key);
+  if (values.empty()) m.fail(key, "must not be empty");
+  for (double v : values)
+    if (!(v > 0 && std::isfinite(v))) m.fail(key, "must be positive numbers");
+  if (by_periods) {
+    p.frequencies = values;
+  } else {
+    const int axis = pitchAxis(m, p, key);
+    p.frequencies.clear();
+    for (double pitch : values) p.frequencies.push_back(axis / pitch);
+  }
+  return key;
+}
+
+// The YAML key of a PatternSpec field (PatternSpecError::field).
+std::string keyOfField(const std::string& field, const std::string& frequency_key,
+                       const std::string& order_key) {
+  if (field == "projector size") return "projector";
+  if (field == "start_phase") return "start_phase_deg";
+  if (field == "offset/amplitude") return "amplitude";
+  if (field == "frequencies") return frequency_key;
+  if (field == "frame_order") return order_key;
+  return field;  // steps, shift_sign, bits, reference_frames
 }
 
 }  // namespace
@@ -102,13 +141,25 @@ PatternSpec parsePattern(const YamlMap& m, const std::string& name,
     p.projector_width = w;
     p.projector_height = h;
   }
-  std::string check_key = "family";  // key blamed when validate() fails
+  std::string frequency_key = "family";  // key blamed for the frequencies
   if (family == "phase_shift_3+3") {
-    // The paper's 3+3: 3 steps at `fringes` periods, then 3 at unit frequency.
+    // The paper's 3+3: 3 steps at `fringes` periods (any positive number) or
+    // a fine period of `pitch_px`, then 3 at unit frequency.
     p.family = PatternFamily::kPhaseShift;
     p.steps = 3;
-    p.frequencies = {static_cast<double>(m.get<int>("fringes", 16)), 1.0};
-    check_key = "fringes";
+    if (m.has("fringes") && m.has("pitch_px"))
+      m.fail("pitch_px", "give one of 'fringes' (periods across the projector) or 'pitch_px'");
+    if (m.has("pitch_px")) {
+      const double pitch = m.get<double>("pitch_px");
+      if (!(pitch > 0 && std::isfinite(pitch))) m.fail("pitch_px", "must be > 0");
+      p.frequencies = {pitchAxis(m, p, "pitch_px") / pitch, 1.0};
+      frequency_key = "pitch_px";
+    } else {
+      const double fringes = m.get<double>("fringes", 16.0);
+      if (!(fringes > 0 && std::isfinite(fringes))) m.fail("fringes", "must be > 0");
+      p.frequencies = {fringes, 1.0};
+      frequency_key = "fringes";
+    }
   } else {
     try {
       p.family = pipeline::patternFamilyFromString(family);
@@ -118,7 +169,7 @@ PatternSpec parsePattern(const YamlMap& m, const std::string& name,
     switch (p.family) {
       case PatternFamily::kPhaseShift:
         p.steps = m.get<int>("steps", 3);
-        p.frequencies = frequencies(m);
+        frequency_key = frequencies(m, p);
         try {
           p.unwrapping = pipeline::unwrappingFromString(
               m.get<std::string>("unwrapping", "hierarchical"));
@@ -126,43 +177,60 @@ PatternSpec parsePattern(const YamlMap& m, const std::string& name,
           m.fail("unwrapping", e.what());
         }
         parseSinusoid(m, p);
-        check_key = "frequencies";
         break;
       case PatternFamily::kTwoPlusOne:
-        p.frequencies = frequencies(m);
+        frequency_key = frequencies(m, p);
         parseSinusoid(m, p);
-        check_key = "frequencies";
         break;
       case PatternFamily::kGrayCode:
         parseGray(m, p);
-        check_key = "bits";
         break;
       case PatternFamily::kGrayPhaseShift:
         p.steps = m.get<int>("steps", 4);
         parseGray(m, p);
         p.complementary = m.get<bool>("complementary", p.complementary);
         parseSinusoid(m, p);
-        check_key = "bits";
         break;
     }
   }
+  // The capture layout: `frame_order` (canonical frame per captured frame,
+  // -1 = not part of the code) or `skip_frames` (captured frames that are
+  // not part of the code, the others in canonical order).
+  std::string order_key = "frame_order";
+  if (m.has("frame_order") && m.has("skip_frames"))
+    m.fail("skip_frames", "give one of 'frame_order' and 'skip_frames' (frame_order marks "
+                          "skipped frames with -1)");
   if (m.has("frame_order")) {
     for (double v : m.get<std::vector<double>>("frame_order")) {
-      if (v != std::floor(v) || v < 0) m.fail("frame_order", "must list frame indices (integers >= 0)");
+      if (v != std::floor(v) || v < -1)
+        m.fail("frame_order", "must list canonical frame indices (integers >= 0, -1 = skip)");
       p.frame_order.push_back(static_cast<int>(v));
     }
-    std::vector<int> sorted = p.frame_order;
-    std::sort(sorted.begin(), sorted.end());
-    bool permutation = static_cast<int>(sorted.size()) == p.frameCount();
-    for (std::size_t i = 0; permutation && i < sorted.size(); ++i)
-      permutation = sorted[i] == static_cast<int>(i);
-    if (!permutation)
-      m.fail("frame_order", "must be a permutation of 0.." + std::to_string(p.frameCount() - 1));
+  } else if (m.has("skip_frames")) {
+    order_key = "skip_frames";
+    std::vector<int> skip;
+    for (double v : m.get<std::vector<double>>("skip_frames")) {
+      if (v != std::floor(v) || v < 0)
+        m.fail("skip_frames", "must list captured frame indices (integers >= 0)");
+      skip.push_back(static_cast<int>(v));
+    }
+    std::sort(skip.begin(), skip.end());
+    if (std::adjacent_find(skip.begin(), skip.end()) != skip.end())
+      m.fail("skip_frames", "lists a frame twice");
+    const int total = p.codeFrameCount() + static_cast<int>(skip.size());
+    if (!skip.empty() && skip.back() >= total)
+      m.fail("skip_frames", "frame " + std::to_string(skip.back()) + " is beyond the " +
+                                std::to_string(total) + " captured frames (" +
+                                std::to_string(p.codeFrameCount()) + " of the code + " +
+                                std::to_string(skip.size()) + " skipped)");
+    for (int i = 0, next = 0; i < total; ++i)
+      p.frame_order.push_back(std::binary_search(skip.begin(), skip.end(), i) ? pipeline::kSkippedFrame
+                                                                             : next++);
   }
   try {
     p.validate();
-  } catch (const std::invalid_argument& e) {
-    m.fail(check_key, e.what());
+  } catch (const pipeline::PatternSpecError& e) {
+    m.fail(keyOfField(e.field, frequency_key, order_key), e.what());
   }
   m.done();
   return p;

@@ -102,10 +102,10 @@ Codec::Codec(PatternSpec spec, DecoderOptions options)
   if (!(options_.min_modulation >= 0.0f))
     throw std::invalid_argument("DecoderOptions: min_modulation must be >= 0 (or negative: derived)");
   const int n = spec_.frameCount();
-  position_.resize(n);
+  position_.resize(spec_.codeFrameCount());
   for (int i = 0; i < n; ++i) {
     const int canonical = spec_.frame_order.empty() ? i : spec_.frame_order[i];
-    position_[canonical] = i;
+    if (canonical != kSkippedFrame) position_[canonical] = i;
   }
 }
 

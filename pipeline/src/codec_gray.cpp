@@ -1,7 +1,8 @@
 // Gray code, and Gray code + phase shift (optionally complementary).
 //
 // Bits are thresholded against the bit's inverse frame when projected, else
-// against the mean of the white and black reference frames. The binary value
+// against the mean of the white and black reference frames, else (Gray +
+// phase shift without either) against the mean of the phase-shift frames. The binary value
 // of the reflected Gray code accumulates MSB first (b_i = b_{i-1} xor g_i).
 //
 // Gray + phase shift: the n-bit code gives the fringe order k1 of a sinusoid
@@ -98,6 +99,21 @@ class GrayCodec final : public Codec {
         a[x] = 0.5f * (wv + kv);
         b[x] = 0.5f * (wv - kv);
         threshold2[x] = wv + kv;
+      }
+    } else if (!inverse) {
+      // Neither references nor inverses (Gray + phase shift only): each bit
+      // against the mean A of the phase-shift frames, the level half way
+      // between the sinusoid's white and black; B comes from the sinusoid.
+      for (int x = 0; x < n; ++x) threshold2[x] = 0.0f;
+      for (int m : phase_frames_) {
+        const Pixel* f = frames[m];
+        for (int x = 0; x < n; ++x) threshold2[x] += f[x];
+      }
+      const float twice_mean = 2.0f / static_cast<float>(phase_frames_.size());
+      for (int x = 0; x < n; ++x) {
+        threshold2[x] *= twice_mean;
+        a[x] = 0.5f * threshold2[x];
+        b[x] = 0.0f;
       }
     } else {
       for (int x = 0; x < n; ++x) a[x] = b[x] = 0.0f;

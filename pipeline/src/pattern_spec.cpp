@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <numbers>
 #include <stdexcept>
 
 #include <opencv2/core.hpp>
 
 #include "frame_layout.h"
+#include "sl/pipeline/codec.h"
 
 namespace sl::pipeline {
 
@@ -104,13 +106,17 @@ int PatternSpec::framesPerDirection() const {
   return 0;
 }
 
-int PatternSpec::frameCount() const {
+int PatternSpec::codeFrameCount() const {
   return framesPerDirection() * (direction == Direction::kBoth ? 2 : 1);
+}
+
+int PatternSpec::frameCount() const {
+  return frame_order.empty() ? codeFrameCount() : static_cast<int>(frame_order.size());
 }
 
 void PatternSpec::validate() const {
   auto fail = [&](const std::string& field, const std::string& what) {
-    throw std::invalid_argument("pattern '" + name + "': " + field + " " + what);
+    throw PatternSpecError(field, "pattern '" + name + "': " + field + " " + what);
   };
   if (projector_width <= 0 || projector_height <= 0)
     fail("projector size", "must be positive");
@@ -164,8 +170,10 @@ void PatternSpec::validate() const {
       if (gray_bits < 0 || gray_bits + extra > full)
         fail("bits", "must be in 0.." + std::to_string(full - extra) + " for " +
                          std::to_string(axis) + " px (0 = all)");
-      if (!reference_frames && !gray_inverse)
-        fail("reference_frames", "or inverse patterns are needed to threshold the bits");
+      // Gray + phase shift may threshold against the sinusoids' mean.
+      if (!reference_frames && !gray_inverse && family == PatternFamily::kGrayCode)
+        fail("reference_frames", "or inverse patterns are needed to threshold the bits of a "
+                                 "Gray code without phase shift");
     }
     if (axes.size() == 2 &&
         grayBitsUsed(projector_width) != grayBitsUsed(projector_height))
@@ -177,14 +185,43 @@ void PatternSpec::validate() const {
                            " px; need >= 4 px");
     }
   }
+  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kTwoPlusOne) {
+    // Unwrapping margin: the modulation the noisiest frequency step needs for
+    // its fringe orders to be picked with a 5-sigma margin (codec.h) must be
+    // within reach of the camera.
+    const double required = derivedMinModulation(*this, 0.3f);
+    const double reachable = 0.5 * 255.0 * amplitude;
+    if (required > reachable) {
+      std::vector<double> f = frequencies;
+      std::sort(f.begin(), f.end(), std::greater<>());
+      std::string ratios;
+      for (std::size_t i = 0; unwrapping == Unwrapping::kHierarchical && i + 1 < f.size(); ++i)
+        ratios += (ratios.empty() ? "" : ", ") + std::to_string(f[i] / f[i + 1]);
+      fail("frequencies",
+           "cannot be unwrapped reliably: the frequency steps (ratios " +
+               (ratios.empty() ? std::string("of the beats") : ratios) +
+               ") need a fringe modulation of " + std::to_string(required) +
+               " DN for 5-sigma fringe orders, more than half of the " +
+               std::to_string(2 * reachable) +
+               " DN an 8-bit camera can record; add intermediate frequencies (ratio <= ~40 per "
+               "step)");
+    }
+  }
   if (!frame_order.empty()) {
-    const int n = frameCount();
-    if (static_cast<int>(frame_order.size()) != n)
-      fail("frame_order", "must list all " + std::to_string(n) + " frames");
-    std::vector<int> sorted = frame_order;
-    std::sort(sorted.begin(), sorted.end());
-    for (int i = 0; i < n; ++i)
-      if (sorted[i] != i) fail("frame_order", "must be a permutation of 0.." + std::to_string(n - 1));
+    const int n = codeFrameCount();
+    std::vector<int> seen(n, 0);
+    for (int c : frame_order) {
+      if (c == kSkippedFrame) continue;
+      if (c < 0 || c >= n)
+        fail("frame_order", "entry " + std::to_string(c) + " is outside 0.." +
+                                std::to_string(n - 1) + " (-1 = skipped frame)");
+      if (++seen[c] > 1)
+        fail("frame_order", "lists canonical frame " + std::to_string(c) + " twice");
+    }
+    for (int c = 0; c < n; ++c)
+      if (seen[c] == 0)
+        fail("frame_order", "misses canonical frame " + std::to_string(c) + " (the code has " +
+                                std::to_string(n) + " frames; each must be captured once)");
   }
 }
 
@@ -287,10 +324,11 @@ double frameIntensity(const PatternSpec& s, const FrameInfo& f, double u, double
 
 double patternIntensity(const PatternSpec& spec, int frame, double u, double v) {
   const auto frames = detail::canonicalFrames(spec);
-  if (frame < 0 || frame >= static_cast<int>(frames.size()))
+  if (frame < 0 || frame >= spec.frameCount())
     throw std::out_of_range("pattern '" + spec.name + "': frame " + std::to_string(frame) +
                             " out of range");
   const int canonical = spec.frame_order.empty() ? frame : spec.frame_order[frame];
+  if (canonical == kSkippedFrame) return 0.0;
   return detail::frameIntensity(spec, frames[canonical], u, v);
 }
 
@@ -318,7 +356,11 @@ std::vector<cv::Mat> generatePatternImages(const PatternSpec& spec) {
   }
   if (spec.frame_order.empty()) return canonical;
   std::vector<cv::Mat> ordered;
-  for (int c : spec.frame_order) ordered.push_back(canonical[c]);
+  for (int c : spec.frame_order)
+    ordered.push_back(c == kSkippedFrame
+                          ? cv::Mat(spec.projector_height, spec.projector_width, CV_8UC1,
+                                    cv::Scalar(0))
+                          : canonical[c]);
   return ordered;
 }
 

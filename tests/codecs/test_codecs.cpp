@@ -107,6 +107,22 @@ std::vector<PatternSpec> allFamilies() {
   gps_plain.family = PatternFamily::kGrayPhaseShift;
   gps_plain.steps = 3;
   v.push_back(gps_plain);
+  // Gray + phase shift thresholded against the fringe mean (no references,
+  // no inverses), with and without the complementary bit.
+  PatternSpec gps_mean = gray("gray_ps_mean_complementary", Direction::kHorizontal, 6, false, false);
+  gps_mean.family = PatternFamily::kGrayPhaseShift;
+  gps_mean.complementary = true;
+  gps_mean.steps = 4;
+  v.push_back(gps_mean);
+  PatternSpec gps_mean_plain = gray("gray_ps_mean_plain", Direction::kBoth, 5, false, false);
+  gps_mean_plain.family = PatternFamily::kGrayPhaseShift;
+  gps_mean_plain.steps = 3;
+  v.push_back(gps_mean_plain);
+  // A 60 px fringe pitch (30.4 periods) with a unit cue, captured with a
+  // white and a black frame that are not part of the code in between.
+  PatternSpec pitch = phaseShift("pitch60_skipped_frames", Direction::kHorizontal, 3, {1824.0 / 60, 1});
+  pitch.frame_order = {0, 1, 2, pipeline::kSkippedFrame, pipeline::kSkippedFrame, 3, 4, 5};
+  v.push_back(pitch);
   return v;
 }
 

@@ -22,6 +22,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "common/cli.h"
+#include "common/frame_files.h"
 #include "residual_plot.h"
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
@@ -38,13 +39,17 @@ namespace pl = sl::pipeline;
 constexpr const char* kUsage =
     "usage: sl_calibrate --poses DIR... --board COLSxROWS --square MM [options]\n"
     "       sl_calibrate --import-sl-sensor CAMERA.xml PROJECTOR.xml --out FILE.yaml\n"
-    "Each pose folder holds the camera images of one pattern sequence, in projection order\n"
-    "when sorted by file name (png, bmp, tif, jpg, pgm).\n"
+    "Each pose folder holds the camera images of one pattern sequence (png, bmp, tif, jpg,\n"
+    "pgm), in projection order by the natural order of the numbers in their names (x_2\n"
+    "before x_10; names that do not follow one numbering are refused), or as --list says.\n"
     "input:\n"
     "  --pattern P            built-in 3+3_both (default) or a pattern file (YAML, see README)\n"
     "  --fringes N            periods of the built-in 3+3 pattern (default 16)\n"
     "  --projector WxH        projector resolution of the built-in pattern (default 1824x1140)\n"
     "  --bit-depth N          significant bits of 16-bit images (default 8 / 16 by type)\n"
+    "  --list FILE            file names of one sequence, one per line in projection order,\n"
+    "                         relative to each pose folder (frames a pattern file skips with\n"
+    "                         skip_frames / frame_order -1 are listed too)\n"
     "  --exclude NAME         leave out the pose folder NAME (repeatable)\n"
     "  --secondary PRIMARY    calibrate a secondary camera against the projector of the\n"
     "                         calibration file PRIMARY (projector intrinsics fixed)\n"
@@ -94,6 +99,7 @@ struct Args {
   std::vector<std::string> poses;
   std::set<std::string> excluded;
   std::string pattern = "3+3_both";
+  std::string list;
   int fringes = 16;
   int projector_width = 1824, projector_height = 1140;
   int bit_depth = 0;  // 0 = from the image type
@@ -130,6 +136,8 @@ Args parseArgs(int argc, char** argv) {
       if (a.poses.empty()) usageError("--poses: no folders given");
     } else if (o == "--import-sl-sensor") {
       a.import_sl_sensor = {value(), value()};
+    } else if (o == "--list") {
+      a.list = value();
     } else if (o == "--exclude") {
       a.excluded.insert(value());
     } else if (o == "--pattern") {
@@ -209,19 +217,6 @@ pl::PatternSpec patternSpec(const Args& a) {
   return pl::toSpec(p);
 }
 
-std::vector<fs::path> imageFiles(const fs::path& dir) {
-  static const std::set<std::string> kExtensions = {".png", ".bmp", ".tif", ".tiff",
-                                                    ".jpg", ".jpeg", ".pgm"};
-  std::vector<fs::path> files;
-  for (const auto& entry : fs::directory_iterator(dir)) {
-    std::string ext = entry.path().extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
-    if (entry.is_regular_file() && kExtensions.count(ext)) files.push_back(entry.path());
-  }
-  std::sort(files.begin(), files.end());
-  return files;
-}
-
 std::string utcNow() {
   const std::time_t now = std::time(nullptr);
   char text[32];
@@ -287,7 +282,17 @@ int run(const Args& a) {
   const bool mean_shading = spec.family == pl::PatternFamily::kPhaseShift;
 
   std::optional<sl::daemon::CalibrationFile> primary;
-  if (!a.secondary_of.empty()) primary = sl::daemon::loadCalibration(a.secondary_of);
+  if (!a.secondary_of.empty()) {
+    primary = sl::daemon::loadCalibration(a.secondary_of);
+    const auto& projector = primary->calibration.projector;
+    if (projector.width != spec.projector_width || projector.height != spec.projector_height)
+      throw std::runtime_error("pattern '" + spec.name + "' is for a " +
+                               std::to_string(spec.projector_width) + "x" +
+                               std::to_string(spec.projector_height) + " projector, " +
+                               a.secondary_of + "'s projector is " +
+                               std::to_string(projector.width) + "x" +
+                               std::to_string(projector.height));
+  }
 
   std::vector<pl::BoardView> views;
   std::vector<std::string> skipped;
@@ -301,16 +306,20 @@ int run(const Args& a) {
       continue;
     }
     if (!fs::is_directory(dir)) throw std::runtime_error(dir + ": not a folder");
-    const std::vector<fs::path> files = imageFiles(dir);
+    const std::vector<std::string> files =
+        a.list.empty() ? sl::tools::listFrameFiles(dir) : sl::tools::readFrameList(a.list, dir);
     if (static_cast<int>(files.size()) != decoder.codec().frameCount())
       throw std::runtime_error(dir + ": " + std::to_string(files.size()) + " images, pattern '" +
                                spec.name + "' has " +
                                std::to_string(decoder.codec().frameCount()) + " frames");
     std::vector<cv::Mat> frames;
-    for (const fs::path& f : files) {
-      cv::Mat image = cv::imread(f.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
-      if (image.empty()) throw std::runtime_error(f.string() + ": cannot read the image");
+    std::vector<cv::Mat> code_frames;  // without the frames the pattern skips
+    for (std::size_t i = 0; i < files.size(); ++i) {
+      cv::Mat image = cv::imread(files[i], cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
+      if (image.empty()) throw std::runtime_error(files[i] + ": cannot read the image");
       frames.push_back(image);
+      if (spec.frame_order.empty() || spec.frame_order[i] != pl::kSkippedFrame)
+        code_frames.push_back(image);
     }
     if (camera_size.empty()) camera_size = frames.front().size();
     if (frames.front().size() != camera_size)
@@ -318,7 +327,7 @@ int run(const Args& a) {
     const int bit_depth =
         a.bit_depth > 0 ? a.bit_depth : (frames.front().depth() == CV_8U ? 8 : 16);
     const pl::ProjectorMaps maps = decoder.decode(frames, bit_depth);
-    const cv::Mat shading = mean_shading ? pl::meanImage(frames) : maps.offset;
+    const cv::Mat shading = mean_shading ? pl::meanImage(code_frames) : maps.offset;
     const pl::BoardViewResult result =
         pl::observeBoard(shading, maps, a.board, label, a.corners, a.homography);
     if (!result.view) {

@@ -1,20 +1,26 @@
 // sl_process: decode and triangulate a recorded capture.
 //
-//   sl_process --pattern P.yaml --calibration C --images DIR [--out DIR]
-//              [--list FILE] [--min-modulation DN] [--max-unwrap-error PERIODS]
+//   sl_process --pattern P.yaml --images DIR [--calibration C [--calibration-keys K]]
+//              [--out DIR] [--list FILE] [--phase] [--smooth-phase SIGMA_PX]
+//              [--min-modulation DN] [--max-unwrap-error PERIODS]
 //              [--keep-saturated] [--undistort-images] [--projector-iterations N]
 //              [--use best|columns|rows] [--min-depth MM] [--max-depth MM]
 //
-// Frames are the image files of DIR sorted by name, or the files named one
-// per line in --list (relative to DIR). Exit codes: 0 ok, 1 error, 2 usage.
+// Frames are the image files of DIR in the natural order of the numbers in
+// their names (ambiguous numbering is refused), or the files named one per
+// line in --list (relative to DIR). Without --calibration only the maps (and
+// with --phase the phase maps) are written. Exit codes: 0 ok, 1 error
+// (including a capture that decodes to no valid pixel), 2 usage.
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
+#include <optional>
 #include <string>
 
+#include "common/cli.h"
+#include "common/frame_files.h"
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/pattern_config.h"
 #include "sl_process/process.h"
@@ -23,20 +29,29 @@ namespace {
 
 int usage(const std::string& message) {
   std::cerr << "sl_process: " << message << "\n"
-            << "usage: sl_process --pattern P.yaml --calibration C --images DIR [--out DIR]\n"
-               "         [--list FILE] [--min-modulation DN] [--max-unwrap-error PERIODS]\n"
-               "         [--keep-saturated] [--undistort-images] [--projector-iterations N]\n"
-               "         [--use best|columns|rows] [--min-depth MM] [--max-depth MM]\n";
+            << "usage: sl_process --pattern P.yaml --images DIR [--calibration C]\n"
+               "         [--calibration-keys FILE.yaml|name=key,...] [--out DIR] [--list FILE]\n"
+               "         [--phase] [--smooth-phase SIGMA_PX] [--min-modulation DN]\n"
+               "         [--max-unwrap-error PERIODS] [--keep-saturated] [--undistort-images]\n"
+               "         [--projector-iterations N] [--use best|columns|rows]\n"
+               "         [--min-depth MM] [--max-depth MM]\n";
   return 2;
+}
+
+double number(const std::string& option, const std::string& text) {
+  if (const auto v = sl::tools::toNumber(text)) return *v;
+  throw std::invalid_argument(option + ": expected a number, got '" + text + "'");
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string pattern_path, calibration_path, images_dir, out_dir = "sl_process_out", list_path;
+  std::string pattern_path, calibration_path, calibration_keys, images_dir,
+      out_dir = "sl_process_out", list_path;
   sl::pipeline::DecoderOptions decoder;
   sl::pipeline::TriangulatorOptions triangulator;
-  bool undistort_images = false;
+  bool undistort_images = false, phase = false;
+  double smooth_sigma = 0;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string arg = argv[i];
@@ -46,17 +61,22 @@ int main(int argc, char** argv) {
       };
       if (arg == "--pattern") pattern_path = value();
       else if (arg == "--calibration") calibration_path = value();
+      else if (arg == "--calibration-keys") calibration_keys = value();
       else if (arg == "--images") images_dir = value();
       else if (arg == "--out") out_dir = value();
       else if (arg == "--list") list_path = value();
-      else if (arg == "--min-modulation") decoder.min_modulation = std::stof(value());
-      else if (arg == "--max-unwrap-error") decoder.max_unwrap_error = std::stof(value());
+      else if (arg == "--phase") phase = true;
+      else if (arg == "--smooth-phase") {
+        smooth_sigma = number(arg, value());
+        if (!(smooth_sigma > 0)) return usage("--smooth-phase: sigma must be > 0 (camera px)");
+      } else if (arg == "--min-modulation") decoder.min_modulation = static_cast<float>(number(arg, value()));
+      else if (arg == "--max-unwrap-error") decoder.max_unwrap_error = static_cast<float>(number(arg, value()));
       else if (arg == "--keep-saturated") decoder.reject_saturated = false;
       else if (arg == "--undistort-images") undistort_images = true;
       else if (arg == "--projector-iterations")
-        triangulator.projector_distortion_iterations = std::stoi(value());
-      else if (arg == "--min-depth") triangulator.min_depth_mm = std::stof(value());
-      else if (arg == "--max-depth") triangulator.max_depth_mm = std::stof(value());
+        triangulator.projector_distortion_iterations = static_cast<int>(number(arg, value()));
+      else if (arg == "--min-depth") triangulator.min_depth_mm = static_cast<float>(number(arg, value()));
+      else if (arg == "--max-depth") triangulator.max_depth_mm = static_cast<float>(number(arg, value()));
       else if (arg == "--use") {
         const std::string use = value();
         using Use = sl::pipeline::TriangulatorOptions::Use;
@@ -74,40 +94,65 @@ int main(int argc, char** argv) {
   } catch (const std::exception& e) {
     return usage(e.what());
   }
-  if (pattern_path.empty() || calibration_path.empty() || images_dir.empty())
-    return usage("--pattern, --calibration and --images are required");
+  if (pattern_path.empty() || images_dir.empty())
+    return usage("--pattern and --images are required");
+  if (!calibration_keys.empty() && calibration_path.empty())
+    return usage("--calibration-keys needs --calibration");
+  if (calibration_path.empty() && undistort_images)
+    return usage("--undistort-images needs --calibration");
 
   try {
     const sl::pipeline::PatternSpec pattern = sl::daemon::loadPattern(pattern_path);
-    const auto calibration = sl::daemon::loadCalibration(calibration_path).calibration;
-    std::vector<std::string> files;
-    if (list_path.empty()) {
-      files = sl::tools::listImages(images_dir);
-    } else {
-      std::ifstream list(list_path);
-      if (!list) throw std::runtime_error(list_path + ": cannot open list");
-      for (std::string line; std::getline(list, line);) {
-        if (line.empty() || line[0] == '#') continue;
-        std::filesystem::path p(line);
-        files.push_back((p.is_relative() ? std::filesystem::path(images_dir) / p : p).string());
-      }
-    }
+    std::optional<sl::pipeline::CameraProjectorCalibration> calibration;
+    if (!calibration_path.empty())
+      calibration = calibration_keys.empty()
+                        ? sl::daemon::loadCalibration(calibration_path).calibration
+                        : sl::daemon::loadOpenCvCalibration(
+                              calibration_path,
+                              sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
+                              .calibration;
+    // Before reading any image: a pattern made for another projector.
+    if (calibration) sl::tools::checkPatternFitsCalibration(pattern, *calibration);
+    const std::vector<std::string> files = list_path.empty()
+                                               ? sl::tools::listFrameFiles(images_dir)
+                                               : sl::tools::readFrameList(list_path, images_dir);
     if (static_cast<int>(files.size()) != pattern.frameCount())
       throw std::runtime_error("pattern '" + pattern.name + "' has " +
                                std::to_string(pattern.frameCount()) + " frames, found " +
-                               std::to_string(files.size()) + " images in " + images_dir);
+                               std::to_string(files.size()) + " images in " +
+                               (list_path.empty() ? images_dir : list_path));
     const sl::tools::LoadedFrames frames = sl::tools::loadFrames(files);
-    const auto result =
-        sl::tools::processCapture(pattern, calibration, frames, decoder, triangulator,
-                                   undistort_images);
-    const std::size_t points = sl::tools::writeOutputs(result, frames.bit_depth, out_dir);
-    int valid = 0;
+    sl::tools::ProcessResult result;
+    if (calibration) {
+      result = sl::tools::processCapture(pattern, *calibration, frames, decoder, triangulator,
+                                         undistort_images, smooth_sigma);
+    } else {
+      result.maps = sl::tools::decodeCapture(pattern, frames, decoder);
+      sl::tools::smoothProjectorCoordinates(result.maps, smooth_sigma);
+    }
+    const std::size_t points =
+        sl::tools::writeOutputs(result, frames.bit_depth, out_dir, phase ? &pattern : nullptr);
+    int counts[5] = {0, 0, 0, 0, 0};
     for (int v = 0; v < result.maps.status.rows; ++v)
       for (int u = 0; u < result.maps.status.cols; ++u)
-        valid += result.maps.status.at<std::uint8_t>(v, u) == 0;
+        ++counts[std::min<int>(result.maps.status.at<std::uint8_t>(v, u), 4)];
     std::cout << "sl_process: " << frames.frames.size() << " frames "
-              << frames.frames[0].cols << "x" << frames.frames[0].rows << ", " << valid
-              << " decoded pixels, " << points << " points -> " << out_dir << "\n";
+              << frames.frames[0].cols << "x" << frames.frames[0].rows << " ("
+              << std::filesystem::path(files.front()).filename().string() << " .. "
+              << std::filesystem::path(files.back()).filename().string() << "), " << counts[0]
+              << " decoded pixels";
+    if (calibration) std::cout << ", " << points << " points";
+    std::cout << " -> " << out_dir << "\n";
+    if (counts[0] == 0 || (calibration && points == 0)) {
+      std::cerr << "sl_process: no " << (counts[0] == 0 ? "valid pixel" : "point")
+                << " (pixels: " << counts[1] << " low modulation, " << counts[2]
+                << " saturated, " << counts[3] << " unwrap inconsistent, " << counts[4]
+                << " out of range" << (counts[0] > 0 ? "; every decoded pixel outside the depth "
+                                                       "range or behind the camera"
+                                                     : "")
+                << "): check the pattern file, the frame order and the thresholds\n";
+      return 1;
+    }
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "sl_process: " << e.what() << "\n";

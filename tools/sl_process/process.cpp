@@ -10,28 +10,14 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "common/frame_files.h"
 #include "common/ply.h"
 
 namespace sl::tools {
 
 namespace fs = std::filesystem;
 
-std::vector<std::string> listImages(const std::string& dir) {
-  std::error_code ec;
-  fs::directory_iterator it(dir, ec);
-  if (ec) throw std::runtime_error(dir + ": cannot read folder: " + ec.message());
-  std::vector<std::string> files;
-  for (const fs::directory_entry& e : it) {
-    if (!e.is_regular_file()) continue;
-    std::string ext = e.path().extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    if (ext == ".png" || ext == ".bmp" || ext == ".tif" || ext == ".tiff" || ext == ".pgm")
-      files.push_back(e.path().string());
-  }
-  std::sort(files.begin(), files.end());
-  return files;
-}
+std::vector<std::string> listImages(const std::string& dir) { return listFrameFiles(dir); }
 
 LoadedFrames loadFrames(const std::vector<std::string>& paths) {
   LoadedFrames out;
@@ -51,11 +37,73 @@ LoadedFrames loadFrames(const std::vector<std::string>& paths) {
   return out;
 }
 
+void checkPatternFitsCalibration(const pipeline::PatternSpec& pattern,
+                                 const pipeline::CameraProjectorCalibration& calibration) {
+  if (pattern.projector_width != calibration.projector.width ||
+      pattern.projector_height != calibration.projector.height)
+    throw std::invalid_argument(
+        "pattern '" + pattern.name + "' is for a " + std::to_string(pattern.projector_width) +
+        "x" + std::to_string(pattern.projector_height) + " projector, the calibration's is " +
+        std::to_string(calibration.projector.width) + "x" +
+        std::to_string(calibration.projector.height) +
+        " (set the pattern's projector: {width, height} to the calibrated resolution)");
+}
+
+pipeline::ProjectorMaps decodeCapture(const pipeline::PatternSpec& pattern,
+                                      const LoadedFrames& frames,
+                                      const pipeline::DecoderOptions& decoder) {
+  if (frames.frames.empty()) throw std::invalid_argument("no frames");
+  return pipeline::makeCodec(pattern, decoder)->decode(frames.frames, frames.bit_depth);
+}
+
+void smoothProjectorCoordinates(pipeline::ProjectorMaps& maps, double sigma_px) {
+  if (!(sigma_px > 0)) return;
+  const cv::Mat valid = maps.status == 0;
+  cv::Mat weight;
+  valid.convertTo(weight, CV_32FC1, 1.0 / 255.0);
+  cv::Mat weight_sum;
+  cv::GaussianBlur(weight, weight_sum, cv::Size(), sigma_px, sigma_px, cv::BORDER_CONSTANT);
+  for (cv::Mat* coord : {&maps.up, &maps.vp}) {
+    if (coord->empty() || cv::countNonZero(*coord == *coord) == 0) continue;  // axis not encoded
+    cv::Mat values = coord->clone();
+    values.setTo(0.0f, ~valid);
+    cv::Mat sum;
+    cv::GaussianBlur(values, sum, cv::Size(), sigma_px, sigma_px, cv::BORDER_CONSTANT);
+    cv::Mat smoothed = sum / weight_sum;
+    smoothed.copyTo(*coord, valid);
+  }
+}
+
+PhaseMaps phaseMaps(const pipeline::PatternSpec& pattern, const cv::Mat& coordinate,
+                    bool columns) {
+  const int axis = pattern.axisLength(columns);
+  const double period = pattern.finestPeriod(axis);
+  if (!(period > 0))
+    throw std::invalid_argument("pattern '" + pattern.name +
+                                "' has no sinusoid: no phase to write");
+  const double origin = pattern.family == pipeline::PatternFamily::kGrayPhaseShift ? -0.5 : 0.0;
+  PhaseMaps out;
+  out.absolute.create(coordinate.size(), CV_32FC1);
+  out.wrapped.create(coordinate.size(), CV_32FC1);
+  const double two_pi = 2.0 * 3.14159265358979323846;
+  for (int v = 0; v < coordinate.rows; ++v) {
+    const float* p = coordinate.ptr<float>(v);
+    float* a = out.absolute.ptr<float>(v);
+    float* w = out.wrapped.ptr<float>(v);
+    for (int u = 0; u < coordinate.cols; ++u) {
+      const double phi = two_pi * (p[u] - origin) / period;
+      a[u] = static_cast<float>(phi);
+      w[u] = static_cast<float>(phi - two_pi * std::floor(phi / two_pi));
+    }
+  }
+  return out;
+}
+
 ProcessResult processCapture(const pipeline::PatternSpec& pattern,
                              const pipeline::CameraProjectorCalibration& calibration,
                              const LoadedFrames& frames, const pipeline::DecoderOptions& decoder,
                              const pipeline::TriangulatorOptions& triangulator,
-                             bool undistort_images) {
+                             bool undistort_images, double smooth_sigma_px) {
   if (frames.frames.empty()) throw std::invalid_argument("no frames");
   const cv::Size size = frames.frames[0].size();
   if (size.width != calibration.camera.width || size.height != calibration.camera.height)
@@ -63,6 +111,7 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
                                 std::to_string(size.height) + ", the calibrated camera is " +
                                 std::to_string(calibration.camera.width) + "x" +
                                 std::to_string(calibration.camera.height));
+  checkPatternFitsCalibration(pattern, calibration);
   const auto codec = pipeline::makeCodec(pattern, decoder);
   ProcessResult r;
   if (undistort_images && calibration.camera.hasDistortion()) {
@@ -83,10 +132,12 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
     pipeline::CameraProjectorCalibration pinhole = calibration;
     pinhole.camera.distortion = {0, 0, 0, 0, 0};
     r.maps = codec->decode(ideal, frames.bit_depth);
+    smoothProjectorCoordinates(r.maps, smooth_sigma_px);
     r.cloud = pipeline::Triangulator(pinhole, triangulator).triangulate(r.maps);
     return r;
   }
   r.maps = codec->decode(frames.frames, frames.bit_depth);
+  smoothProjectorCoordinates(r.maps, smooth_sigma_px);
   r.cloud = pipeline::Triangulator(calibration, triangulator).triangulate(r.maps);
   return r;
 }
@@ -99,10 +150,32 @@ void write(const std::string& path, const cv::Mat& image) {
 
 }  // namespace
 
-std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::string& out_dir) {
+std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::string& out_dir,
+                         const pipeline::PatternSpec* pattern) {
   fs::create_directories(out_dir);
   const fs::path dir(out_dir);
+  write((dir / "up.tiff").string(), result.maps.up);
+  write((dir / "vp.tiff").string(), result.maps.vp);
+  write((dir / "modulation.tiff").string(), result.maps.modulation);
+  write((dir / "offset.tiff").string(), result.maps.offset);
+  write((dir / "status.png").string(), result.maps.status);
+  cv::Mat modulation_preview;
+  result.maps.modulation.convertTo(modulation_preview, CV_8UC1, std::ldexp(1.0, 8 - bit_depth));
+  write((dir / "modulation.png").string(), modulation_preview);
+  if (pattern) {
+    for (bool columns : {true, false}) {
+      const pipeline::Direction skip =
+          columns ? pipeline::Direction::kVertical : pipeline::Direction::kHorizontal;
+      if (pattern->direction == skip) continue;
+      const PhaseMaps phase = phaseMaps(*pattern, columns ? result.maps.up : result.maps.vp,
+                                        columns);
+      const std::string axis = columns ? "u" : "v";
+      write((dir / ("phase_" + axis + "_absolute.tiff")).string(), phase.absolute);
+      write((dir / ("phase_" + axis + "_wrapped.tiff")).string(), phase.wrapped);
+    }
+  }
   const pipeline::PointCloud& cloud = result.cloud;
+  if (cloud.width == 0 || cloud.height == 0) return 0;  // maps only
   cv::Mat depth(cloud.height, cloud.width, CV_32FC1);
   std::vector<float> finite;
   for (int v = 0; v < cloud.height; ++v) {
@@ -112,13 +185,7 @@ std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::
       if (std::isfinite(z)) finite.push_back(z);
     }
   }
-  write((dir / "up.tiff").string(), result.maps.up);
-  write((dir / "vp.tiff").string(), result.maps.vp);
-  write((dir / "modulation.tiff").string(), result.maps.modulation);
-  write((dir / "offset.tiff").string(), result.maps.offset);
   write((dir / "depth.tiff").string(), depth);
-  write((dir / "status.png").string(), result.maps.status);
-
   cv::Mat depth_preview(depth.size(), CV_8UC1, cv::Scalar(0));
   if (!finite.empty()) {
     std::sort(finite.begin(), finite.end());
@@ -134,9 +201,6 @@ std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::
     }
   }
   write((dir / "depth.png").string(), depth_preview);
-  cv::Mat modulation_preview;
-  result.maps.modulation.convertTo(modulation_preview, CV_8UC1, std::ldexp(1.0, 8 - bit_depth));
-  write((dir / "modulation.png").string(), modulation_preview);
   return writePly(cloud, (dir / "cloud.ply").string(), LengthUnit::kMillimetre);
 }
 

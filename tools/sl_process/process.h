@@ -13,8 +13,9 @@
 
 namespace sl::tools {
 
-// Image files of `dir` (png, bmp, tif, tiff, pgm; case-insensitive), sorted
-// by name. Throws std::runtime_error when the folder cannot be read.
+// Image files of `dir` in projection order: common/frame_files.h's
+// listFrameFiles() (natural order of the numbers in the names; ambiguous
+// numbering refused with a message).
 std::vector<std::string> listImages(const std::string& dir);
 
 struct LoadedFrames {
@@ -28,11 +29,43 @@ LoadedFrames loadFrames(const std::vector<std::string>& paths);
 
 struct ProcessResult {
   pipeline::ProjectorMaps maps;
-  pipeline::PointCloud cloud;  // mm, camera optical frame
+  pipeline::PointCloud cloud;  // mm, camera optical frame; empty (0 x 0) for maps only
 };
 
+// Throws std::invalid_argument when the pattern was made for another
+// projector size than the calibration's projector (its coordinates would be
+// scaled wrongly: a wrong cloud or none at all).
+void checkPatternFitsCalibration(const pipeline::PatternSpec& pattern,
+                                 const pipeline::CameraProjectorCalibration& calibration);
+
+// Decodes one capture into maps, without triangulating.
+pipeline::ProjectorMaps decodeCapture(const pipeline::PatternSpec& pattern,
+                                      const LoadedFrames& frames,
+                                      const pipeline::DecoderOptions& decoder);
+
+// Smooths the decoded projector coordinates (up, vp) with a Gaussian of
+// `sigma_px` camera px, normalised over the valid pixels only (NaN and
+// invalid pixels neither contribute nor receive a value). Meant for noisy
+// single-frequency captures (e.g. 3 steps at one period across the
+// projector), where the coordinate is the phase scaled and has no period
+// jumps to blur across. sigma_px <= 0 leaves the maps as they are.
+void smoothProjectorCoordinates(pipeline::ProjectorMaps& maps, double sigma_px);
+
+// Phase maps of the finest sinusoid of the pattern, derived from the decoded
+// coordinate of one axis: absolute phase Phi = 2 pi (p - origin) / period
+// (rad; origin -0.5 px for Gray + phase shift, else 0) and the wrapped phase
+// Phi mod 2 pi in [0, 2 pi). NaN where the coordinate is. Throws
+// std::invalid_argument for a pattern without sinusoids (Gray code).
+struct PhaseMaps {
+  cv::Mat absolute;  // CV_32FC1, rad
+  cv::Mat wrapped;   // CV_32FC1, rad
+};
+PhaseMaps phaseMaps(const pipeline::PatternSpec& pattern, const cv::Mat& coordinate,
+                    bool columns);
+
 // Decodes and triangulates one capture. The camera size of the calibration
-// must equal the frames' size (std::invalid_argument otherwise).
+// must equal the frames' size, and its projector size the pattern's
+// (std::invalid_argument otherwise).
 //
 // With undistort_images the frames are first resampled (bilinear) onto the
 // ideal pinhole camera of the same K, and triangulated with a distortion-free
@@ -44,11 +77,14 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
                              const pipeline::CameraProjectorCalibration& calibration,
                              const LoadedFrames& frames, const pipeline::DecoderOptions& decoder,
                              const pipeline::TriangulatorOptions& triangulator,
-                             bool undistort_images = false);
+                             bool undistort_images = false, double smooth_sigma_px = 0);
 
 // Writes into `out_dir` (created if missing):
 //   up.tiff, vp.tiff, modulation.tiff, offset.tiff, depth.tiff: 32-bit float
-//     TIFF (projector px / camera DN / mm), NaN where invalid
+//     TIFF (projector px / camera DN / mm), NaN where invalid (depth.tiff,
+//     depth.png and cloud.ply only with a cloud)
+//   with `pattern` (phase outputs): phase_u_absolute.tiff,
+//     phase_u_wrapped.tiff (and phase_v_... for rows) from phaseMaps()
 //   status.png: 8-bit PixelStatus per pixel (0 valid, 1 low modulation,
 //     2 saturated, 3 unwrap inconsistent, 4 out of range)
 //   cloud.ply: binary PLY of the valid points (mm)
@@ -56,6 +92,7 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
 //     black, stretched over the 1st..99th percentile; modulation: 0..255 DN
 //     at 8 bits, clipped)
 // Returns the number of points written. Throws std::runtime_error on I/O errors.
-std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::string& out_dir);
+std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::string& out_dir,
+                         const pipeline::PatternSpec* pattern = nullptr);
 
 }  // namespace sl::tools

@@ -74,6 +74,43 @@ CalibrationFile loadCalibration(const std::string& path);
 CalibrationFile loadSlSensorCalibration(const std::string& camera_path,
                                         const std::string& projector_path);
 
+// Which keys of a foreign OpenCV FileStorage calibration (YAML, XML or JSON,
+// as cv::FileStorage writes them) hold what. A size is either a number
+// (`width: 1824`, for files that do not store it) or the name of an
+// integer key (`width: image_width`).
+//
+// As a YAML file (or inline, comma-separated dotted pairs:
+// "camera.matrix=K1,camera.distortion=D1,...,projector.width=1824"):
+//   camera:    {matrix: K1, distortion: D1, width: image_width, height: image_height}
+//   projector: {matrix: K2, distortion: D2, width: 1824, height: 1140}
+//   rotation: R            # 3x3 matrix, or a 3x1 / 1x3 Rodrigues vector
+//   translation: T         # 3 elements
+//   pose: camera_to_projector   # X_p = R X_c + T (cv::stereoCalibrate(camera,
+//                               # projector)); or projector_to_camera: X_c = R X_p + T
+//   translation_unit: mm   # mm (default), cm or m
+// Distortion: OpenCV's order k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]; 4 or 5
+// elements, or more when all beyond k3 are 0 (the model has k1 k2 p1 p2 k3).
+struct OpenCvCalibrationKeys {
+  struct Device {
+    std::string matrix, distortion;
+    std::string width, height;  // a number or a key name
+  };
+  Device camera, projector;
+  std::string rotation, translation;
+  bool projector_to_camera = false;
+  double translation_to_mm = 1.0;
+  std::string origin;  // where the mapping came from, for messages
+};
+
+// Reads a key mapping from a YAML file, or, when `text` is not a file, from
+// inline pairs. Throws ConfigError naming the file / pair and the key.
+OpenCvCalibrationKeys parseOpenCvCalibrationKeys(const std::string& text);
+
+// Reads an OpenCV FileStorage calibration through `keys`. Throws
+// ConfigError naming the calibration file and the key (missing, wrong size,
+// not a rotation, unsupported distortion terms, non-positive sizes).
+CalibrationFile loadOpenCvCalibration(const std::string& path, const OpenCvCalibrationKeys& keys);
+
 // Writes `file` as OpenCV FileStorage (format from the extension: .xml,
 // .yaml / .yml, .json) with SLStudio's keys and conventions: Kc, kc, Kp, kp
 // (CV_64F), Rp, Tp (X_p = Rp X_c + Tp, mm), frameWidth/Height,

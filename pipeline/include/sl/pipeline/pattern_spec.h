@@ -16,12 +16,27 @@
 //   set has delta_n = start_phase + shift_sign * 2*pi*n/N.
 #pragma once
 
+#include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sl/pipeline/pattern.h"
 
 namespace sl::pipeline {
+
+// frame_order entry of a captured frame that is not part of the code.
+inline constexpr int kSkippedFrame = -1;
+
+// Thrown by PatternSpec::validate(): `field` names the PatternSpec field at
+// fault (projector size, steps, frequencies, shift_sign, start_phase,
+// offset/amplitude, bits, reference_frames, frame_order) so that readers can
+// blame their own key.
+struct PatternSpecError : std::invalid_argument {
+  PatternSpecError(std::string field_name, const std::string& message)
+      : std::invalid_argument(message), field(std::move(field_name)) {}
+  std::string field;
+};
 
 enum class PatternFamily {
   // N-step phase shift (N >= 3) at one or more frequencies, temporal unwrapping.
@@ -36,7 +51,9 @@ enum class PatternFamily {
   kGrayCode,
   // Gray code for the fringe order + N-step phase shift with one period per
   // Gray stripe (optionally complementary: one more Gray bit of half the
-  // stripe width against edge errors).
+  // stripe width against edge errors). Bits are thresholded against the
+  // reference frames, the inverse frames, or (with neither) the mean A of
+  // the phase-shift frames.
   kGrayPhaseShift,
 };
 
@@ -92,13 +109,18 @@ struct PatternSpec {
   bool reference_frames = true;   // full white then black before the bits
   bool complementary = false;     // kGrayPhaseShift: one extra bit of half a stripe
 
-  // Optional permutation: projected frame i (of one full sequence) shows
+  // Optional capture layout: captured frame i (of one full sequence) shows
   // canonical frame frame_order[i] (canonical order as documented above and
-  // in README.md). Empty = canonical order.
+  // in README.md), or is not part of the code when frame_order[i] is
+  // kSkippedFrame (an extra white or black frame, say). Every canonical frame
+  // appears exactly once. Empty = canonical order, nothing skipped.
   std::vector<int> frame_order;
 
-  // Frames of one full sequence (both directions for kBoth).
+  // Frames of one captured sequence (both directions for kBoth), skipped
+  // frames included: what a decoder takes and a projector shows.
   int frameCount() const;
+  // Frames of the code alone (canonical frames, both directions).
+  int codeFrameCount() const;
   // Frames of one direction.
   int framesPerDirection() const;
   // Extent (px) of the encoded axis: width for columns, height for rows.
@@ -111,7 +133,11 @@ struct PatternSpec {
   // Period (px) of the finest sinusoid along an axis of L px (0 for kGrayCode).
   double finestPeriod(int axis_length) const;
 
-  // Throws std::invalid_argument naming the pattern and the bad field.
+  // Throws PatternSpecError naming the pattern and the bad field. Besides the
+  // ranges of every field, the unwrapping margin of phase-shift patterns is
+  // checked: a frequency step whose fringe order cannot be picked reliably
+  // (derivedMinModulation() above half the modulation an 8-bit camera can
+  // record, 255 * amplitude / 2 DN) is refused with the numbers.
   void validate() const;
 };
 
@@ -120,7 +146,8 @@ struct PatternSpec {
 PatternSpec toSpec(const PhaseShift33Pattern& p);
 
 // Relative projector intensity in [0, 1] of projected frame `frame` at the
-// continuous projector coordinate (u, v) (px). Gray stripes are sharp.
+// continuous projector coordinate (u, v) (px). Gray stripes are sharp;
+// skipped frames (kSkippedFrame) are black.
 // Throws std::out_of_range for a frame outside [0, frameCount()).
 double patternIntensity(const PatternSpec& spec, int frame, double u, double v);
 
