@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -519,4 +520,137 @@ TEST_CASE("real captures: skull_2x3 triangulated with our calibration",
   CHECK(s.median_abs_dz < 0.2);
   CHECK(s.p95_abs_dz < 0.8);
   CHECK(s.within_1mm >= 0.97);
+}
+
+namespace {
+
+// Corner observations of `board` in `pose` projected through the rig, with
+// Gaussian noise of sigma_camera / sigma_projector px (the corner noise the
+// simulator's full render -> decode -> detect chain shows, see the round
+// trip above: ~0.1 px).
+BoardView syntheticView(const sl::pipeline::CameraProjectorCalibration& rig,
+                        const Checkerboard& board, const BoardPose& pose, double sigma_camera,
+                        double sigma_projector, cv::RNG& rng, const std::string& label) {
+  const sl::drivers::SimCheckerboard texture = *boardPlane(board, pose).checkerboard;
+  BoardView v;
+  v.label = label;
+  for (int id = 0; id < board.cornerCount(); ++id) {
+    const Eigen::Vector3d X = texture.origin + board.square_mm * ((id % board.cols) * texture.x_axis +
+                                                                  (id / board.cols) * texture.y_axis);
+    const Eigen::Vector2d qc = rig.camera.project(X);
+    const Eigen::Vector2d qp = rig.projector.project(rig.R * X + rig.t);
+    v.corner_ids.push_back(id);
+    v.camera_px.emplace_back(qc.x() + rng.gaussian(sigma_camera), qc.y() + rng.gaussian(sigma_camera));
+    v.projector_px.emplace_back(qp.x() + rng.gaussian(sigma_projector),
+                                qp.y() + rng.gaussian(sigma_projector));
+  }
+  return v;
+}
+
+struct Spread {
+  std::vector<double> values, sigmas;
+  void add(double value, double sigma) {
+    values.push_back(value);
+    sigmas.push_back(sigma);
+  }
+  double std() const {
+    double m = 0, s = 0;
+    for (double v : values) m += v;
+    m /= values.size();
+    for (double v : values) s += (v - m) * (v - m);
+    return std::sqrt(s / (values.size() - 1));
+  }
+  double meanSigma() const {
+    double m = 0;
+    for (double v : sigmas) m += v;
+    return m / sigmas.size();
+  }
+};
+
+}  // namespace
+
+TEST_CASE("reported 1-sigma uncertainties agree with the spread over noise seeds",
+          "[calibration][uncertainty]") {
+  const auto rig = simulatedRig();
+  const Checkerboard board{13, 9, 15.0};
+  const std::vector<BoardPose> poses = {
+      {0, 0, 0, {0, 0, 560}},    {25, 0, 0, {0, 0, 560}},     {-25, 0, 5, {0, 0, 570}},
+      {0, 25, 0, {10, 0, 550}},  {0, -25, -5, {-10, 0, 570}}, {18, 18, 10, {0, 10, 610}},
+      {-18, 18, -10, {0, -10, 530}}, {18, -18, 0, {15, 0, 520}}};
+  std::map<std::string, Spread> spread;
+  constexpr int kSeeds = 24;
+  for (int seed = 0; seed < kSeeds; ++seed) {
+    cv::RNG rng(1000 + seed);
+    std::vector<BoardView> views;
+    for (std::size_t i = 0; i < poses.size(); ++i)
+      views.push_back(syntheticView(rig, board, poses[i], 0.1, 0.15, rng, "pose" + std::to_string(i)));
+    const CalibrationResult r = sl::pipeline::calibrateCameraProjector(
+        views, board, cv::Size(1440, 1080), cv::Size(1824, 1140), CalibrationOptions{});
+    const auto& c = r.calibration;
+    const auto& u = r.report.uncertainty;
+    spread["camera fx"].add(c.camera.fx, u.camera.fx);
+    spread["camera fy"].add(c.camera.fy, u.camera.fy);
+    spread["camera cx"].add(c.camera.cx, u.camera.cx);
+    spread["camera cy"].add(c.camera.cy, u.camera.cy);
+    spread["camera k1"].add(c.camera.distortion[0], u.camera.distortion[0]);
+    spread["projector fx"].add(c.projector.fx, u.projector.fx);
+    spread["projector fy"].add(c.projector.fy, u.projector.fy);
+    spread["projector cx"].add(c.projector.cx, u.projector.cx);
+    spread["projector cy"].add(c.projector.cy, u.projector.cy);
+    spread["projector k1"].add(c.projector.distortion[0], u.projector.distortion[0]);
+    const Eigen::AngleAxisd d(c.R * rig.R.transpose());
+    const Eigen::Vector3d rotation = d.angle() * d.axis() * 180.0 / std::numbers::pi;
+    for (int q = 0; q < 3; ++q) {
+      spread["rotation " + std::to_string(q)].add(rotation(q), u.rotation_deg(q));
+      spread["translation " + std::to_string(q)].add(c.t(q), u.translation_mm(q));
+    }
+  }
+  for (const auto& [name, s] : spread) {
+    const double ratio = s.meanSigma() / s.std();
+    std::printf("uncertainty %-14s reported %.3g, spread over %d seeds %.3g (ratio %.2f)\n",
+                name.c_str(), s.meanSigma(), kSeeds, s.std(), ratio);
+    CAPTURE(name, s.meanSigma(), s.std());
+    CHECK(ratio > 0.5);
+    CHECK(ratio < 2.0);
+  }
+}
+
+TEST_CASE("poorly constrained calibrations warn and suggest poses", "[calibration][uncertainty]") {
+  const auto rig = simulatedRig();
+  const Checkerboard board{13, 9, 15.0};
+  // Five poses, all nearly facing the camera at one distance, in the middle
+  // of the image, with real-capture noise: the projector is poorly pinned.
+  const std::vector<BoardPose> few = {{0, 0, 0, {0, 0, 600}},
+                                      {5, 0, 0, {0, 0, 600}},
+                                      {0, 5, 0, {0, 0, 605}},
+                                      {-5, 0, 3, {0, 0, 600}},
+                                      {0, -5, 0, {0, 0, 598}}};
+  cv::RNG rng(7);
+  std::vector<BoardView> views;
+  for (std::size_t i = 0; i < few.size(); ++i)
+    views.push_back(syntheticView(rig, board, few[i], 0.3, 0.3, rng, "pose" + std::to_string(i)));
+  const CalibrationResult r = sl::pipeline::calibrateCameraProjector(
+      views, board, cv::Size(1440, 1080), cv::Size(1824, 1140), CalibrationOptions{});
+  std::string warnings, advice;
+  for (const auto& w : r.report.warnings) warnings += w + "\n";
+  for (const auto& a : r.report.advice) advice += a + "\n";
+  INFO(warnings << advice);
+  CHECK(warnings.find("projector fx uncertain") != std::string::npos);
+  CHECK(advice.find("tilt the board more") != std::string::npos);
+  CHECK(advice.find("vary the distance") != std::string::npos);
+  CHECK(advice.find("cover the projector's image") != std::string::npos);
+  // The well-spread set of the round trip does not warn.
+  const std::vector<BoardPose> good = {
+      {0, 0, 0, {0, 0, 560}},    {35, 0, 0, {0, 0, 560}},      {-35, 0, 5, {0, 0, 570}},
+      {0, 35, 0, {10, 0, 550}},  {0, -35, -5, {-10, 0, 570}},  {18, 18, 10, {60, 40, 610}},
+      {-18, 18, -10, {-60, -40, 480}}, {18, -18, 0, {60, -40, 520}}, {-18, -18, 15, {-60, 40, 680}}};
+  std::vector<BoardView> good_views;
+  for (std::size_t i = 0; i < good.size(); ++i)
+    good_views.push_back(syntheticView(rig, board, good[i], 0.1, 0.15, rng, "g" + std::to_string(i)));
+  const CalibrationResult ok = sl::pipeline::calibrateCameraProjector(
+      good_views, board, cv::Size(1440, 1080), cv::Size(1824, 1140), CalibrationOptions{});
+  std::string ok_warnings;
+  for (const auto& w : ok.report.warnings) ok_warnings += w + "\n";
+  INFO(ok_warnings);
+  CHECK(ok.report.advice.empty());
 }

@@ -70,6 +70,8 @@ constexpr const char* kUsage =
     "  --report DIR           report.txt and residual plots (default: FILE without .yaml +\n"
     "                         _report)\n"
     "  --warn-px PX           per-corner residual warning threshold (default 1)\n"
+    "  --max-focal-sigma PCT  warn when a focal length's 1-sigma exceeds PCT % (default 0.5)\n"
+    "  --max-principal-sigma PX  warn when a principal point's 1-sigma exceeds PX (default 5)\n"
     "exit codes: 0 ok, 1 error, 2 usage\n";
 
 [[noreturn]] void usageError(const std::string& message) {
@@ -170,6 +172,10 @@ Args parseArgs(int argc, char** argv) {
       a.export_opencv = value();
     } else if (o == "--report") {
       a.report_dir = value();
+    } else if (o == "--max-focal-sigma") {
+      a.calibration.max_focal_sigma_fraction = parseNumber(o, value()) / 100.0;
+    } else if (o == "--max-principal-sigma") {
+      a.calibration.max_principal_point_sigma_px = parseNumber(o, value());
     } else if (o == "--warn-px") {
       a.calibration.residual_warning_px = parseNumber(o, value());
     } else if (o.rfind("--camera-", 0) == 0 || o.rfind("--projector-", 0) == 0) {
@@ -225,7 +231,7 @@ std::string utcNow() {
 }
 
 void writeReport(std::ostream& out, const pl::CalibrationResult& r, const Args& a,
-                 const std::vector<std::string>& skipped) {
+                 const std::vector<std::string>& skipped, bool primary_projector) {
   const auto& c = r.calibration;
   char line[256];
   out << "sl_calibrate report (" << utcNow() << ")\n";
@@ -248,6 +254,27 @@ void writeReport(std::ostream& out, const pl::CalibrationResult& r, const Args& 
                 "rotation %.3f deg\n",
                 c.t.x(), c.t.y(), c.t.z(), centre.norm(),
                 Eigen::AngleAxisd(c.R).angle() * 180.0 / std::numbers::pi);
+  out << line;
+  const auto& u = r.report.uncertainty;
+  out << "1-sigma uncertainty (linearised least squares; assumes independent corner errors):\n";
+  for (const auto* s : {&u.camera, &u.projector}) {
+    if (s == &u.projector && primary_projector) {
+      out << "  projector fixed (from the primary calibration)\n";
+      continue;
+    }
+    const pl::PinholeModel& m = s == &u.camera ? c.camera : c.projector;
+    std::snprintf(line, sizeof line,
+                  "  %-9s fx %.2f (%.3f %%) fy %.2f (%.3f %%) cx %.2f cy %.2f px, "
+                  "k [%.5f %.5f %.5f %.5f %.5f]\n",
+                  s == &u.camera ? "camera" : "projector", s->fx, 100 * s->fx / m.fx, s->fy,
+                  100 * s->fy / m.fy, s->cx, s->cy, s->distortion[0], s->distortion[1],
+                  s->distortion[2], s->distortion[3], s->distortion[4]);
+    out << line;
+  }
+  std::snprintf(line, sizeof line,
+                "  pose      rotation [%.4f %.4f %.4f] deg, translation [%.3f %.3f %.3f] mm\n",
+                u.rotation_deg.x(), u.rotation_deg.y(), u.rotation_deg.z(), u.translation_mm.x(),
+                u.translation_mm.y(), u.translation_mm.z());
   out << line << "per pose (RMS px):\n";
   for (const auto& p : r.report.poses) {
     std::snprintf(line, sizeof line, "  %-12s %3d corners  camera %.3f  projector %.3f  stereo %.3f\n",
@@ -261,6 +288,7 @@ void writeReport(std::ostream& out, const pl::CalibrationResult& r, const Args& 
   for (const std::string& w : r.report.warnings) out << "  warning: " << w << "\n";
   if (r.report.dominant_pose)
     out << "suggestion: re-run with --exclude " << *r.report.dominant_pose << "\n";
+  for (const std::string& advice : r.report.advice) out << "suggestion: " << advice << "\n";
 }
 
 int run(const Args& a) {
@@ -354,7 +382,7 @@ int run(const Args& a) {
 
   fs::create_directories(a.report_dir);
   std::ostringstream report;
-  writeReport(report, result, a, skipped);
+  writeReport(report, result, a, skipped, primary.has_value());
   std::cout << report.str();
   std::ofstream(fs::path(a.report_dir) / "report.txt") << report.str();
   {

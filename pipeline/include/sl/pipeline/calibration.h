@@ -11,10 +11,12 @@
 // convention), projector points in projector px of the addressed resolution.
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core/mat.hpp>
 #include <opencv2/core/types.hpp>
 
@@ -129,6 +131,37 @@ struct CalibrationOptions {
   // The worst pose "dominates" when its RMS exceeds this factor times the RMS
   // of all other poses together; the report then suggests dropping it.
   double dominant_pose_factor = 2.0;
+  // Warnings on the estimated 1-sigma uncertainty (CalibrationUncertainty):
+  // a focal length above this fraction of itself, a principal point
+  // coordinate above this many px.
+  double max_focal_sigma_fraction = 0.005;
+  double max_principal_point_sigma_px = 5.0;
+};
+
+// 1-sigma standard deviations of one device's intrinsics (px; distortion
+// unitless), 0 for parameters held fixed.
+struct IntrinsicsSigma {
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  std::array<double, 5> distortion{};  // k1 k2 p1 p2 k3
+};
+
+// Estimated 1-sigma uncertainty of a calibration from the linearised least
+// squares problems at the solution: the intrinsics from each device's own
+// cv::calibrateCamera (OpenCV's calibrateCameraExtended: residual variance
+// times the diagonal of (J^T J)^-1; OpenCV < 4.7's factor sqrt(2) excess,
+// opencv/opencv#19803, undone); R and t from the stereo step (R, t and the
+// board poses with the intrinsics fixed; camera and projector residuals
+// weighted by their own RMS) plus the intrinsics' covariance carried through
+// it (C + S Sigma_int S^T, S the stereo solution's sensitivity to the
+// intrinsics), as the two-step estimator has it. Assumes independent corner
+// errors of equal variance per device: correlated or biased errors (blur, a
+// wrong model) are not in it. test_calibration "[uncertainty]" compares it
+// with the spread over noise seeds (within 0.8-1.35x).
+struct CalibrationUncertainty {
+  IntrinsicsSigma camera;
+  IntrinsicsSigma projector;            // zeros for a secondary camera (projector fixed)
+  Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();  // of R's rotation vector, per axis
+  Eigen::Vector3d translation_mm = Eigen::Vector3d::Zero();
 };
 
 // One corner's reprojection residual, measured minus reprojected (px), for
@@ -158,8 +191,14 @@ struct CalibrationReport {
   double stereo_rms_px = 0;     // OpenCV's stereo RMS: over camera and projector points
   std::vector<PoseErrors> poses;
   std::vector<CornerResidual> corners;
-  std::vector<std::string> warnings;  // corners above the threshold, a dominating pose
+  std::vector<std::string> warnings;  // corners above the threshold, a dominating pose,
+                                      // parameters whose uncertainty passes its threshold
   std::optional<std::string> dominant_pose;  // label of a pose worth dropping, if any
+  CalibrationUncertainty uncertainty;
+  // Which poses to add when an uncertainty passes its threshold (tilt,
+  // distance, coverage of the camera's and projector's images), one sentence
+  // each; empty when nothing passes.
+  std::vector<std::string> advice;
 };
 
 struct CalibrationResult {
