@@ -17,6 +17,7 @@
 #include <opencv2/core.hpp>
 
 #include "calibration_yaml.h"
+#include "sl/pipeline/projector_response.h"
 
 namespace sl::daemon {
 
@@ -575,6 +576,53 @@ CalibrationFile loadOpenCvCalibration(const std::string& path, const OpenCvCalib
   file.source = "OpenCV FileStorage " + std::filesystem::path(path).filename().string() +
                 " through " + keys.origin;
   return file;
+}
+
+std::vector<float> loadProjectorResponse(const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    throw ConfigError(path + ": cannot open projector response file");
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(path + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
+  }
+  const YamlMap m(root, path, "");
+  const std::string format = m.get<std::string>("format", "sl-sensor-projector-response/1");
+  if (format != "sl-sensor-projector-response/1")
+    m.fail("format", "unsupported format '" + format + "' (this build reads "
+                     "sl-sensor-projector-response/1)");
+  if (m.has("gamma") == m.has("response"))
+    m.fail("response", "give exactly one of 'response' (samples of R at L = 0 .. 1) or 'gamma'");
+  std::vector<float> response;
+  try {
+    if (m.has("gamma")) {
+      response = pipeline::gammaResponse(positive(m, "gamma", 1.0));
+    } else {
+      for (double v : m.get<std::vector<double>>("response")) response.push_back(static_cast<float>(v));
+      pipeline::validateProjectorResponse(response);
+    }
+  } catch (const std::invalid_argument& e) {
+    m.fail(m.has("gamma") ? "gamma" : "response", e.what());
+  }
+  m.get<std::string>("source", "");
+  m.done();
+  return response;
+}
+
+void saveProjectorResponse(const std::vector<float>& response, const std::string& source,
+                           const std::string& path) {
+  std::ostringstream out;
+  out.precision(7);
+  out << "# Projector intensity response R(L) at L = k / (n - 1) (sl_calibrate).\n"
+      << "format: sl-sensor-projector-response/1\nresponse: [";
+  for (std::size_t k = 0; k < response.size(); ++k) out << (k ? ", " : "") << response[k];
+  out << "]\n";
+  if (!source.empty()) out << "source: " << YAML::Node(source) << "\n";
+  std::ofstream f(path, std::ios::trunc);
+  if (!f) throw std::runtime_error(path + ": cannot open for writing");
+  f << out.str();
+  if (!f.flush()) throw std::runtime_error(path + ": write failed");
 }
 
 void exportOpenCvCalibration(const CalibrationFile& file, const std::string& path) {

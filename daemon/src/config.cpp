@@ -14,6 +14,7 @@
 #include "hardware_config_yaml.h"
 #include "pattern_config_yaml.h"
 #include "sl/daemon/calibration_io.h"
+#include "sl/pipeline/projector_response.h"
 #include "aravis_config.h"
 #include "sl/drivers/recording.h"
 #include "yaml_reader.h"
@@ -329,6 +330,22 @@ void parseDecoder(const YamlMap& m, pipeline::DecoderOptions& d) {
   d.reject_saturated = m.get<bool>("reject_saturated", d.reject_saturated);
   d.max_unwrap_error = static_cast<float>(positive(m, "max_unwrap_error", d.max_unwrap_error));
   if (d.max_unwrap_error >= 0.5f) m.fail("max_unwrap_error", "must be < 0.5 (periods)");
+  // The projector's response, compensated in decoding (projector_response.h):
+  // `projector_gamma: G` (R = L^G) or `projector_response: [R(0), ..., R(1)]`.
+  if (m.has("projector_gamma") && m.has("projector_response"))
+    m.fail("projector_response", "give one of projector_gamma and projector_response");
+  try {
+    if (m.has("projector_gamma")) {
+      const double gamma = positive(m, "projector_gamma", 1.0);
+      if (gamma != 1.0) d.projector_response = pipeline::gammaResponse(gamma);
+    } else if (m.has("projector_response")) {
+      for (double v : m.get<std::vector<double>>("projector_response"))
+        d.projector_response.push_back(static_cast<float>(v));
+      pipeline::validateProjectorResponse(d.projector_response);
+    }
+  } catch (const std::invalid_argument& e) {
+    m.fail(m.has("projector_gamma") ? "projector_gamma" : "projector_response", e.what());
+  }
   m.done();
 }
 

@@ -93,6 +93,7 @@ std::string keyOfField(const std::string& field, const std::string& frequency_ke
   if (field == "offset/amplitude") return "amplitude";
   if (field == "frequencies") return frequency_key;
   if (field == "frame_order") return order_key;
+  if (field == "carrier_pitch") return "carrier_pitch_px";
   return field;  // steps, shift_sign, bits, reference_frames
 }
 
@@ -189,6 +190,17 @@ PatternSpec parsePattern(const YamlMap& m, const std::string& name,
         p.steps = m.get<int>("steps", 4);
         parseGray(m, p);
         p.complementary = m.get<bool>("complementary", p.complementary);
+        parseSinusoid(m, p);
+        break;
+      case PatternFamily::kMicroPhaseShift:
+        p.steps = m.get<int>("steps", 3);
+        frequency_key = frequencies(m, p);
+        parseSinusoid(m, p);
+        break;
+      case PatternFamily::kModulatedPhaseShift:
+        p.steps = m.get<int>("steps", 3);
+        frequency_key = frequencies(m, p);
+        p.carrier_pitch_px = m.get<double>("carrier_pitch_px", p.carrier_pitch_px);
         parseSinusoid(m, p);
         break;
     }

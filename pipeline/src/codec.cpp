@@ -16,6 +16,7 @@
 #include "codec_families.h"
 #include "frame_layout.h"
 #include "multiversion.h"
+#include "sl/pipeline/projector_response.h"
 
 namespace sl::pipeline {
 
@@ -58,7 +59,16 @@ float derivedMinModulation(const PatternSpec& spec, float max_unwrap_error) {
   constexpr double kMarginSigmas = 5.0;  // z
   constexpr double kFloorDn = 8.0;
   double phase_gain = 0;  // sigma_phi * B / sigma_I of one set
-  if (spec.family == PatternFamily::kPhaseShift) phase_gain = std::sqrt(2.0 / spec.steps);
+  if (spec.family == PatternFamily::kMicroPhaseShift) {
+    // The closest wrong candidate's cost differs by the separation d, with a
+    // noise of 2 sigma_c sqrt(d), sigma_c = sigma_I / B per cosine.
+    const double d = spec.microSeparation();
+    if (!(d > 0)) return std::numeric_limits<float>::infinity();
+    return static_cast<float>(std::max(kFloorDn, 2.0 * kMarginSigmas * kNoiseDn / std::sqrt(d)));
+  }
+  if (spec.family == PatternFamily::kPhaseShift ||
+      spec.family == PatternFamily::kModulatedPhaseShift)
+    phase_gain = std::sqrt(2.0 / spec.steps);
   else if (spec.family == PatternFamily::kTwoPlusOne) phase_gain = std::sqrt(2.0);
   else return static_cast<float>(kFloorDn);
   std::vector<double> f = spec.frequencies;
@@ -99,6 +109,7 @@ Codec::Codec(PatternSpec spec, DecoderOptions options)
     throw std::invalid_argument("DecoderOptions: max_unwrap_error must be in (0, 0.5]");
   if (options_.min_modulation < 0.0f)
     options_.min_modulation = derivedMinModulation(spec_, options_.max_unwrap_error);
+  if (!options_.projector_response.empty()) validateProjectorResponse(options_.projector_response);
   if (!(options_.min_modulation >= 0.0f))
     throw std::invalid_argument("DecoderOptions: min_modulation must be >= 0 (or negative: derived)");
   const int n = spec_.frameCount();
@@ -256,6 +267,10 @@ std::unique_ptr<Codec> makeCodec(const PatternSpec& spec, const DecoderOptions& 
     case PatternFamily::kGrayCode:
     case PatternFamily::kGrayPhaseShift:
       return detail::makeGrayCodec(spec, options);
+    case PatternFamily::kMicroPhaseShift:
+      return detail::makeMicroPhaseShiftCodec(spec, options);
+    case PatternFamily::kModulatedPhaseShift:
+      return detail::makeModulatedPhaseShiftCodec(spec, options);
   }
   throw std::invalid_argument("makeCodec: unknown family");
 }

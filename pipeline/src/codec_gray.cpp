@@ -16,11 +16,13 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <vector>
 
 #include "codec_families.h"
 #include "fast_atan2.h"
 #include "frame_layout.h"
+#include "phase_response.h"
 
 namespace sl::pipeline::detail {
 
@@ -56,6 +58,13 @@ class GrayCodec final : public Codec {
       }
     }
     with_phase_ = !phase_frames_.empty();
+    if (with_phase_ && !options.projector_response.empty()) {
+      std::vector<double> deltas;
+      for (std::size_t m = 0; m < ws_.size(); ++m)
+        deltas.push_back(std::atan2(static_cast<double>(ws_[m]), static_cast<double>(wc_[m])));
+      correction_ = makePhaseCorrection(options.projector_response, spec.offset, spec.amplitude,
+                                        deltas, false, "pattern '" + spec.name + "'");
+    }
     complementary_ = with_phase_ && spec.complementary;
   }
 
@@ -185,6 +194,7 @@ class GrayCodec final : public Codec {
       float* __restrict a_out = out.offset;
       for (int x = 0; x < n; ++x) {
         phase[x] = fastAtan2Positive(sv[x], cv[x]);
+        if (correction_) phase[x] = correction_->apply(phase[x]);
         b2[x] = scale * std::sqrt(sv[x] * sv[x] + cv[x] * cv[x]);
         (void)a_out;
       }
@@ -231,6 +241,7 @@ class GrayCodec final : public Codec {
   std::vector<float> ws_, wc_;
   bool with_phase_ = false;
   bool complementary_ = false;
+  std::optional<PhaseCorrection> correction_;  // projector response, when given
 };
 
 }  // namespace

@@ -18,6 +18,7 @@
 
 #include "codec_families.h"
 #include "fast_atan2.h"
+#include "phase_response.h"
 #include "frame_layout.h"
 #include "multiversion.h"
 #include "two_three_step_row.h"
@@ -483,7 +484,18 @@ class PhaseShiftCodec final : public Codec {
     } else {
       unit_frequency_ = sets_[order_.front()].frequency;
     }
-    two_three_step_ = !heterodyne && flat_ < 0 && sets_.size() == 2 &&
+    if (!options.projector_response.empty()) {
+      // Compensation: each set's phase through its table, in the general row.
+      for (const Set& s : sets_) {
+        std::vector<double> deltas;
+        for (std::size_t m = 0; m < s.ws.size(); ++m)
+          deltas.push_back(std::atan2(static_cast<double>(s.ws[m]), static_cast<double>(s.wc[m])));
+        corrections_.push_back(makePhaseCorrection(options.projector_response, spec.offset,
+                                                   spec.amplitude, deltas, flat_ >= 0,
+                                                   "pattern '" + spec.name + "'"));
+      }
+    }
+    two_three_step_ = corrections_.empty() && !heterodyne && flat_ < 0 && sets_.size() == 2 &&
                       sets_[0].frames.size() == 3 && sets_[1].frames.size() == 3;
     if (two_three_step_ && threeStepTablesPay()) {
       for (int j = 0; j < 2; ++j) {
@@ -705,6 +717,11 @@ class PhaseShiftCodec final : public Codec {
       }
       const float scale2 = s.b_scale * s.b_scale;
       phaseAndModulation(n, s_acc, c_acc, scale2, phase[j], b2_min);
+      if (!corrections_.empty()) {
+        const PhaseCorrection& table = corrections_[j];
+        float* __restrict ph = phase[j];
+        for (int x = 0; x < n; ++x) ph[x] = table.apply(ph[x]);
+      }
       if (j == finest_) {
         float* __restrict b_out = out.modulation;
         for (int x = 0; x < n; ++x)
@@ -790,6 +807,8 @@ class PhaseShiftCodec final : public Codec {
   // and fine [1] set (one shared table when their weights agree), else null.
   std::shared_ptr<const std::vector<ThreeStepEntry>> lut_[2];
   double unit_frequency_ = 1.0;  // frequency of the coarsest (beat) phase
+  // Per set (listed order): the projector-response correction, or empty.
+  std::vector<PhaseCorrection> corrections_;
 };
 
 }  // namespace

@@ -16,6 +16,10 @@ struct FrameInfo {
   double frequency = 0;    // periods across the axis
   double origin = 0;       // px
   double delta = 0;        // rad
+  // kSinusoid of kModulatedPhaseShift: times 0.5 + 0.5 cos(2*pi*q/carrier_pitch
+  // - carrier_shift), q the other axis' coordinate; carrier_pitch 0 = none.
+  double carrier_pitch = 0;    // px
+  double carrier_shift = 0;    // rad
   // kGrayBit: bit `bit` (0 = MSB) of the `code_bits`-bit reflected Gray code
   // of the stripe index floor((p + 0.5) / stripe); inverted swaps 0 and 1.
   int bit = 0;

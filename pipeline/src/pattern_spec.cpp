@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <functional>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 
@@ -17,6 +19,12 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
+std::string shortNumber(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", v);
+  return text;
+}
+
 }  // namespace
 
 const char* toString(PatternFamily f) {
@@ -25,6 +33,8 @@ const char* toString(PatternFamily f) {
     case PatternFamily::kTwoPlusOne: return "two_plus_one";
     case PatternFamily::kGrayCode: return "gray_code";
     case PatternFamily::kGrayPhaseShift: return "gray_phase_shift";
+    case PatternFamily::kMicroPhaseShift: return "micro_phase_shift";
+    case PatternFamily::kModulatedPhaseShift: return "modulated_phase_shift";
   }
   return "?";
 }
@@ -38,9 +48,12 @@ PatternFamily patternFamilyFromString(const std::string& s) {
   if (s == "two_plus_one") return PatternFamily::kTwoPlusOne;
   if (s == "gray_code") return PatternFamily::kGrayCode;
   if (s == "gray_phase_shift") return PatternFamily::kGrayPhaseShift;
+  if (s == "micro_phase_shift") return PatternFamily::kMicroPhaseShift;
+  if (s == "modulated_phase_shift") return PatternFamily::kModulatedPhaseShift;
   throw std::invalid_argument("unknown pattern family '" + s +
                               "' (supported: phase_shift, phase_shift_3+3, two_plus_one, "
-                              "gray_code, gray_phase_shift)");
+                              "gray_code, gray_phase_shift, micro_phase_shift, "
+                              "modulated_phase_shift)");
 }
 
 Unwrapping unwrappingFromString(const std::string& s) {
@@ -89,6 +102,34 @@ double PatternSpec::finestPeriod(int axis_length) const {
   return axis_length / f;
 }
 
+double PatternSpec::microSeparation() const {
+  if (family != PatternFamily::kMicroPhaseShift || frequencies.size() < 2) return 0.0;
+  double worst = std::numeric_limits<double>::infinity();
+  std::vector<int> axes;
+  if (direction != Direction::kVertical) axes.push_back(projector_width);
+  if (direction != Direction::kHorizontal) axes.push_back(projector_height);
+  for (int axis : axes) {
+    const double f0 = frequencies[0], wavelength = axis / f0;
+    const int candidates = static_cast<int>(std::ceil(f0 - 1e-9));
+    for (int pi = 0; pi < 2 * axis; ++pi) {
+      const double p = 0.5 * pi;
+      const int k_true = static_cast<int>(std::floor(p / wavelength));
+      for (int k = 0; k < candidates; ++k) {
+        if (k == k_true) continue;
+        const double q = p + (k - k_true) * wavelength;
+        double d = 0;
+        for (std::size_t j = 1; j < frequencies.size(); ++j) {
+          const double w = 2.0 * kPi * frequencies[j] / axis;
+          const double e = std::cos(w * p - start_phase_rad) - std::cos(w * q - start_phase_rad);
+          d += e * e;
+        }
+        worst = std::min(worst, d);
+      }
+    }
+  }
+  return std::isfinite(worst) ? worst : 0.0;
+}
+
 int PatternSpec::framesPerDirection() const {
   const int bits_frames = [&] {
     // Bits of the shorter-coded axis do not matter here: both axes of kBoth
@@ -102,6 +143,9 @@ int PatternSpec::framesPerDirection() const {
     case PatternFamily::kTwoPlusOne: return 1 + 2 * static_cast<int>(frequencies.size());
     case PatternFamily::kGrayCode: return bits_frames;
     case PatternFamily::kGrayPhaseShift: return bits_frames + steps;
+    case PatternFamily::kMicroPhaseShift: return static_cast<int>(frequencies.size()) + 2;
+    case PatternFamily::kModulatedPhaseShift:
+      return 3 * steps * static_cast<int>(frequencies.size());
   }
   return 0;
 }
@@ -131,10 +175,42 @@ void PatternSpec::validate() const {
     if (!(amplitude > 0 && offset - amplitude >= -1e-9 && offset + amplitude <= 1 + 1e-9))
       fail("offset/amplitude", "must satisfy amplitude > 0 and 0 <= offset +- amplitude <= 1");
   }
-  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kGrayPhaseShift) {
+  const bool modulated = family == PatternFamily::kModulatedPhaseShift;
+  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kGrayPhaseShift ||
+      modulated) {
     if (steps < 3 || steps > 64) fail("steps", "must be in 3..64");
   }
-  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kTwoPlusOne) {
+  if (modulated) {
+    if (unwrapping != Unwrapping::kHierarchical)
+      fail("unwrapping", "must be hierarchical for modulated_phase_shift");
+    const int other = direction == Direction::kVertical ? projector_width : projector_height;
+    if (!(carrier_pitch_px >= 3.0 && carrier_pitch_px <= other))
+      fail("carrier_pitch", "must be in 3.." + std::to_string(other) + " px");
+  }
+  if (family == PatternFamily::kMicroPhaseShift) {
+    if (steps != 3) fail("steps", "must be 3 for micro_phase_shift (its first frequency has 3 shifts)");
+    if (frequencies.size() < 2 || frequencies.size() > 17)
+      fail("frequencies", "must list 2..17 frequencies for micro_phase_shift");
+    for (double f : frequencies)
+      if (!(f >= 1 && std::isfinite(f))) fail("frequencies", "must be >= 1 period");
+    for (int axis : axes)
+      if (axis / *std::max_element(frequencies.begin(), frequencies.end()) < 4.0)
+        fail("frequencies", "too high for the projector (period must be >= 4 px)");
+    // The candidates p + k L / f_0 must differ in the other frequencies'
+    // cosines by enough for the modulation a camera records:
+    // derivedMinModulation() (5 sigma on the closest wrong candidate) within
+    // half of the 8-bit range, as for the phase-shift unwrapping margin.
+    const double required = derivedMinModulation(*this, 0.3f);
+    const double reachable = 0.5 * 255.0 * amplitude;
+    if (required > reachable)
+      fail("frequencies", "do not tell the periods of the first frequency apart: the closest "
+                          "wrong candidate differs by only " + shortNumber(microSeparation()) +
+                          " in the summed squared cosines, which needs a fringe modulation of " +
+                          shortNumber(required) + " DN (more than half of the " +
+                          shortNumber(2 * reachable) +
+                          " DN an 8-bit camera can record); spread the frequencies or add one");
+  }
+  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kTwoPlusOne || modulated) {
     if (frequencies.empty()) fail("frequencies", "must not be empty");
     for (double f : frequencies)
       if (!(f > 0 && std::isfinite(f))) fail("frequencies", "must be > 0");
@@ -185,7 +261,7 @@ void PatternSpec::validate() const {
                            " px; need >= 4 px");
     }
   }
-  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kTwoPlusOne) {
+  if (family == PatternFamily::kPhaseShift || family == PatternFamily::kTwoPlusOne || modulated) {
     // Unwrapping margin: the modulation the noisiest frequency step needs for
     // its fringe orders to be picked with a 5-sigma margin (codec.h) must be
     // within reach of the camera.
@@ -285,6 +361,21 @@ std::vector<FrameInfo> canonicalFrames(const PatternSpec& s) {
       case PatternFamily::kGrayCode:
         gray();
         break;
+      case PatternFamily::kMicroPhaseShift:
+        for (int n = 0; n < 3; ++n)
+          sinusoid(s.frequencies[0], 0.0, s.start_phase_rad + sign * 2.0 * kPi * n / 3);
+        for (std::size_t j = 1; j < s.frequencies.size(); ++j)
+          sinusoid(s.frequencies[j], 0.0, s.start_phase_rad);
+        break;
+      case PatternFamily::kModulatedPhaseShift:
+        for (double fr : s.frequencies)
+          for (int n = 0; n < s.steps; ++n)
+            for (int m = 0; m < 3; ++m) {
+              sinusoid(fr, 0.0, s.start_phase_rad + sign * 2.0 * kPi * n / s.steps);
+              frames.back().carrier_pitch = s.carrier_pitch_px;
+              frames.back().carrier_shift = 2.0 * kPi * m / 3;
+            }
+        break;
       case PatternFamily::kGrayPhaseShift: {
         gray();
         // One period per stripe, phase 0 at the stripe boundary p = -0.5.
@@ -304,9 +395,13 @@ double frameIntensity(const PatternSpec& s, const FrameInfo& f, double u, double
   const double p = f.columns ? u : v;
   const double axis = s.axisLength(f.columns);
   switch (f.kind) {
-    case FrameInfo::Kind::kSinusoid:
-      return s.offset +
-             s.amplitude * std::cos(2.0 * kPi * f.frequency * (p - f.origin) / axis - f.delta);
+    case FrameInfo::Kind::kSinusoid: {
+      const double value =
+          s.offset + s.amplitude * std::cos(2.0 * kPi * f.frequency * (p - f.origin) / axis - f.delta);
+      if (f.carrier_pitch <= 0) return value;
+      const double q = f.columns ? v : u;
+      return value * (0.5 + 0.5 * std::cos(2.0 * kPi * q / f.carrier_pitch - f.carrier_shift));
+    }
     case FrameInfo::Kind::kFlat: return s.offset;
     case FrameInfo::Kind::kWhite: return 1.0;
     case FrameInfo::Kind::kBlack: return 0.0;
@@ -337,6 +432,16 @@ std::vector<cv::Mat> generatePatternImages(const PatternSpec& spec) {
   const auto frames = detail::canonicalFrames(spec);
   std::vector<cv::Mat> canonical;
   for (const detail::FrameInfo& f : frames) {
+    if (f.carrier_pitch > 0) {
+      // Two-dimensional: the sinusoid along one axis times the carrier.
+      cv::Mat image(spec.projector_height, spec.projector_width, CV_8UC1);
+      for (int r = 0; r < spec.projector_height; ++r)
+        for (int c = 0; c < spec.projector_width; ++c)
+          image.at<std::uint8_t>(r, c) = static_cast<std::uint8_t>(std::lround(
+              255.0 * std::clamp(detail::frameIntensity(spec, f, c, r), 0.0, 1.0)));
+      canonical.push_back(image);
+      continue;
+    }
     const int extent = spec.axisLength(f.columns);
     std::vector<std::uint8_t> profile(extent);
     for (int i = 0; i < extent; ++i) {

@@ -123,6 +123,17 @@ std::vector<PatternSpec> allFamilies() {
   PatternSpec pitch = phaseShift("pitch60_skipped_frames", Direction::kHorizontal, 3, {1824.0 / 60, 1});
   pitch.frame_order = {0, 1, 2, pipeline::kSkippedFrame, pipeline::kSkippedFrame, 3, 4, 5};
   v.push_back(pitch);
+  // Micro phase shifting: six pitches between 16 and 18.5 px, no unit cue.
+  PatternSpec micro = phaseShift("micro_6", Direction::kHorizontal, 3, {});
+  micro.family = PatternFamily::kMicroPhaseShift;
+  for (double pitch_px : {16.0, 16.5, 17.0, 17.5, 18.0, 18.5}) micro.frequencies.push_back(1824.0 / pitch_px);
+  v.push_back(micro);
+  // Modulated phase shifting: the 3+3 sets, each frame at 3 carrier shifts
+  // of a 9 px carrier along the rows.
+  PatternSpec modulated = phaseShift("modulated_3x3", Direction::kHorizontal, 3, {16, 1});
+  modulated.family = PatternFamily::kModulatedPhaseShift;
+  modulated.carrier_pitch_px = 9;
+  v.push_back(modulated);
   return v;
 }
 

@@ -2,6 +2,7 @@
 // px, the unwrapping margin checked at load time, frames to skip, Gray +
 // phase shift thresholded against the fringe mean, errors that blame the
 // right key.
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -134,4 +135,39 @@ TEST_CASE("Gray + phase shift without references or inverses loads; errors blame
   CHECK(loadError("family: gray_phase_shift\ndirection: horizontal\nbits: 6\nshift_sign: 1\n"
                   "amplitude: 0.6\n")
             .find("key 'amplitude'") != std::string::npos);
+}
+
+TEST_CASE("micro and modulated phase shifting in pattern files", "[codecs][yaml][conventions]") {
+  const PatternSpec micro = daemon::parsePatternText(
+      "family: micro_phase_shift\ndirection: horizontal\npitches_px: [16, 16.5, 17, 17.5, 18, 18.5]\n",
+      "p.yaml");
+  CHECK(micro.family == PatternFamily::kMicroPhaseShift);
+  CHECK(micro.frameCount() == 8);
+  CHECK(micro.microSeparation() > 0.01);
+  // The derived threshold follows from the separation (5 sigma on the
+  // closest wrong candidate).
+  CHECK(pipeline::derivedMinModulation(micro, 0.3f) ==
+        Approx(2 * 5 * 0.54 / std::sqrt(micro.microSeparation())).epsilon(1e-3));
+  // Equally spaced pitches of 16..20 px repeat their cosines: refused with the number.
+  const std::string e = loadError(
+      "family: micro_phase_shift\ndirection: horizontal\npitches_px: [16, 17, 18, 19, 20]\n");
+  CAPTURE(e);
+  CHECK(e.find("key 'pitches_px'") != std::string::npos);
+  CHECK(e.find("do not tell the periods") != std::string::npos);
+  CHECK(loadError("family: micro_phase_shift\ndirection: horizontal\nfrequencies: [100]\n")
+            .find("2..17 frequencies") != std::string::npos);
+  const PatternSpec modulated = daemon::parsePatternText(
+      "family: modulated_phase_shift\ndirection: vertical\nsteps: 4\nfrequencies: [16, 1]\n"
+      "carrier_pitch_px: 10\n",
+      "p.yaml");
+  CHECK(modulated.frameCount() == 3 * 4 * 2);
+  CHECK(modulated.carrier_pitch_px == 10);
+  CHECK(loadError("family: modulated_phase_shift\ndirection: vertical\nfrequencies: [16, 1]\n"
+                  "carrier_pitch_px: 2\n")
+            .find("key 'carrier_pitch_px'") != std::string::npos);
+  // The carrier runs along the other axis: a vertical pattern's frames vary
+  // along both axes.
+  const auto images = pipeline::makeCodec(modulated, {})->generate();
+  CHECK(images[0].at<std::uint8_t>(100, 0) > images[0].at<std::uint8_t>(100, 5) + 10);
+  CHECK(images[0].at<std::uint8_t>(100, 0) != images[0].at<std::uint8_t>(300, 0));
 }

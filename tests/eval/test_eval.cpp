@@ -170,4 +170,20 @@ TEST_CASE("gamma: an uncompensated projector gamma adds the error the model pred
     CHECK(m.at("systematic_inlier_rms_mm") > 0.5);
     CHECK(m.at("systematic_inlier_rms_mm") < 2.0);
   }
+  SECTION("gamma 2.2 compensated in decoding: the linear projector's noise, no period errors") {
+    // Issue 15: the gamma estimated from the first scan's own captures,
+    // compensated in decoding: within 1.5x of the linear projector's noise
+    // and no unwrapping failures.
+    const sl::eval::EvalResult linear = sl::eval::runPrecision(o);
+    o.projector_gamma = 2.2;
+    o.compensate_gamma = true;
+    const sl::eval::EvalResult r = sl::eval::runPrecision(o);
+    INFO(r.markdown);
+    const auto& m = r.metrics;
+    CHECK(m.at("estimated_gamma") == Approx(2.2).margin(0.05));
+    CHECK(m.at("period_error_fraction") == 0);
+    CHECK(m.at("valid_fraction") >= 0.99 * linear.metrics.at("valid_fraction"));
+    CHECK(m.at("std_mean_mm") <= 1.5 * linear.metrics.at("std_mean_mm"));
+    CHECK(m.at("systematic_inlier_rms_mm") < 0.08);
+  }
 }

@@ -6,6 +6,7 @@
 //   sl_calibrate --import-sl-sensor CAMERA.xml PROJECTOR.xml --out FILE.yaml
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -30,6 +31,7 @@
 #include "sl/pipeline/calibration.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/pattern_spec.h"
+#include "sl/pipeline/projector_response.h"
 
 namespace {
 
@@ -39,6 +41,9 @@ namespace pl = sl::pipeline;
 constexpr const char* kUsage =
     "usage: sl_calibrate --poses DIR... --board COLSxROWS --square MM [options]\n"
     "       sl_calibrate --import-sl-sensor CAMERA.xml PROJECTOR.xml --out FILE.yaml\n"
+    "       sl_calibrate --projector-response RAMP_DIR [--levels L0,L1,...] --out FILE.yaml\n"
+    "         (camera images of flat grey frames, e.g. from sl_patterns --ramp N, in natural\n"
+    "         order; levels default k / (n - 1); writes the projector's response R(L))\n"
     "Each pose folder holds the camera images of one pattern sequence (png, bmp, tif, jpg,\n"
     "pgm), in projection order by the natural order of the numbers in their names (x_2\n"
     "before x_10; names that do not follow one numbering are refused), or as --list says.\n"
@@ -115,6 +120,8 @@ struct Args {
   std::string export_opencv;
   std::string report_dir;
   std::vector<std::string> import_sl_sensor;
+  std::string response_dir;
+  std::vector<double> levels;
 };
 
 Args parseArgs(int argc, char** argv) {
@@ -136,6 +143,11 @@ Args parseArgs(int argc, char** argv) {
     } else if (o == "--poses") {
       while (i + 1 < args.size() && args[i + 1].rfind("--", 0) != 0) a.poses.push_back(args[++i]);
       if (a.poses.empty()) usageError("--poses: no folders given");
+    } else if (o == "--projector-response") {
+      a.response_dir = value();
+    } else if (o == "--levels") {
+      std::stringstream list(value());
+      for (std::string item; std::getline(list, item, ',');) a.levels.push_back(parseNumber(o, item));
     } else if (o == "--import-sl-sensor") {
       a.import_sl_sensor = {value(), value()};
     } else if (o == "--list") {
@@ -198,7 +210,7 @@ Args parseArgs(int argc, char** argv) {
       usageError("unknown option " + o);
     }
   }
-  if (!a.import_sl_sensor.empty()) return a;
+  if (!a.import_sl_sensor.empty() || !a.response_dir.empty()) return a;
   if (a.poses.empty()) usageError("--poses is required");
   if (a.board.cols <= 0 || a.board.rows <= 0) usageError("--board COLSxROWS is required");
   if (!(a.board.square_mm > 0)) usageError("--square MM is required (> 0)");
@@ -292,6 +304,37 @@ void writeReport(std::ostream& out, const pl::CalibrationResult& r, const Args& 
 }
 
 int run(const Args& a) {
+  if (!a.response_dir.empty()) {
+    const std::vector<std::string> files = a.list.empty()
+                                               ? sl::tools::listFrameFiles(a.response_dir)
+                                               : sl::tools::readFrameList(a.list, a.response_dir);
+    std::vector<double> levels = a.levels;
+    if (levels.empty())
+      for (std::size_t k = 0; k < files.size(); ++k)
+        levels.push_back(files.size() > 1 ? double(k) / double(files.size() - 1) : 0.0);
+    if (levels.size() != files.size())
+      throw std::runtime_error(a.response_dir + ": " + std::to_string(files.size()) +
+                               " images but " + std::to_string(levels.size()) + " --levels");
+    std::vector<cv::Mat> frames;
+    for (const std::string& f : files) {
+      cv::Mat image = cv::imread(f, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
+      if (image.empty()) throw std::runtime_error(f + ": cannot read the image");
+      frames.push_back(image);
+    }
+    const int bit_depth =
+        a.bit_depth > 0 ? a.bit_depth : (frames.front().depth() == CV_8U ? 8 : 16);
+    const std::vector<float> response =
+        pl::estimateProjectorResponse(frames, levels, bit_depth);
+    sl::daemon::saveProjectorResponse(
+        response, "sl_calibrate --projector-response " + a.response_dir + " (" + utcNow() + ")",
+        a.out);
+    // The gamma a power law would have at mid grey, for the report.
+    const double mid = response[response.size() / 2];
+    std::cout << "projector response from " << files.size() << " levels: R(0.5) = " << mid
+              << " (a gamma of " << std::log(std::max(mid, 1e-6)) / std::log(0.5) << ") -> "
+              << a.out << "\n";
+    return 0;
+  }
   if (!a.import_sl_sensor.empty()) {
     auto file = sl::daemon::loadSlSensorCalibration(a.import_sl_sensor[0], a.import_sl_sensor[1]);
     sl::daemon::saveCalibration(file, a.out);

@@ -17,6 +17,10 @@ struct EvalOptions {
   // The simulated projector's intensity response (L / 255)^gamma; 1 = linear
   // (the LightCrafter 4500 in pattern mode). Not compensated by the pipeline.
   double projector_gamma = 1.0;
+  // Compensate the projector's response in decoding: precision estimates the
+  // gamma from its first scan's captures (pipeline::estimateProjectorGamma)
+  // and decodes every scan with that response.
+  bool compensate_gamma = false;
 };
 
 struct EvalResult {
@@ -94,7 +98,11 @@ EvalResult runVdi2634(const EvalOptions& options);
 // uncompensated projector non-linearity adds, next to the model's phase
 // error. Metrics: <experiment>.<metric>_<linear|gamma_1.1|gamma_G> for the
 // rows of the table, systematic_max_abs_<...>_mm, phase_error_peak_rad_<...>,
-// gamma.
+// gamma; and the wall of precision at gamma G with the gamma estimated from
+// the captures and compensated in decoding, next to the linear projector:
+// compensated.<metric>, compensated_estimated_gamma,
+// compensated_noise_ratio (std_mean against the linear projector's),
+// compensated_target_met (1 when within 1.5x and without period errors).
 EvalResult runGamma(const EvalOptions& options);
 
 // 4.4 wall: a plaster-like wall larger than the field of view, a 50 cm

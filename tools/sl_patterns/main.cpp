@@ -9,8 +9,12 @@
 // (912 x 1140 native DMD images, see pipeline/projector_images.h) and
 // image_KK.bmp (24-bit, three 8-bit patterns each: pattern 3K -> green =
 // LightCrafter pattern index 0, 3K+1 -> red = index 1, 3K+2 -> blue = index 2).
-// Exit codes: 0 ok, 1 error, 2 usage.
+// `sl_patterns --ramp N --out DIR` writes ramp_00..ramp_N.png, flat frames at
+// levels k / N, to measure the projector's response (sl_calibrate
+// --projector-response). Exit codes: 0 ok, 1 error, 2 usage.
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -26,7 +30,8 @@ namespace {
 
 int usage(const std::string& message) {
   std::cerr << "sl_patterns: " << message << "\n"
-            << "usage: sl_patterns PATTERN.yaml --out DIR [--lightcrafter] [--calibration C]\n";
+            << "usage: sl_patterns PATTERN.yaml --out DIR [--lightcrafter] [--calibration C]\n"
+            << "       sl_patterns --ramp N --out DIR   (N + 1 flat 1824 x 1140 frames at k / N)\n";
   return 2;
 }
 
@@ -45,14 +50,36 @@ void write(const std::filesystem::path& path, const cv::Mat& image) {
 int main(int argc, char** argv) {
   std::string pattern_path, out_dir, calibration_path;
   bool lightcrafter = false;
+  int ramp = 0;  // --ramp N: N + 1 flat frames at k / N
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--out" && i + 1 < argc) out_dir = argv[++i];
     else if (arg == "--calibration" && i + 1 < argc) calibration_path = argv[++i];
     else if (arg == "--lightcrafter") lightcrafter = true;
+    else if (arg == "--ramp" && i + 1 < argc) {
+      ramp = std::atoi(argv[++i]);
+      if (ramp < 2 || ramp > 255) return usage("--ramp N needs N in 2..255");
+    }
     else if (arg == "-h" || arg == "--help") return usage("help"), 0;
     else if (!arg.empty() && arg[0] != '-' && pattern_path.empty()) pattern_path = arg;
     else return usage("unexpected argument '" + arg + "'");
+  }
+  if (ramp > 0 && !out_dir.empty() && pattern_path.empty()) {
+    // Flat frames at levels k / N of the default projector, for
+    // sl_calibrate --projector-response.
+    try {
+      const std::filesystem::path dir(out_dir);
+      std::filesystem::create_directories(dir);
+      for (int k = 0; k <= ramp; ++k)
+        write(dir / numbered("ramp", static_cast<std::size_t>(k), ".png"),
+              cv::Mat(1140, 1824, CV_8UC1, cv::Scalar(std::lround(255.0 * k / ramp))));
+      std::cout << "sl_patterns: " << ramp + 1 << " flat frames (levels k / " << ramp << ") -> "
+                << out_dir << "\n";
+      return 0;
+    } catch (const std::exception& e) {
+      std::cerr << "sl_patterns: " << e.what() << "\n";
+      return 1;
+    }
   }
   if (pattern_path.empty() || out_dir.empty()) return usage("PATTERN.yaml and --out are required");
   try {

@@ -6,6 +6,8 @@
 //              [--keep-saturated] [--undistort-images] [--projector-iterations N]
 //              [--use best|columns|rows] [--min-depth MM] [--max-depth MM]
 //
+// --projector-gamma / --projector-response / --estimate-gamma compensate a
+// non-linear projector in decoding (pipeline/projector_response.h).
 // Frames are the image files of DIR in the natural order of the numbers in
 // their names (ambiguous numbering is refused), or the files named one per
 // line in --list (relative to DIR). Without --calibration only the maps (and
@@ -23,6 +25,7 @@
 #include "common/frame_files.h"
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/pattern_config.h"
+#include "sl/pipeline/projector_response.h"
 #include "sl_process/process.h"
 
 namespace {
@@ -34,7 +37,8 @@ int usage(const std::string& message) {
                "         [--phase] [--smooth-phase SIGMA_PX] [--min-modulation DN]\n"
                "         [--max-unwrap-error PERIODS] [--keep-saturated] [--undistort-images]\n"
                "         [--projector-iterations N] [--use best|columns|rows]\n"
-               "         [--min-depth MM] [--max-depth MM]\n";
+               "         [--min-depth MM] [--max-depth MM]\n"
+               "         [--projector-gamma G | --projector-response FILE | --estimate-gamma]\n";
   return 2;
 }
 
@@ -50,7 +54,8 @@ int main(int argc, char** argv) {
       out_dir = "sl_process_out", list_path;
   sl::pipeline::DecoderOptions decoder;
   sl::pipeline::TriangulatorOptions triangulator;
-  bool undistort_images = false, phase = false;
+  bool undistort_images = false, phase = false, estimate_gamma = false, gamma_given = false;
+  std::string response_path;
   double smooth_sigma = 0;
   try {
     for (int i = 1; i < argc; ++i) {
@@ -66,6 +71,13 @@ int main(int argc, char** argv) {
       else if (arg == "--out") out_dir = value();
       else if (arg == "--list") list_path = value();
       else if (arg == "--phase") phase = true;
+      else if (arg == "--projector-gamma") {
+        const double gamma = number(arg, value());
+        if (!(gamma > 0)) return usage("--projector-gamma must be > 0");
+        decoder.projector_response = sl::pipeline::gammaResponse(gamma);
+        gamma_given = true;
+      } else if (arg == "--projector-response") response_path = value();
+      else if (arg == "--estimate-gamma") estimate_gamma = true;
       else if (arg == "--smooth-phase") {
         smooth_sigma = number(arg, value());
         if (!(smooth_sigma > 0)) return usage("--smooth-phase: sigma must be > 0 (camera px)");
@@ -122,6 +134,18 @@ int main(int argc, char** argv) {
                                std::to_string(files.size()) + " images in " +
                                (list_path.empty() ? images_dir : list_path));
     const sl::tools::LoadedFrames frames = sl::tools::loadFrames(files);
+    if (int(estimate_gamma) + int(!response_path.empty()) + int(gamma_given) > 1)
+      throw std::invalid_argument("give one of --projector-gamma, --projector-response and "
+                                  "--estimate-gamma");
+    if (!response_path.empty())
+      decoder.projector_response = sl::daemon::loadProjectorResponse(response_path);
+    if (estimate_gamma) {
+      const auto e = sl::pipeline::estimateProjectorGamma(pattern, frames.frames, frames.bit_depth);
+      std::cout << "sl_process: projector gamma " << e.gamma << " estimated from " << e.pixels
+                << " pixels (unwrapping residual " << e.rms_residual_periods
+                << " periods RMS, " << e.rms_residual_linear_periods << " if linear)\n";
+      decoder.projector_response = sl::pipeline::gammaResponse(e.gamma);
+    }
     sl::tools::ProcessResult result;
     if (calibration) {
       result = sl::tools::processCapture(pattern, *calibration, frames, decoder, triangulator,

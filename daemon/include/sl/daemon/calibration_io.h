@@ -18,6 +18,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "sl/pipeline/camera_model.h"
 
@@ -117,6 +118,18 @@ CalibrationFile loadOpenCvCalibration(const std::string& path, const OpenCvCalib
 // screenResX/Y, and cam_error, proj_error, stereo_error when known.
 // Throws std::runtime_error naming the file on failure.
 void exportOpenCvCalibration(const CalibrationFile& file, const std::string& path);
+
+// A projector's intensity response (pipeline/projector_response.h) as a
+// file, written by `sl_calibrate --projector-response` and read by
+// `sl_process --projector-response`:
+//   format: sl-sensor-projector-response/1
+//   response: [R(0), ..., R(1)]    # at L = k / (n - 1), any affine scale
+//   # or instead: gamma: 2.2       # R = L^gamma
+//   source: "free text"            # optional
+// Throws ConfigError naming the file and the key.
+std::vector<float> loadProjectorResponse(const std::string& path);
+void saveProjectorResponse(const std::vector<float>& response, const std::string& source,
+                           const std::string& path);
 
 // Writes the project's format (atomically: temporary file + rename).
 // Throws std::runtime_error naming the file on I/O failure.

@@ -30,6 +30,13 @@ struct DecoderOptions {
   // phase shift with the complementary bit: periods by which the phase may
   // lie outside the half stripe the code names. In (0, 0.5].
   float max_unwrap_error = 0.3f;
+  // The projector's intensity response R(L) sampled at L = k / (size - 1)
+  // (projector_response.h; any affine scale), e.g. gammaResponse(2.2) for a
+  // projector in video mode. Empty (the default): linear, nothing to
+  // compensate. Otherwise every sinusoid set's phase (phase shift, 2+1, Gray +
+  // phase shift) is corrected for R before unwrapping; 3+3 patterns then
+  // leave their dedicated kernels for the general row.
+  std::vector<float> projector_response;
 };
 
 // The modulation (8-bit DN) below which the temporal unwrapping of `spec`

@@ -55,6 +55,19 @@ enum class PatternFamily {
   // reference frames, the inverse frames, or (with neither) the mean A of
   // the phase-shift frames.
   kGrayPhaseShift,
+  // Micro phase shifting (Gupta and Nayar 2012): F >= 2 high frequencies in a
+  // narrow band; per direction F + 2 frames: the first listed frequency at
+  // the three shifts delta_0, delta_1, delta_2 (steps is 3), then each
+  // further frequency once at delta_0. No unit cue: the coordinate is the
+  // candidate period of the first frequency whose cosines match the others'.
+  kMicroPhaseShift,
+  // Modulated phase shifting (Chen, Stewart, Yang 2008): the N-step sets of
+  // kPhaseShift (hierarchical unwrapping) with every frame multiplied by a
+  // carrier 0.5 + 0.5 cos(2 pi q / carrier_pitch_px - 2 pi m / 3) along the
+  // other projector axis q, at m = 0, 1, 2: per direction, for each
+  // frequency, for each step, the three carrier shifts (3 N F frames). The
+  // carrier separates direct light from interreflections and scattering.
+  kModulatedPhaseShift,
 };
 
 enum class Unwrapping {
@@ -71,7 +84,8 @@ enum class Unwrapping {
 const char* toString(PatternFamily f);
 const char* toString(Unwrapping u);
 // Parse the names used in YAML ("phase_shift", "two_plus_one", "gray_code",
-// "gray_phase_shift"; "hierarchical", "unit_cue", "heterodyne"). Throw
+// "gray_phase_shift", "micro_phase_shift", "modulated_phase_shift";
+// "hierarchical", "unit_cue", "heterodyne"). Throw
 // std::invalid_argument listing the valid names.
 PatternFamily patternFamilyFromString(const std::string& s);
 Unwrapping unwrappingFromString(const std::string& s);
@@ -99,6 +113,7 @@ struct PatternSpec {
   double start_phase_rad = 0.0;  // delta_0
   double offset = 0.5;           // mean relative intensity
   double amplitude = 0.5;        // offset +- amplitude must stay in [0, 1]
+  double carrier_pitch_px = 8.0; // kModulatedPhaseShift: carrier period along the other axis
 
   // --- Gray code (kGrayCode, kGrayPhaseShift) ---
   // Projected bits, MSB first, of the ceil(log2(L))-bit code of the
@@ -132,6 +147,12 @@ struct PatternSpec {
   double stripeWidth(int axis_length) const;
   // Period (px) of the finest sinusoid along an axis of L px (0 for kGrayCode).
   double finestPeriod(int axis_length) const;
+  // kMicroPhaseShift: the smallest summed squared difference of the further
+  // frequencies' cosines between a coordinate and any other candidate period
+  // of the first frequency (over the encoded axes at 0.5 px steps). A pixel
+  // picks the right period with a 5-sigma margin when 2 * 5 * sigma_c <=
+  // sqrt(separation), sigma_c = sigma_I / B (see derivedMinModulation()).
+  double microSeparation() const;
 
   // Throws PatternSpecError naming the pattern and the bad field. Besides the
   // ranges of every field, the unwrapping margin of phase-shift patterns is
