@@ -98,7 +98,10 @@ grep -q 'address="127.0.0.1"' "$work/lan-loopback.xml" || { echo "bench-delivery
 configs=("loopback:$src/config/cyclonedds-loopback.xml" "lan:$work/lan-loopback.xml")
 if command -v iox-roudi > /dev/null; then
   if [ "${SL_BENCH_INSIDE:-0}" = 1 ] || ! pgrep -x iox-roudi > /dev/null; then
-    iox-roudi -c "$src/config/iceoryx-roudi.toml" -l warning > "$work/roudi.log" 2>&1 &
+    # Monitoring off: with it on, RouDi declares a SIGSTOPped subscriber dead
+    # after a few seconds and the subscriber aborts when it resumes (README
+    # "DDS deployment").
+    iox-roudi -c "$src/config/iceoryx-roudi.toml" -m off -l warning > "$work/roudi.log" 2>&1 &
     roudi_pid=$!
     sleep 2
     kill -0 "$roudi_pid" 2> /dev/null || { cat "$work/roudi.log" >&2; roudi_pid=""; }
@@ -107,6 +110,18 @@ if command -v iox-roudi > /dev/null; then
 else
   note "note: iox-roudi not installed: shm configuration skipped"
 fi
+
+# SL_BENCH_CONFIGS / SL_BENCH_SCENARIOS: subsets (names separated by spaces),
+# for iterating on one case; the figures of record come from a full run.
+if [ -n "${SL_BENCH_CONFIGS:-}" ]; then
+  kept=()
+  for entry in "${configs[@]}"; do
+    case " $SL_BENCH_CONFIGS " in *" ${entry%%:*} "*) kept+=("$entry") ;; esac
+  done
+  configs=("${kept[@]}")
+fi
+scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz stalled max 3subs fastdds}
+wanted() { case " $scenarios " in *" $1 "*) return 0 ;; esac; return 1; }
 
 # --- statistics ---
 # stats FILE PERIOD_NS OFFSET_NS -> "clouds_per_s=.. lost=.. p50_ms=.. p99_ms=.. max_ms=.."
@@ -186,9 +201,11 @@ scenario() {
   timeout 20 "$slctl" --ns "$ns" start > /dev/null || { echo "bench-delivery: slctl start failed" >&2; cat "$work/daemon.log" >&2; exit 1; }
   if [ "$stall" = 1 ]; then
     sleep 5
-    kill -STOP "${sub_pids[1]}"
+    # The subscriber itself, not only the timeout(1) that runs it.
+    local stalled=("${sub_pids[1]}" $(pgrep -P "${sub_pids[1]}" || true))
+    kill -STOP "${stalled[@]}"
     sleep "$secs"
-    kill -CONT "${sub_pids[1]}"
+    kill -CONT "${stalled[@]}"
   fi
   for p in "${sub_pids[@]}"; do wait "$p" || true; done
   local rss
@@ -231,6 +248,7 @@ echo "bench-delivery: net.core.rmem_max=$(cat /proc/sys/net/core/rmem_max) wmem_
 # --- bare DDS ceiling: sl_dds_bench pub -> sub, no daemon ---
 declare -A ceiling_rate ceiling_p50
 for entry in "${configs[@]}"; do
+  wanted ceiling || break
   cfg=${entry%%:*}
   export CYCLONEDDS_URI=file://${entry#*:}
   for rate in 5 0; do
@@ -256,18 +274,24 @@ done
 for entry in "${configs[@]}"; do
   cfg=${entry%%:*}
   export CYCLONEDDS_URI=file://${entry#*:}
-  start_daemon 30
-  scenario 5hz "$cfg" 30 1 "$((secs * 2 / 3))"
-  scenario stalled "$cfg" 30 2 "$((secs + 12))" 1
-  stop_daemon
-  start_daemon 180
-  scenario max "$cfg" 180 1 "$secs"
-  scenario 3subs "$cfg" 180 3 "$((secs * 2 / 3))"
-  stop_daemon
+  if wanted 5hz || wanted stalled; then
+    start_daemon 30
+    ! wanted 5hz || scenario 5hz "$cfg" 30 1 "$((secs * 2 / 3))"
+    ! wanted stalled || scenario stalled "$cfg" 30 2 "$((secs + 12))" 1
+    stop_daemon
+  fi
+  if wanted max || wanted 3subs; then
+    start_daemon 180
+    ! wanted max || scenario max "$cfg" 180 1 "$secs"
+    ! wanted 3subs || scenario 3subs "$cfg" 180 3 "$((secs * 2 / 3))"
+    stop_daemon
+  fi
 done
 
 # --- a Fast DDS subscriber (ROS 2's default middleware) at 5 Hz, default config ---
-if [ -x "$fastdds" ]; then
+if ! wanted fastdds; then
+  :
+elif [ -x "$fastdds" ]; then
   export CYCLONEDDS_URI=file://$src/config/cyclonedds-loopback.xml
   export FASTRTPS_DEFAULT_PROFILES_FILE=$src/config/fastdds-loopback.xml
   start_daemon 30

@@ -54,6 +54,12 @@ Eigen::Vector2d PinholeModel::pixelToNormalized(const Eigen::Vector2d& pixel) co
   return x;
 }
 
+CameraProjectorCalibration inUnits(const CameraProjectorCalibration& calibration, double units_per_mm) {
+  CameraProjectorCalibration scaled = calibration;
+  scaled.t *= units_per_mm;
+  return scaled;
+}
+
 Eigen::Isometry3d cameraToCamera(const CameraProjectorCalibration& from,
                                  const CameraProjectorCalibration& to) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();

@@ -1038,10 +1038,15 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
   constexpr std::size_t kScans = 2;
   startScans(*client_owner, "3+3_horizontal", 0);  // continuous: a lost sequence is no failure
 
-  // The offline pipeline with the daemon's configuration.
+  // The offline pipeline with the daemon's configuration, triangulating in
+  // metres as the daemon does (ScanEngine's CloudUnit::kMetres).
   const sl::pipeline::PatternSpec& pattern = *config.findPattern("3+3_horizontal");
   const sl::pipeline::Decoder decoder(pattern, config.decoder);
-  const sl::pipeline::Triangulator triangulator(config.calibration, config.triangulator);
+  sl::pipeline::TriangulatorOptions in_metres = config.triangulator;
+  in_metres.min_depth_mm *= 1e-3f;
+  in_metres.max_depth_mm *= 1e-3f;
+  const sl::pipeline::Triangulator triangulator(sl::pipeline::inUnits(config.calibration, 1e-3),
+                                                in_metres);
   sl::pipeline::ScanProcessor processor(2);
   std::map<sl::pipeline::TimestampNs, std::vector<float>> offline;  // by stamp, metres as published
   std::map<sl::pipeline::TimestampNs, std::vector<std::uint8_t>> received;
@@ -1081,8 +1086,7 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
                                              config.dds.frame_id,
                                              sl::pipeline::ScanProcessor::Keep::kCloud);
       std::vector<float> metres;
-      for (const auto& p : cloud->points)
-        metres.insert(metres.end(), {p.x * 1e-3f, p.y * 1e-3f, p.z * 1e-3f, p.intensity});
+      for (const auto& p : cloud->points) metres.insert(metres.end(), {p.x, p.y, p.z, p.intensity});
       offline[stamp] = std::move(metres);
     }
     for (auto loan = points_reader.take(1); !loan.empty(); loan = points_reader.take(1)) {

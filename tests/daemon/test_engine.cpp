@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 
 #include <atomic>
+#include <cmath>
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
@@ -430,4 +431,49 @@ TEST_CASE("a source that drops and delays frames costs exactly the sequences it 
   // The spoiled ones are counted as incomplete, their frames as unmatched.
   CHECK(status.sets_incomplete >= spoiled_old);
   CHECK(status.frames_unmatched >= 5 * spoiled_old);
+}
+
+// CloudUnit::kMetres (the daemon's, for DDS): the clouds are triangulated
+// from the calibration in metres, so they are the millimetre clouds / 1000
+// to float rounding, with the same invalid pixels.
+TEST_CASE("clouds in metres are the clouds in millimetres scaled, with the same invalid pixels") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  auto scanOnce = [&](sl::daemon::CloudUnit unit) {
+    const auto sim = sl::drivers::SimulatedSensor::create(config.sim);  // same seed: same images
+    std::mutex mutex;
+    std::condition_variable cv;
+    std::optional<sl::daemon::ScanResult> first;
+    sl::daemon::ScanEngine engine(
+        config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+        [&](const sl::daemon::ScanResult& r) {
+          std::lock_guard lock(mutex);
+          if (!first) first = r;
+          cv.notify_all();
+        },
+        unit);
+    REQUIRE(engine.start("3+3_horizontal", 1).accepted());
+    std::unique_lock lock(mutex);
+    REQUIRE(cv.wait_for(lock, sl::test::scaledBound(20s), [&] { return first.has_value(); }));
+    return *first;
+  };
+  const sl::daemon::ScanResult mm = scanOnce(sl::daemon::CloudUnit::kMillimetres);
+  const sl::daemon::ScanResult m = scanOnce(sl::daemon::CloudUnit::kMetres);
+  CHECK(mm.cloud_unit_m == 1e-3);
+  CHECK(m.cloud_unit_m == 1.0);
+  REQUIRE(mm.cloud->points.size() == m.cloud->points.size());
+  std::size_t valid = 0, mismatched = 0;
+  for (std::size_t i = 0; i < mm.cloud->points.size(); ++i) {
+    const auto& a = mm.cloud->points[i];
+    const auto& b = m.cloud->points[i];
+    if (std::isnan(a.z) || std::isnan(b.z)) {
+      mismatched += std::isnan(a.z) != std::isnan(b.z);
+      continue;
+    }
+    ++valid;
+    const float tolerance = 2e-6f * std::abs(a.z);  // a few float ulps of the depth
+    mismatched += !(std::abs(b.x * 1000.0f - a.x) <= tolerance && std::abs(b.y * 1000.0f - a.y) <= tolerance &&
+                    std::abs(b.z * 1000.0f - a.z) <= tolerance && a.intensity == b.intensity);
+  }
+  CHECK(valid > mm.cloud->points.size() / 2);
+  CHECK(mismatched == 0);
 }

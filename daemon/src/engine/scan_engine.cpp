@@ -75,7 +75,7 @@ std::vector<std::string> idsOf(const EngineDevices& devices) {
 }  // namespace
 
 struct ScanEngine::Impl {
-  Impl(const DaemonConfig& config, EngineDevices devices, OutputCallback output)
+  Impl(const DaemonConfig& config, EngineDevices devices, OutputCallback output, CloudUnit unit)
       : config(config),
         devices(std::move(devices)),
         output(std::move(output)),
@@ -84,7 +84,7 @@ struct ScanEngine::Impl {
         schedule(kScheduleQueueCapacity, Overflow::kWaitForRoom),
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
-        processing_config(processingConfigOf(config, camera_ids)),
+        processing_config(processingConfigOf(config, camera_ids, unit == CloudUnit::kMetres ? 1000.0 : 1.0)),
         processor(processing_config),
         motion_enabled(processing_config.motion_enabled),
         software(this->devices.cameras, this->devices.projector, config.software_trigger),
@@ -243,7 +243,8 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     ResultItem result{item->generation, {}};
     for (CameraScan& scan : outcome.scans)
       result.results.push_back({0, set.pattern_name, scan.camera_id, scan.bit_depth,
-                                std::move(scan.maps), std::move(scan.cloud), item->set});
+                                std::move(scan.maps), std::move(scan.cloud),
+                                processing_config.cloud_unit_mm * 1e-3, item->set});
     results.push(std::move(result));
   }
 }
@@ -346,8 +347,9 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
   if (holding) gate.release();
 }
 
-ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output)
-    : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output))) {
+ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output,
+                       CloudUnit unit)
+    : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output), unit)) {
   Impl& d = *impl_;
   const std::size_t k = d.devices.cameras.size();
   d.heartbeats = std::vector<Heartbeat>(k + 5);

@@ -1,14 +1,17 @@
 #include "engine/set_processor.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 #include "sl/pipeline/intensity_transfer.h"
 
 namespace sl::daemon {
 
-ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids) {
+ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids,
+                                    double cloud_unit_mm) {
   ProcessingConfig p;
+  p.cloud_unit_mm = cloud_unit_mm;
   p.patterns = config.patterns;
   p.decoder = config.decoder;
   p.triangulator = config.triangulator;
@@ -27,8 +30,24 @@ ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vecto
   return p;
 }
 
+namespace {
+
+// `config` with the calibrations and the depth limits in the clouds' unit.
+ProcessingConfig inCloudUnit(ProcessingConfig config) {
+  if (!(config.cloud_unit_mm > 0 && std::isfinite(config.cloud_unit_mm)))
+    throw std::invalid_argument("cloud unit must be a positive number of mm");
+  if (config.cloud_unit_mm == 1.0) return config;
+  const double per_mm = 1.0 / config.cloud_unit_mm;
+  for (auto& [id, calibration] : config.calibrations) calibration = pipeline::inUnits(calibration, per_mm);
+  config.triangulator.min_depth_mm = static_cast<float>(config.triangulator.min_depth_mm * per_mm);
+  config.triangulator.max_depth_mm = static_cast<float>(config.triangulator.max_depth_mm * per_mm);
+  return config;
+}
+
+}  // namespace
+
 SetProcessor::SetProcessor(const ProcessingConfig& config)
-    : config_(config), stages_(build(config)), motion_(config.motion) {}
+    : config_(inCloudUnit(config)), stages_(build(config_)), motion_(config.motion) {}
 
 SetProcessor::Stages SetProcessor::build(const ProcessingConfig& config) {
   Stages stages;
@@ -40,11 +59,12 @@ SetProcessor::Stages SetProcessor::build(const ProcessingConfig& config) {
 
 std::string SetProcessor::reconfigure(const ProcessingConfig& config) {
   try {
-    Stages rebuilt = build(config);
+    ProcessingConfig scaled = inCloudUnit(config);
+    Stages rebuilt = build(scaled);
     pipeline::MotionCompensator motion(config.motion);
     stages_ = std::move(rebuilt);
     motion_ = std::move(motion);
-    config_ = config;
+    config_ = std::move(scaled);
   } catch (const std::exception& e) {
     return e.what();
   }

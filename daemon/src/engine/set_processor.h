@@ -30,20 +30,27 @@ struct ProcessingConfig {
   bool motion_enabled = false;  // default of requests that leave it open
   pipeline::MotionCompensationOptions motion;
   bool keep_maps = false;  // return the projector maps (costs memory traffic)
+  // Length unit of the clouds, in mm: 1 (millimetres, the pipeline's) or 1000
+  // (metres, ROS's). The triangulators and the intensity transfer work on the
+  // calibrations in that unit (pipeline::inUnits), so no pass converts the
+  // points afterwards. Everything else here (triangulator depth limits
+  // included) stays in mm.
+  double cloud_unit_mm = 1.0;
 };
 
 // From the daemon's config for the sensor's cameras (`camera_ids`, in
 // synchroniser order): the first uses `calibration`, the others their entry
 // of `calibrations:` (if any); maps are kept when the DDS edge publishes them
-// (dds.publish_projector_maps).
-ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids);
+// (dds.publish_projector_maps); clouds in `cloud_unit_mm`.
+ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids,
+                                    double cloud_unit_mm = 1.0);
 
 // One camera's result of one set.
 struct CameraScan {
   std::string camera_id;  // the triangulating camera; also the cloud's frame_id
   int bit_depth = 8;      // of that camera's images
   std::shared_ptr<const pipeline::ProjectorMaps> maps;  // null unless keep_maps
-  std::shared_ptr<const pipeline::PointCloud> cloud;    // mm, that camera's optical frame
+  std::shared_ptr<const pipeline::PointCloud> cloud;    // cloud_unit_mm, that camera's optical frame
 };
 
 struct SetOutcome {

@@ -100,7 +100,8 @@ struct ScanResult {
   // Null unless dds.publish_projector_maps: the processing then never writes
   // the maps out (pipeline::ScanProcessor::Keep::kCloud).
   std::shared_ptr<const pipeline::ProjectorMaps> maps;
-  std::shared_ptr<const pipeline::PointCloud> cloud;  // mm, the camera's optical frame
+  std::shared_ptr<const pipeline::PointCloud> cloud;  // the camera's optical frame, in cloud_unit_m
+  double cloud_unit_m = 1e-3;  // metres per unit of the cloud's x, y, z (ScanEngine's CloudUnit)
   // The image set the scan came from, as acquired (before motion
   // compensation): published on rt/<ns>/image_sets when enabled.
   std::shared_ptr<const pipeline::ImageSet> images;
@@ -117,13 +118,19 @@ struct EngineDevices {
 // Thread-safe: start/stop/selectPattern/status may be called from any thread.
 // The output callback runs on the engine's output thread, one result at a
 // time; it must not call back into the engine's control methods.
+// Length unit of ScanResult::cloud: millimetres (the pipeline's, the
+// default) or metres (ROS's: the clouds are triangulated in metres, so the
+// DDS bridge writes them out without a pass over the points).
+enum class CloudUnit { kMillimetres, kMetres };
+
 class ScanEngine {
  public:
   using OutputCallback = std::function<void(const ScanResult&)>;
 
   // Throws std::runtime_error when a pattern names a camera the devices lack
   // or one without a calibration.
-  ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output);
+  ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output,
+             CloudUnit unit = CloudUnit::kMillimetres);
   ~ScanEngine();  // stops the projector and joins every thread
   ScanEngine(const ScanEngine&) = delete;
   ScanEngine& operator=(const ScanEngine&) = delete;

@@ -40,6 +40,12 @@ struct CameraProjectorCalibration {
   Eigen::Vector3d t = Eigen::Vector3d::Zero();  // mm
 };
 
+// The same calibration with its lengths (t) in another unit: `units_per_mm`
+// of them per millimetre (1e-3: metres). Intrinsics and R have no length, so
+// a Triangulator built from it (with its depth limits scaled alike) gives
+// clouds in that unit directly, without a conversion pass over the points.
+CameraProjectorCalibration inUnits(const CameraProjectorCalibration& calibration, double units_per_mm);
+
 // Two cameras calibrated against the same projector: the pose taking a point
 // of `from`'s frame into `to`'s frame, X_to = pose * X_from (both map to the
 // projector: R_from X_from + t_from = R_to X_to + t_to).
