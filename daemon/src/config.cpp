@@ -404,6 +404,10 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   d.publish_projector_maps = m.get<bool>("publish_projector_maps", d.publish_projector_maps);
   d.publish_image_sets = m.get<bool>("publish_image_sets", d.publish_image_sets);
   d.publish_images = m.get<bool>("publish_images", d.publish_images);
+  d.points_layout.decimation = m.get<int>("points_decimation", d.points_layout.decimation);
+  if (d.points_layout.decimation < 1 || d.points_layout.decimation > 16)
+    m.fail("points_decimation", "must be 1..16 (1 = every pixel)");
+  d.points_layout.valid_only = m.get<bool>("points_valid_only", d.points_layout.valid_only);
   d.status_period_s = positive(m, "status_period_s", d.status_period_s);
   const YamlMap qos = m.optionalMap("qos");
   parseTopicQos(qos.optionalMap("points"), d.points_qos);

@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "msg_convert.h"
+#include "sl/daemon/cloud_layout.h"
 #include "request_guard.h"
 #include "sl/daemon/dds.h"
 #include "sl/daemon/log.h"
@@ -208,24 +209,9 @@ struct DdsBridge::Impl {
 
 void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud, double unit_m,
                                    const std::string& frame_id_of_camera) {
-  const std::size_t n = cloud.points.size();
-  static_assert(sizeof(pipeline::PointXYZI) == 16, "x, y, z, intensity: the PointCloud2 layout");
-  const std::uint8_t* data = reinterpret_cast<const std::uint8_t*>(cloud.points.data());
-  if (unit_m != 1.0) {
-    // Not triangulated in metres (the engine's CloudUnit): one pass converts
-    // (25 MB read and written per full cloud, ~5-7 ms here).
-    const float scale = static_cast<float>(unit_m);
-    cloud_buffer.resize(4 * n);
-    for (std::size_t i = 0; i < n; ++i) {
-      const pipeline::PointXYZI& p = cloud.points[i];
-      float* out = &cloud_buffer[4 * i];
-      out[0] = p.x * scale;
-      out[1] = p.y * scale;
-      out[2] = p.z * scale;
-      out[3] = p.intensity;
-    }
-    data = reinterpret_cast<const std::uint8_t*>(cloud_buffer.data());
-  }
+  // Triangulated in metres (the engine's CloudUnit) and sent whole, the
+  // cloud's points are the message's data; else one pass packs them.
+  const PackedCloud packed = packCloud(cloud, unit_m, config.points_layout, cloud_buffer);
   static const char* kNames[4] = {"x", "y", "z", "intensity"};
   PointField fields[4];
   for (int i = 0; i < 4; ++i)
@@ -235,17 +221,17 @@ void DdsBridge::Impl::publishCloud(const pipeline::PointCloud& cloud, double uni
   PointCloud2 msg{};
   msg.header.stamp = toTime(cloud.stamp_ns);
   msg.header.frame_id = frame_id.data();
-  msg.height = static_cast<std::uint32_t>(cloud.height);
-  msg.width = static_cast<std::uint32_t>(cloud.width);
+  msg.height = packed.height;
+  msg.width = packed.width;
   borrow(msg.fields, fields, 4);
   msg.is_bigendian = false;  // x86-64 / aarch64 little endian, as written
   msg.point_step = 16;
   msg.row_step = 16 * msg.width;
-  borrow(msg.data, const_cast<std::uint8_t*>(data), n * sizeof(pipeline::PointXYZI));
-  // Organized: invalid pixels are NaN points, so the cloud may hold some
-  // (is_dense = false, as ROS depth drivers publish organized clouds);
-  // finding out that none is invalid would cost a pass over the points.
-  msg.is_dense = false;
+  borrow(msg.data, const_cast<std::uint8_t*>(packed.data), packed.bytes);
+  // Organized, invalid pixels are NaN points, so the cloud may hold some:
+  // is_dense = false (as ROS depth drivers publish organized clouds); finding
+  // out that none is invalid would cost a pass over the points.
+  msg.is_dense = packed.dense;
   if (!points_writer.write(msg)) ++writes_timed_out;
 }
 

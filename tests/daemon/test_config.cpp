@@ -1,6 +1,7 @@
 // Config loading: the shipped config parses; every kind of mistake is one
 // ConfigError naming the file, the line and the key.
 #include <catch2/catch.hpp>
+#include <limits>
 
 #include <fstream>
 #include <regex>
@@ -8,6 +9,7 @@
 
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/config.h"
+#include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds_environment.h"
 #include "sl/daemon/log.h"
 #include "support/config_text.h"
@@ -129,6 +131,8 @@ TEST_CASE("config mistakes are reported with file, line and key") {
            "key 'sim.rig.calibration.camera.height': 16000 x 16000 is more than 50 megapixels"},
       Case{"  seed: 1", "  seed: 1\n  seed: 2", "test.yaml:10: key 'sim.seed' appears twice in the same map"},
       Case{"calibration: sim", "calibration: /tmp", "key 'calibration': cannot read calibration file '/tmp': a directory"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  points_decimation: 0",
+           "key 'dds.points_decimation': must be 1..16"},
       Case{"calibration: sim", "calibration: /dev/null",
            "key 'calibration': cannot read calibration file '/dev/null': not a regular file"});
   INFO("edit: '" << c.from << "' -> '" << c.to << "'");
@@ -154,6 +158,52 @@ TEST_CASE("dds.qos sets each topic's writer QoS, the rest keep their defaults") 
   const auto defaults = sl::daemon::parseConfig(shippedConfig(), "test.yaml");
   CHECK(defaults.dds.points_qos.reliable);
   CHECK(defaults.dds.points_qos.depth == sl::daemon::DdsConfig{}.points_qos.depth);
+}
+
+TEST_CASE("dds.points_decimation and dds.points_valid_only shape the published cloud") {
+  const auto c = sl::daemon::parseConfig(
+      edited("status_period_s: 1.0", "status_period_s: 1.0\n  points_decimation: 3\n  points_valid_only: true"),
+      "test.yaml");
+  CHECK(c.dds.points_layout.decimation == 3);
+  CHECK(c.dds.points_layout.valid_only);
+  const auto defaults = sl::daemon::parseConfig(shippedConfig(), "test.yaml");
+  CHECK(defaults.dds.points_layout.decimation == 1);
+  CHECK_FALSE(defaults.dds.points_layout.valid_only);
+
+  // A 5 x 4 cloud in mm, point (u, v) = (u, v, 1000 + 10 v + u) mm, intensity
+  // u + v, with (1, 0) and (3, 2) invalid.
+  sl::pipeline::PointCloud cloud;
+  cloud.width = 5;
+  cloud.height = 4;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (int v = 0; v < 4; ++v)
+    for (int u = 0; u < 5; ++u)
+      cloud.points.push_back({float(u), float(v), 1000.0f + 10 * v + u, float(u + v)});
+  cloud.points[1].z = cloud.points[3 + 2 * 5].z = nan;
+  std::vector<float> buffer;
+  auto point = [](const sl::daemon::PackedCloud& p, std::size_t i) {
+    const float* f = reinterpret_cast<const float*>(p.data) + 4 * i;
+    return std::vector<float>{f[0], f[1], f[2], f[3]};
+  };
+  SECTION("metres, whole: the cloud's own memory") {
+    const auto p = sl::daemon::packCloud(cloud, 1.0, {}, buffer);
+    CHECK(p.data == reinterpret_cast<const std::uint8_t*>(cloud.points.data()));
+    CHECK(p.bytes == 20 * 16);
+    CHECK((p.width == 5 && p.height == 4 && !p.dense));
+  }
+  SECTION("millimetres, every second pixel: 3 x 2, converted") {
+    const auto p = sl::daemon::packCloud(cloud, 1e-3, {2, false}, buffer);
+    REQUIRE((p.width == 3 && p.height == 2 && p.bytes == 6 * 16 && !p.dense));
+    CHECK(point(p, 1) == std::vector<float>{2e-3f, 0.0f, 1002.0f * 1e-3f, 2.0f});  // (2, 0)
+    CHECK(point(p, 5) == std::vector<float>{4e-3f, 2e-3f, 1024.0f * 1e-3f, 6.0f});  // (4, 2)
+  }
+  SECTION("valid only: 18 points in row order, height 1, dense") {
+    const auto p = sl::daemon::packCloud(cloud, 1e-3, {1, true}, buffer);
+    REQUIRE((p.width == 18 && p.height == 1 && p.bytes == 18 * 16 && p.dense));
+    CHECK(point(p, 0)[2] == 1000.0f * 1e-3f);
+    CHECK(point(p, 1)[2] == 1002.0f * 1e-3f);  // (1, 0) skipped
+    for (std::size_t i = 0; i < 18; ++i) CHECK_FALSE(std::isnan(point(p, i)[2]));
+  }
 }
 
 TEST_CASE("the DDS environment check names what the kernel or RouDi cannot give") {

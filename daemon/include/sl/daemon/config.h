@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "sl/daemon/aravis_config.h"
+#include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/hardware_config.h"
 #include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
@@ -44,6 +45,8 @@ struct DdsConfig {
   bool publish_image_sets = false;
   // Depth (32FC1, m) and shading (mono8) images and camera_info, ROS 2 types.
   bool publish_images = false;
+  // What rt/<ns>/points carries: dds.points_decimation, dds.points_valid_only.
+  CloudLayout points_layout;
   double status_period_s = 1.0;
   // Per topic writer QoS (`dds.qos.points`, `.images` for depth, shading and
   // camera_info, `.projector_maps`, `.image_sets`).

@@ -1,0 +1,35 @@
+// What rt/<ns>/points carries of a scan: the full organized cloud (the
+// default), every N-th pixel of every N-th row (dds.points_decimation), or
+// the valid points only (dds.points_valid_only, an unorganized cloud of
+// height 1). Lighter clouds for links or subscribers that cannot take
+// 25 MB at the scan rate (README "Topics").
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "sl/pipeline/types.h"
+
+namespace sl::daemon {
+
+struct CloudLayout {
+  int decimation = 1;       // 1..16: keep pixels (u, v) with u % N == 0 and v % N == 0
+  bool valid_only = false;  // drop NaN points (organized -> height 1)
+};
+
+// PointCloud2 data of x, y, z (metres) and intensity, float32 each, 16 bytes a point.
+struct PackedCloud {
+  const std::uint8_t* data = nullptr;  // the cloud's own points or `buffer`
+  std::size_t bytes = 0;
+  std::uint32_t width = 0, height = 0;
+  bool dense = false;  // true only when it is known that no point is NaN (valid_only)
+};
+
+// Packs `cloud` (x, y, z in units of `unit_m` metres) as `layout` says. With
+// metres, the full organized layout borrows cloud.points (no copy); anything
+// else is written to `buffer` in one pass. The result points into `cloud`
+// or `buffer`, so both must outlive it.
+PackedCloud packCloud(const pipeline::PointCloud& cloud, double unit_m, const CloudLayout& layout,
+                      std::vector<float>& buffer);
+
+}  // namespace sl::daemon
