@@ -10,6 +10,7 @@
 // requests on the daemon's request topic exactly as slctl does.
 #include <json/json.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -21,10 +22,10 @@
 #include <thread>
 
 #include "common/cdr.h"
-#include "common/cli.h"
 #include "common/ros2_schemas.h"
 #include "foxglove_server.h"
 #include "mcap_record.h"
+#include "options.h"
 #include "preview.h"
 #include "raw_topics.h"
 #include "sl/daemon/client.h"
@@ -38,6 +39,9 @@
 
 namespace {
 
+using sl::view::ArgCursor;
+using sl::view::parseTopicOption;
+
 std::atomic<bool> g_stop{false};
 void onSignal(int) { g_stop = true; }
 
@@ -47,9 +51,13 @@ const char* kUsage =
     "options (both):\n"
     "  --domain N        DDS domain (default 0)\n"
     "  --ns NAME         the daemon's namespace (default sl)\n"
-    "  --best-effort     read clouds and images best-effort (default reliable,\n"
-    "                    keep-last 1; best-effort loses clouds bigger than the\n"
-    "                    socket receive buffer)\n"
+    "  --best-effort     read clouds and images best-effort, keep-last 1 (the live\n"
+    "                    view's default: the daemon never waits for sl_view; a\n"
+    "                    cloud whose burst overflows the socket receive buffer is\n"
+    "                    lost and counted)\n"
+    "  --reliable        read them reliably (record's default, keep-last 8: lost\n"
+    "                    fragments are repaired, but an sl_view short of CPU then\n"
+    "                    holds the daemon's reliable writers back)\n"
     "live view:\n"
     "  --host ADDR       listen address (default 127.0.0.1; 0.0.0.0 = every interface)\n"
     "  --port N          TCP port (default 8765; 0 = any free port)\n"
@@ -64,7 +72,10 @@ const char* kUsage =
     "  --seconds S       stop after S seconds\n"
     "  --scan N          also ask the daemon for N scans (as `slctl scan --count N`);\n"
     "                    0: scan continuously, stopped after --count clouds\n"
-    "  --compression C   chunk compression: zstd (default), lz4 or none\n";
+    "  --compression C   chunk compression: zstd (default), lz4 or none\n"
+    "  --buffer-mb N     samples taken but not yet written, at most N MB (default\n"
+    "                    1024); beyond, samples are dropped, named, exit code 5\n"
+    "  a scan's images and camera_info missing from the file are named (exit code 5)\n";
 
 int usage(const std::string& error) {
   std::cerr << "sl_view: " << error << "\n" << kUsage;
@@ -116,32 +127,18 @@ int serve(int argc, char** argv) {
   sl::view::RawTopicsOptions topics;
   int decimate = 4;
   std::string web_dir = SL_VIEW_WEB_DIR, three_dir = SL_VIEW_THREE_DIR;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
-    const auto integer = [&](int lo, int hi) {
-      const std::string v = value();
-      const auto n = sl::tools::toInt(v);
-      if (!n || *n < lo || *n > hi)
-        throw std::invalid_argument(a + " " + v + ": expected an integer in [" +
-                                    std::to_string(lo) + ", " + std::to_string(hi) + "]");
-      return *n;
-    };
+  for (ArgCursor args(argc, argv, 1); args.next();) {
+    const std::string a = args.option();
     if (a == "--help" || a == "-h") {
       std::cout << kUsage;
       return 0;
-    } else if (a == "--host") server.host = value();
-    else if (a == "--port") server.port = integer(0, 65535);
-    else if (a == "--queue") server.queue_depth = static_cast<std::size_t>(integer(1, 64));
-    else if (a == "--decimate") decimate = integer(1, 64);
-    else if (a == "--domain") topics.domain_id = integer(0, 232);
-    else if (a == "--ns") topics.ns = value();
-    else if (a == "--best-effort") topics.best_effort = true;
-    else if (a == "--web-dir") web_dir = value();
-    else if (a == "--three-dir") three_dir = value();
+    } else if (parseTopicOption(args, topics)) continue;
+    else if (a == "--host") server.host = args.value();
+    else if (a == "--port") server.port = args.integer(0, 65535);
+    else if (a == "--queue") server.queue_depth = static_cast<std::size_t>(args.integer(1, 64));
+    else if (a == "--decimate") decimate = args.integer(1, 64);
+    else if (a == "--web-dir") web_dir = args.value();
+    else if (a == "--three-dir") three_dir = args.value();
     else throw std::invalid_argument("unknown option '" + a + "'");
   }
   if (!std::filesystem::exists(three_dir + "/build/three.module.js"))
@@ -167,11 +164,7 @@ int serve(int argc, char** argv) {
                         schema.definition, "ros2msg"});
   }
 
-  sl::daemon::ClientOptions client_options;
-  client_options.domain_id = topics.domain_id;
-  client_options.ns = topics.ns;
-  client_options.subscribe_points = false;
-  sl::daemon::SensorClient client(client_options);
+  sl::daemon::SensorClient client(sl::view::clientOptions(topics));
   std::vector<sl::view::ServiceInfo> services;
   services.push_back({1, "/" + topics.ns + "/command", "sl_msgs/srv/Command",
                       [&client](const std::string& req) { return requestJson(req, client); }});
@@ -185,10 +178,20 @@ int serve(int argc, char** argv) {
   std::signal(SIGTERM, onSignal);
   std::uint64_t preview_errors = 0;
   std::string last_preview_error;
+  std::vector<std::uint32_t> incompatible(raw.topics().size(), 0);
   while (!g_stop) {
-    for (std::size_t i = 0; i < raw.topics().size(); ++i)
+    for (std::size_t i = 0; i < raw.topics().size(); ++i) {
       raw.setActive(i, ws.subscribed(static_cast<std::uint32_t>(i + 1)) ||
                            (i == points_topic && ws.subscribed(preview_channel)));
+      // A writer this reader cannot read would leave the topic silently empty.
+      std::int32_t policy = 0;
+      const std::uint32_t n = raw.incompatibleWriters(i, &policy);
+      if (n > incompatible[i])
+        std::cerr << "sl_view: warning: " << raw.topics()[i].ros_name
+                  << ": a writer's QoS does not match this reader (policy id " << policy
+                  << (topics.best_effort ? "" : "; try --best-effort") << ")\n";
+      incompatible[i] = std::max(incompatible[i], n);
+    }
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const sl::view::RawSample> s) {
       const std::uint32_t channel = static_cast<std::uint32_t>(s->topic + 1);
       if (s->topic == points_topic && ws.subscribed(preview_channel)) {
@@ -207,6 +210,11 @@ int serve(int argc, char** argv) {
     });
   }
   ws.stop();
+  for (std::size_t i = 0; i < raw.topics().size(); ++i)
+    if (raw.samplesLost(i) > 0)
+      std::printf("sl_view: %s: %llu samples lost in DDS (best-effort: a fragment missing)\n",
+                  raw.topics()[i].ros_name.c_str(),
+                  static_cast<unsigned long long>(raw.samplesLost(i)));
   const auto st = ws.stats();
   std::printf("sl_view: %llu messages sent, %llu dropped for slow viewers\n",
               static_cast<unsigned long long>(st.sent),

@@ -1,68 +1,177 @@
 #include "mcap_record.h"
 
 #include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <mutex>
 #include <cstdio>
 #include <iostream>
 #include <map>
 #include <optional>
+#include <set>
 #include <thread>
+#include <utility>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "common/cdr.h"
-#include "common/cli.h"
 #include "common/mcap_writer.h"
 #include "common/ros2_schemas.h"
+#include "options.h"
 #include "raw_topics.h"
 #include "sl/daemon/client.h"
 
 namespace sl::view {
+
+namespace {
+
+// A scan: its cloud's header stamp (ns) and frame, shared by the scan's
+// depth and shading images and camera_info.
+using ScanKey = std::pair<std::uint64_t, std::string>;
+
+bool isScanTopic(const std::string& type_name) {
+  return type_name == "sensor_msgs/msg/PointCloud2" || type_name == "sensor_msgs/msg/Image" ||
+         type_name == "sensor_msgs/msg/CameraInfo";
+}
+
+ScanKey scanKey(const RawSample& s, const std::string& topic) {
+  tools::CdrReader header(s.data(), s.size(), topic + " sample");
+  const std::int32_t sec = header.i32();
+  const std::uint32_t nanosec = header.u32();
+  return {static_cast<std::uint64_t>(sec) * 1000000000ull + nanosec, header.string()};
+}
+
+// Whether topic t should hold a message of scan k, given the keys it holds:
+// camera_info describes the first camera only (the frame of the camera_info
+// messages seen; every frame if none was seen).
+bool expects(const TopicInfo& t, const std::set<ScanKey>& held, const ScanKey& k) {
+  if (t.type_name != "sensor_msgs/msg/CameraInfo" || held.empty()) return true;
+  for (const auto& h : held)
+    if (h.second == k.second) return true;
+  return false;
+}
+
+// Samples on their way into the file. The DDS side only takes samples and
+// queues them; this queue's thread compresses and writes, so a slow disk or
+// a CPU-starved compressor never leaves a DDS reader's keep-last history to
+// overwrite samples unseen. Bounded by bytes: a sample that does not fit is
+// dropped and counted. Thread-safe.
+class WriteQueue {
+ public:
+  WriteQueue(tools::McapWriter& writer, std::size_t max_bytes)
+      : writer_(writer), max_bytes_(max_bytes), thread_([this] { run(); }) {}
+  ~WriteQueue() { finish(); }
+
+  // False (and counted) if the queue is full or the writer failed.
+  bool push(std::uint16_t channel, std::uint32_t sequence, std::shared_ptr<const RawSample> s) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (error_ || bytes_ + s->size() > max_bytes_) {
+      ++dropped_;
+      return false;
+    }
+    bytes_ += s->size();
+    queue_.push_back({channel, sequence, std::move(s)});
+    cv_.notify_one();
+    return true;
+  }
+  // Writes what is queued, stops the thread; rethrows a write error.
+  void finish() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+      cv_.notify_one();
+    }
+    if (thread_.joinable()) thread_.join();
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+  bool failed() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return error_ != nullptr;
+  }
+  std::uint64_t dropped() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return dropped_;
+  }
+
+ private:
+  struct Item {
+    std::uint16_t channel;
+    std::uint32_t sequence;
+    std::shared_ptr<const RawSample> sample;
+  };
+  void run() {
+    for (;;) {
+      Item item;
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        cv_.wait(lock, [&] { return done_ || !queue_.empty(); });
+        if (queue_.empty()) return;
+        item = std::move(queue_.front());
+        queue_.pop_front();
+      }
+      try {
+        writer_.write(item.channel, item.sequence, item.sample->receive_ns, item.sample->source_ns,
+                      item.sample->bytes());
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mu_);
+        error_ = std::current_exception();
+        dropped_ += queue_.size() + 1;
+        queue_.clear();
+        bytes_ = 0;
+        return;
+      }
+      std::lock_guard<std::mutex> lock(mu_);
+      bytes_ -= item.sample->size();
+    }
+  }
+
+  tools::McapWriter& writer_;  // used by the thread only
+  const std::size_t max_bytes_;
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Item> queue_;       // guarded by mu_
+  std::size_t bytes_ = 0;        // guarded by mu_
+  std::uint64_t dropped_ = 0;    // guarded by mu_
+  bool done_ = false;            // guarded by mu_
+  std::exception_ptr error_;     // guarded by mu_
+  std::thread thread_;
+};
+
+}  // namespace
 
 int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   if (argc < 2 || argv[1][0] == '-')
     throw std::invalid_argument("record needs the output file (sl_view record FILE.mcap)");
   const std::string path = argv[1];
   RawTopicsOptions topics;
-  topics.depth = 8;  // room for a burst while a chunk is compressed
+  // A recording wants every sample: reliable (repaired), room for a burst
+  // while a chunk is compressed.
+  topics.best_effort = false;
+  topics.depth = 8;
   tools::McapWriterOptions mcap;
   long count = 0, scan = -1;  // scan: -1 none, 0 continuous
   double seconds = 0;
-  for (int i = 2; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
-    const auto integer = [&](int lo, int hi) {
-      const std::string v = value();
-      const auto n = tools::toInt(v);
-      if (!n || *n < lo || *n > hi)
-        throw std::invalid_argument(a + " " + v + ": expected an integer in [" +
-                                    std::to_string(lo) + ", " + std::to_string(hi) + "]");
-      return *n;
-    };
+  std::size_t buffer_mb = 1024;  // samples taken but not yet written
+  for (ArgCursor args(argc, argv, 2); args.next();) {
+    const std::string a = args.option();
+    if (parseTopicOption(args, topics)) continue;
     if (a == "--topics") {
-      std::stringstream list(value());
+      std::stringstream list(args.value());
       for (std::string t; std::getline(list, t, ',');)
         if (!t.empty()) topics.only.push_back(t);
-    } else if (a == "--count") count = integer(1, 1000000);
-    else if (a == "--scan") scan = integer(0, 1000000);
-    else if (a == "--seconds") {
-      const std::string v = value();
-      const auto s = tools::toNumber(v);
-      if (!s || *s <= 0) throw std::invalid_argument("--seconds " + v + ": expected a number > 0");
-      seconds = *s;
-    } else if (a == "--compression") {
-      mcap.compression = value();
+    } else if (a == "--count") count = args.integer(1, 1000000);
+    else if (a == "--scan") scan = args.integer(0, 1000000);
+    else if (a == "--seconds") seconds = args.positive();
+    else if (a == "--buffer-mb") buffer_mb = static_cast<std::size_t>(args.integer(64, 65536));
+    else if (a == "--compression") {
+      mcap.compression = args.value();
       if (mcap.compression == "none") mcap.compression.clear();
       if (mcap.compression != "" && mcap.compression != "zstd" && mcap.compression != "lz4")
         throw std::invalid_argument("--compression " + mcap.compression + ": zstd, lz4 or none");
-    } else if (a == "--domain") topics.domain_id = integer(0, 232);
-    else if (a == "--ns") topics.ns = value();
-    else if (a == "--best-effort") topics.best_effort = true;
-    else throw std::invalid_argument("record: unknown option '" + a + "'");
+    } else throw std::invalid_argument("record: unknown option '" + a + "'");
   }
   if (topics.only.empty()) {
     // Image sets and projector maps are big and off by default in the
@@ -100,11 +209,7 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   const auto t0 = std::chrono::steady_clock::now();
   std::optional<daemon::SensorClient> client;
   if (scan >= 0) {
-    daemon::ClientOptions co;
-    co.domain_id = topics.domain_id;
-    co.ns = topics.ns;
-    co.subscribe_points = false;
-    client.emplace(co);
+    client.emplace(clientOptions(topics));
     if (!client->waitForDaemon(std::chrono::seconds(10))) {
       std::cerr << "sl_view record: no daemon on domain " << topics.domain_id << " ns '"
                 << topics.ns << "' within 10 s\n";
@@ -115,6 +220,13 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
       if (i != status_topic)
         for (int k = 0; k < 200 && raw.matchedWriters(i) == 0; ++k)
           std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    for (std::size_t i = 0; i < raw.topics().size(); ++i) {
+      std::int32_t policy = 0;
+      if (raw.matchedWriters(i) == 0 && raw.incompatibleWriters(i, &policy) > 0)
+        throw std::runtime_error(raw.topics()[i].ros_name +
+                                 ": the daemon's writer QoS does not match this reader (policy id " +
+                                 std::to_string(policy) + ")");
+    }
     const auto reply = client->request(daemon::Command::kStart, "", static_cast<int>(scan),
                                       std::chrono::seconds(10));
     if (!reply) {
@@ -128,36 +240,89 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
     if (count == 0) count = scan;
   }
 
+  // A scan's cloud, depth and shading images and camera_info share the
+  // cloud's header stamp and frame, and the daemon publishes the images
+  // after the cloud: a recording that ends with the N-th cloud waits (up to
+  // kTailWait) for that scan's other messages, and leaves out the next
+  // scan's. At the end, each scan topic is checked against the clouds: a
+  // message missing is named and makes the exit code 5.
+  std::vector<std::size_t> scan_topics;  // topics other than the cloud carrying one per scan
+  for (std::size_t i = 0; i < raw.topics().size(); ++i)
+    if (i != points_topic && isScanTopic(raw.topics()[i].type_name)) scan_topics.push_back(i);
+  std::set<ScanKey> cloud_keys;
+  std::vector<std::set<ScanKey>> keys_of(raw.topics().size());
+  std::optional<ScanKey> last_cloud;  // the N-th cloud, once recorded
+  std::optional<std::chrono::steady_clock::time_point> tail_since;
+  constexpr auto kTailWait = std::chrono::seconds(3);
+  const auto tailComplete = [&] {
+    for (const std::size_t i : scan_topics)
+      if (!keys_of[i].count(*last_cloud) && expects(raw.topics()[i], keys_of[i], *last_cloud))
+        return false;
+    return true;
+  };
+
   std::vector<std::uint32_t> sequence(raw.topics().size(), 0);
   long clouds = 0;
   std::uint64_t bytes = 0;
+  std::uint64_t dropped_after = 0;  // samples of scans after the last one recorded
   // With --scan: the daemon going back to idle ends the recording too (a
   // scan it could not complete never comes); 0.5 s later, for the last
   // images.
   bool scanning_seen = false;
+  std::optional<std::uint64_t> writes_timed_out_at_start, writes_timed_out;
   std::optional<std::chrono::steady_clock::time_point> idle_since;
-  while (!stop) {
-    if (count > 0 && clouds >= count) break;
-    if (idle_since && std::chrono::steady_clock::now() - *idle_since > std::chrono::milliseconds(500)) {
+  WriteQueue queue(writer, buffer_mb << 20);
+  std::vector<std::uint64_t> not_written(raw.topics().size(), 0);
+  while (!stop && !queue.failed()) {
+    const auto now = std::chrono::steady_clock::now();
+    if (last_cloud) {
+      if (tailComplete()) break;
+      if (!tail_since) tail_since = now;
+      if (now - *tail_since > kTailWait) break;
+    }
+    if (idle_since && now - *idle_since > std::chrono::milliseconds(500)) {
       std::cerr << "sl_view record: the daemon went idle after " << clouds << " of " << count
                 << " clouds\n";
       break;
     }
-    if (seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() >= seconds)
-      break;
+    if (seconds > 0 && std::chrono::duration<double>(now - t0).count() >= seconds) break;
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const RawSample> s) {
-      if (count > 0 && clouds >= count) return;
-      writer.write(channel_of[s->topic], ++sequence[s->topic], s->receive_ns, s->source_ns,
-                   s->bytes());
-      bytes += s->size();
-      if (s->topic == points_topic) ++clouds;
-      if (scan > 0 && s->topic == status_topic) {
+      const TopicInfo& t = raw.topics()[s->topic];
+      std::optional<ScanKey> key;
+      if (s->topic == points_topic || isScanTopic(t.type_name)) key = scanKey(*s, t.dds_name);
+      if (last_cloud && key && *key > *last_cloud) {
+        ++dropped_after;  // the next scan's: not part of this recording
+        return;
+      }
+      const std::size_t size = s->size();
+      if (!queue.push(channel_of[s->topic], sequence[s->topic] + 1, s)) {
+        ++not_written[s->topic];
+        return;
+      }
+      ++sequence[s->topic];
+      bytes += size;
+      if (key) keys_of[s->topic].insert(*key);
+      if (s->topic == points_topic) {
+        cloud_keys.insert(*key);
+        if (count > 0 && ++clouds >= count) last_cloud = key;
+        else if (count == 0) ++clouds;
+      }
+      if (s->topic == status_topic) {
         tools::CdrReader status(s->data(), s->size(), "status sample");
         status.i32();  // stamp
         status.u32();
         const std::uint32_t state = status.u32();  // sl_msgs State: 0 idle, 1 scanning
-        if (state == 1 || state == 3) scanning_seen = true;
-        if (state == 0 && scanning_seen && !idle_since) idle_since = std::chrono::steady_clock::now();
+        status.string();                           // pattern
+        status.u64();                              // scans_done
+        status.u64();                              // scans_requested
+        status.f64();                              // scan_rate_hz
+        for (int k = 0; k < 6; ++k) status.u64();  // frames_dropped .. sets_overflow
+        writes_timed_out = status.u64();
+        if (!writes_timed_out_at_start) writes_timed_out_at_start = writes_timed_out;
+        if (scan > 0) {
+          if (state == 1 || state == 3) scanning_seen = true;
+          if (state == 0 && scanning_seen && !idle_since) idle_since = std::chrono::steady_clock::now();
+        }
       }
     });
   }
@@ -167,11 +332,37 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
       std::cerr << "sl_view record: could not stop the scan: "
                 << (reply ? reply->reason : std::string("no reply")) << "\n";
   }
+  queue.finish();
   writer.close();
   std::printf("sl_view record: %llu messages (%ld clouds, %.1f MB of CDR) -> %s\n",
               static_cast<unsigned long long>(writer.messageCount()), clouds, bytes / 1e6,
               path.c_str());
-  return 0;
+  int rc = 0;
+  for (std::size_t i = 0; i < raw.topics().size(); ++i) {
+    if (not_written[i] == 0) continue;
+    std::fprintf(stderr,
+                 "sl_view record: %s: %llu samples dropped: the file writer fell %d MB behind "
+                 "(--buffer-mb)\n",
+                 raw.topics()[i].ros_name.c_str(), static_cast<unsigned long long>(not_written[i]),
+                 static_cast<int>(buffer_mb));
+    rc = 5;
+  }
+  // Every scan topic against the clouds recorded.
+  for (const std::size_t i : scan_topics) {
+    std::size_t missing = 0;
+    for (const auto& k : cloud_keys)
+      if (!keys_of[i].count(k) && expects(raw.topics()[i], keys_of[i], k)) ++missing;
+    if (missing == 0) continue;
+    std::fprintf(stderr, "sl_view record: %s: %zu of the %zu scans recorded have no message\n",
+                 raw.topics()[i].ros_name.c_str(), missing, cloud_keys.size());
+    rc = 5;
+  }
+  if (rc != 0 && writes_timed_out && *writes_timed_out > *writes_timed_out_at_start)
+    std::fprintf(stderr,
+                 "sl_view record: the daemon counted %llu DDS writes timed out meanwhile "
+                 "(writes_timed_out): it did not publish them\n",
+                 static_cast<unsigned long long>(*writes_timed_out - *writes_timed_out_at_start));
+  return rc;
 }
 
 }  // namespace sl::view

@@ -7,7 +7,8 @@
 namespace sl::view {
 
 // argv[0] is "record". Returns the exit code (0 ok, 1 error, 2 usage,
-// 3 no daemon, 4 scan request rejected), like slctl.
+// 3 no daemon, 4 scan request rejected, 5 a scan's image or camera_info
+// missing from the file: named on stderr).
 int recordMain(int argc, char** argv, const std::atomic<bool>& stop);
 
 }  // namespace sl::view

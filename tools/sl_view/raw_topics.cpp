@@ -2,6 +2,7 @@
 
 #include <dds/ddsi/ddsi_serdata.h>
 
+#include <algorithm>
 #include <chrono>
 #include <optional>
 #include <stdexcept>
@@ -138,6 +139,11 @@ const std::vector<TopicInfo>& RawTopics::topics() const { return impl_->infos; }
 bool RawTopics::poll(std::int64_t timeout_ns, const Callback& callback) {
   std::vector<dds_attach_t> triggered;
   impl_->waitset.wait(timeout_ns, &triggered);
+  // Every triggered reader is emptied before any callback runs, and the
+  // samples are handed over in the order they were taken: a slow callback
+  // on one topic's samples (a 25 MB cloud compressed into a file) must not
+  // leave the other readers' keep-last histories to overwrite theirs.
+  std::vector<std::shared_ptr<RawSample>> batch;
   bool woken = false;
   for (const dds_attach_t cookie : triggered) {
     if (cookie == 0) {
@@ -160,7 +166,6 @@ bool RawTopics::poll(std::int64_t timeout_ns, const Callback& callback) {
       sample->topic = i;
       sample->receive_ns = nowNs();
       sample->source_ns = static_cast<std::uint64_t>(info.source_timestamp);
-      sample->sequence = impl_->next_sequence++;
       const std::uint32_t size = ddsi_serdata_size(serdata);
       ddsrt_iovec_t iov;
       sample->ref_ = ddsi_serdata_to_ser_ref(serdata, 0, size, &iov);
@@ -177,8 +182,16 @@ bool RawTopics::poll(std::int64_t timeout_ns, const Callback& callback) {
         ddsi_serdata_to_ser(serdata, 0, size, sample->copy_.data());
         sample->bytes_ = sample->copy_;
       }
-      callback(std::move(sample));
+      batch.push_back(std::move(sample));
     }
+  }
+  // In the writers' order (a scan's cloud before its images), then as taken.
+  std::stable_sort(batch.begin(), batch.end(), [](const auto& a, const auto& b) {
+    return a->source_ns < b->source_ns;
+  });
+  for (auto& sample : batch) {
+    sample->sequence = impl_->next_sequence++;
+    callback(std::move(sample));
   }
   return !woken;
 }
@@ -197,6 +210,15 @@ std::uint64_t RawTopics::samplesLost(std::size_t i) const {
   dds_sample_lost_status_t status;
   dds::check(dds_get_sample_lost_status(impl_->readers[i]->handle(), &status),
              "dds_get_sample_lost_status");
+  return status.total_count;
+}
+
+std::uint32_t RawTopics::incompatibleWriters(std::size_t i, std::int32_t* last_policy) const {
+  if (!impl_->readers.at(i)) return 0;
+  dds_requested_incompatible_qos_status_t status;
+  dds::check(dds_get_requested_incompatible_qos_status(impl_->readers[i]->handle(), &status),
+             "dds_get_requested_incompatible_qos_status");
+  if (last_policy != nullptr) *last_policy = static_cast<std::int32_t>(status.last_policy_id);
   return status.total_count;
 }
 

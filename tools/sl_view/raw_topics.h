@@ -56,15 +56,21 @@ class RawSample {
 struct RawTopicsOptions {
   int domain_id = 0;
   std::string ns = "sl";
-  // Reliable (default): lost fragments of a 25 MB cloud are resent, and the
-  // reader keeps only the latest sample (keep-last 1), acknowledging on
-  // receipt in Cyclone's receive thread, so slow consumers of this program
-  // never hold the daemon's writer back (a process starved of CPU does:
-  // the daemon's reliable writers wait for its acknowledgements). Best-effort
-  // loses every cloud whose burst overflows the socket receive buffer (most
-  // of them with Linux's default rmem_max). Status is always reliable +
-  // transient-local (the latest one arrives on start-up).
-  bool best_effort = false;
+  // Clouds and images (status is always reliable + transient-local, so the
+  // latest one arrives on start-up):
+  // - best-effort, keep-last 1 (default; the viewer profile): the daemon's
+  //   writers never wait for this reader (no acknowledgements, no repairs),
+  //   so a viewer starved of CPU or stopped cannot slow the sensor; it
+  //   matches the daemon's reliable writers (a best-effort reader may read a
+  //   reliable writer). A cloud is lost when a fragment is: its 25 MB burst
+  //   must fit the socket receive buffer (config/cyclonedds-*.xml ask for
+  //   8 MiB or more; Linux grants at most net.core.rmem_max). Lost samples
+  //   are counted (samplesLost()).
+  // - reliable, keep-last `depth` (the recorder): lost fragments are
+  //   repaired; acknowledged by Cyclone's receive thread, but a process
+  //   short of CPU acknowledges late and the daemon's reliable writers wait
+  //   for it (up to their max_blocking_s).
+  bool best_effort = true;
   int depth = 1;  // keep-last depth of the cloud and image readers
   std::vector<std::string> only;  // ROS names to subscribe; empty = all
   // Lazy: only the status reader exists at first; setActive() creates and
@@ -91,6 +97,9 @@ class RawTopics {
   std::uint32_t matchedWriters(std::size_t i) const;
   // Samples Cyclone reported lost (best-effort fragments missing) per topic.
   std::uint64_t samplesLost(std::size_t i) const;
+  // Writers on topic i that did not match for incompatible QoS (0 while
+  // inactive), and the last policy that did not match (DDS_*_QOS_POLICY_ID).
+  std::uint32_t incompatibleWriters(std::size_t i, std::int32_t* last_policy = nullptr) const;
 
  private:
   struct Impl;
