@@ -30,6 +30,16 @@ std::string toJson(const Json::Value& v) {
   return Json::writeString(b, v);
 }
 
+// {"op": op, key: [item(x) for x in items]} as JSON text.
+template <typename T, typename F>
+std::string opWithList(const char* op, const char* key, const std::vector<T>& items, F item) {
+  Json::Value v;
+  v["op"] = op;
+  v[key] = Json::Value(Json::arrayValue);
+  for (const auto& x : items) v[key].append(item(x));
+  return toJson(v);
+}
+
 void putU32(std::string& s, std::uint32_t v) {
   char b[4];
   std::memcpy(b, &v, 4);  // little-endian host (x86-64, aarch64)
@@ -70,6 +80,7 @@ struct Client {
   std::string remote;
   std::map<std::uint32_t, std::uint32_t> subscriptions;  // subscription id -> channel
   std::map<std::uint32_t, std::deque<Queued>> queues;    // per subscription id
+  std::uint32_t last_served = 0;                         // subscription id
   std::uint64_t sent = 0, dropped = 0;
 };
 
@@ -152,10 +163,7 @@ struct FoxgloveServer::Impl {
     }
     info["sessionId"] = std::to_string(std::chrono::system_clock::now().time_since_epoch().count());
     sendText(hdl, toJson(info));
-    Json::Value adv;
-    adv["op"] = "advertise";
-    adv["channels"] = Json::Value(Json::arrayValue);
-    for (const auto& ch : channels) {
+    sendText(hdl, opWithList("advertise", "channels", channels, [](const ChannelInfo& ch) {
       Json::Value c;
       c["id"] = ch.id;
       c["topic"] = ch.topic;
@@ -163,24 +171,18 @@ struct FoxgloveServer::Impl {
       c["schemaName"] = ch.schema_name;
       c["schema"] = ch.schema;
       c["schemaEncoding"] = ch.schema_encoding;
-      adv["channels"].append(c);
-    }
-    sendText(hdl, toJson(adv));
-    if (!services.empty()) {
-      Json::Value s;
-      s["op"] = "advertiseServices";
-      s["services"] = Json::Value(Json::arrayValue);
-      for (const auto& svc : services) {
-        Json::Value j;
-        j["id"] = svc.id;
-        j["name"] = svc.name;
-        j["type"] = svc.type;
-        j["requestSchema"] = "";
-        j["responseSchema"] = "";
-        s["services"].append(j);
-      }
-      sendText(hdl, toJson(s));
-    }
+      return c;
+    }));
+    if (!services.empty())
+      sendText(hdl, opWithList("advertiseServices", "services", services, [](const ServiceInfo& svc) {
+        Json::Value s;
+        s["id"] = svc.id;
+        s["name"] = svc.name;
+        s["type"] = svc.type;
+        s["requestSchema"] = "";
+        s["responseSchema"] = "";
+        return s;
+      }));
   }
 
   void onClose(Hdl hdl) {
@@ -443,15 +445,22 @@ struct FoxgloveServer::Impl {
           (void)hdl;
           if (!c.connection || c.connection->get_buffered_amount() >= options.max_in_flight_bytes)
             continue;
-          std::deque<Queued>* oldest = nullptr;
-          for (auto& [sub, q] : c.queues) {
-            (void)sub;
-            if (!q.empty() && (oldest == nullptr || q.front().sequence < oldest->front().sequence))
-              oldest = &q;
+          // Subscriptions take turns (the next non-empty queue after the
+          // one served last): a viewer slower than the sensor still gets
+          // the latest of every topic, not only of those published first
+          // in a scan (a 25 MB cloud ahead of its camera_info every time).
+          std::deque<Queued>* turn = nullptr;
+          auto it = c.queues.upper_bound(c.last_served);
+          for (std::size_t k = 0; k < c.queues.size() && turn == nullptr; ++k, ++it) {
+            if (it == c.queues.end()) it = c.queues.begin();
+            if (!it->second.empty()) {
+              turn = &it->second;
+              c.last_served = it->first;
+            }
           }
-          if (oldest == nullptr) continue;
-          next = std::move(oldest->front());
-          oldest->pop_front();
+          if (turn == nullptr) continue;
+          next = std::move(turn->front());
+          turn->pop_front();
           ++c.sent;
           ++total_sent;
           con = c.connection;

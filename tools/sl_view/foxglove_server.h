@@ -4,7 +4,7 @@
 //
 // Back-pressure: every subscription of every client has a queue of at most
 // `queue_depth` messages; publishing into a full queue drops its oldest
-// message and counts it. A client's next message is handed to the socket
+// message and counts it; a client's subscriptions take turns. Its next message is handed to the socket
 // only when less than `max_in_flight_bytes` of the previous ones are still
 // unsent, so a stalled viewer holds at most one message plus its queues and
 // publish() never blocks (the DDS side never waits for a viewer).
