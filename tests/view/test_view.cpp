@@ -1,7 +1,7 @@
-// sl_view's pieces without DDS: the CDR reader's errors, the preview
-// decimation, the ROS 2 schemas and the MCAP writer's framing (the Node
-// tests check the files with @mcap/core; these check what they cannot see:
-// errors, and the bytes we choose).
+// sl_view's pieces: the CDR reader's errors, the preview decimation, the
+// ROS 2 schemas and the MCAP writer's framing (the Node tests check the files
+// with @mcap/core; these check what they cannot see: errors, and the bytes
+// we choose), and the DDS readers' QoS against the daemon's writers.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -14,6 +14,14 @@
 #include "common/mcap_writer.h"
 #include "common/ros2_schemas.h"
 #include "preview.h"
+#include "raw_topics.h"
+#include "sl/daemon/dds_bridge.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <map>
+#include <thread>
 
 using sl::tools::CdrError;
 using sl::tools::CdrReader;
@@ -158,4 +166,60 @@ TEST_CASE("McapWriter: magic at both ends, the footer points at the summary, err
   std::remove(path.c_str());
   CHECK_THROWS_WITH(sl::tools::McapWriter("/nonexistent/dir/x.mcap"), Catch::Contains("/nonexistent/dir/x.mcap"));
   CHECK_THROWS_WITH(sl::tools::McapWriter(path, {"ros2", "t", "brotli", 1}), Catch::Contains("brotli"));
+}
+
+// The viewer's readers against the daemon's own writers (DdsBridge with the
+// default dds.qos: reliable keep-last): the best-effort keep-last-1 profile
+// and the recorder's reliable one both match (no incompatible QoS) and
+// receive a published scan's cloud, images and camera_info. DDS on domain 0
+// (run in a private network namespace, as the suite is).
+TEST_CASE("sl_view's reader QoS matches the daemon's writers", "[view][dds]") {
+  sl::daemon::DdsConfig dds;
+  dds.ns = "view_qos_" + std::to_string(::getpid());
+  dds.publish_images = true;
+  sl::pipeline::PinholeModel camera;
+  camera.width = 8;
+  camera.height = 6;
+  camera.fx = camera.fy = 10;
+  camera.cx = 4;
+  camera.cy = 3;
+  sl::daemon::DdsBridge bridge(dds, "cam0", camera);
+  for (const bool best_effort : {true, false}) {
+    CAPTURE(best_effort);
+    sl::view::RawTopicsOptions options;
+    options.ns = dds.ns;
+    options.best_effort = best_effort;
+    options.only = {"/" + dds.ns + "/points", "/" + dds.ns + "/depth/image",
+                    "/" + dds.ns + "/shading/image", "/" + dds.ns + "/camera_info"};
+    sl::view::RawTopics raw(options);
+    REQUIRE(raw.topics().size() == 4);
+    for (std::size_t i = 0; i < raw.topics().size(); ++i) {
+      CAPTURE(raw.topics()[i].ros_name);
+      for (int k = 0; k < 500 && raw.matchedWriters(i) == 0; ++k)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      CHECK(raw.matchedWriters(i) == 1);
+      CHECK(raw.incompatibleWriters(i) == 0);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the writers match us too
+    auto cloud = std::make_shared<sl::pipeline::PointCloud>();
+    cloud->width = camera.width;
+    cloud->height = camera.height;
+    cloud->stamp_ns = 1'700'000'000'123'000'000 + (best_effort ? 0 : 1);
+    cloud->points.assign(camera.width * camera.height, {1.f, 2.f, 500.f, 100.f});
+    sl::daemon::ScanResult result;
+    result.camera_id = "cam0";
+    result.cloud = cloud;
+    std::map<std::string, int> got;
+    for (int attempt = 0; attempt < 50 && got.size() < 4; ++attempt) {
+      if (attempt % 10 == 0) bridge.publish(result);  // again if the writer had not matched yet
+      raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const sl::view::RawSample> s) {
+        CdrReader header(s->data(), s->size(), "sample");
+        CHECK(header.i32() == 1'700'000'000);
+        CHECK(header.u32() == 123'000'000u + (best_effort ? 0u : 1u));
+        ++got[raw.topics()[s->topic].ros_name];
+      });
+    }
+    CHECK(got.size() == 4);
+    for (std::size_t i = 0; i < raw.topics().size(); ++i) CHECK(raw.samplesLost(i) == 0);
+  }
 }
