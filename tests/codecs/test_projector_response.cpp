@@ -1,14 +1,23 @@
 // A non-linear projector (gamma) compensated in decoding: the phase tables
 // built from the response, the response from a grey ramp, the gamma from the
 // phase-shift captures themselves.
+#include <sys/wait.h>
+
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <numbers>
 #include <string>
 #include <vector>
 
 #include <catch2/catch.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
+#include "sl/daemon/calibration_io.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/projector_response.h"
 
@@ -185,4 +194,82 @@ TEST_CASE("the response is measured from a ramp of grey levels", "[codecs][gamma
   std::vector<cv::Mat> dark(frames.size(), cv::Mat(60, 80, CV_8UC1, cv::Scalar(5)));
   CHECK_THROWS_WITH(pipeline::estimateProjectorResponse(dark, levels, 8),
                     Catch::Contains("enough contrast"));
+}
+
+// The command-line path: sl_patterns --ramp writes the flat frames,
+// sl_calibrate --projector-response reads their camera images back into a
+// response file that the decoder takes.
+TEST_CASE("sl_patterns --ramp and sl_calibrate --projector-response", "[codecs][gamma][cli]") {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_codecs_ramp";
+  fs::remove_all(dir);
+  fs::create_directories(dir / "camera");
+  const std::string bin = std::string(SL_BINARY_DIR) + "/tools/";
+  const auto run = [&](const std::string& args) {
+    const std::string command = bin + args + " > " + (dir / "out.txt").string() + " 2>&1";
+    const int rc = std::system(command.c_str());
+    std::ifstream in(dir / "out.txt");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    UNSCOPED_INFO(args << "\n" << text);
+    return std::make_pair(WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, text);
+  };
+
+  REQUIRE(run("sl_patterns --ramp 8 --out " + (dir / "ramp").string()).first == 0);
+  std::vector<fs::path> ramp;
+  for (const auto& e : fs::directory_iterator(dir / "ramp")) ramp.push_back(e.path());
+  std::sort(ramp.begin(), ramp.end());
+  REQUIRE(ramp.size() == 9);
+  cv::RNG rng(5);
+  for (std::size_t k = 0; k < ramp.size(); ++k) {
+    // Each frame flat at round(255 k / 8), at the projector's size.
+    const cv::Mat frame = cv::imread(ramp[k].string(), cv::IMREAD_UNCHANGED);
+    REQUIRE(frame.type() == CV_8UC1);
+    CHECK(frame.size() == cv::Size(1824, 1140));
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(frame, &lo, &hi);
+    CHECK(lo == hi);
+    CHECK(lo == std::round(255.0 * k / 8));
+    // The camera's image of it through a gamma 2.2 projector (gain and
+    // ambient varying across the image, noise), 16-bit.
+    cv::Mat image(60, 80, CV_16UC1);
+    for (int y = 0; y < image.rows; ++y)
+      for (int x = 0; x < image.cols; ++x) {
+        const double gain = 30000.0 + 200.0 * x, ambient = 2000.0 + 40.0 * y;
+        image.at<std::uint16_t>(y, x) = cv::saturate_cast<std::uint16_t>(
+            gain * std::pow(lo / 255.0, 2.2) + ambient + rng.gaussian(200.0));
+      }
+    REQUIRE(cv::imwrite((dir / "camera" / ramp[k].filename()).string(), image));
+  }
+  const fs::path response_file = dir / "response.yaml";
+  const auto [rc, text] = run("sl_calibrate --projector-response " + (dir / "camera").string() +
+                              " --out " + response_file.string());
+  REQUIRE(rc == 0);
+  CHECK_THAT(text, Catch::Contains("from 9 levels"));
+  const std::vector<float> response = daemon::loadProjectorResponse(response_file.string());
+  REQUIRE(response.size() >= 9);
+  for (double L : {0.25, 0.5, 0.75}) {
+    CAPTURE(L);
+    const double at = L * (response.size() - 1);
+    const std::size_t i = static_cast<std::size_t>(at);
+    const double r = response[i] + (at - i) * (response[std::min(i + 1, response.size() - 1)] - response[i]);
+    CHECK(r == Approx(std::pow(L, 2.2)).margin(0.015));
+  }
+  // The decoder takes it: a gamma 2.2 capture decodes as well as with the exact gamma.
+  const PatternSpec p33 = phaseShift(3, {40, 1});
+  pipeline::DecoderOptions o;
+  o.min_modulation = 4;
+  o.projector_response = response;
+  const Errors e = errors(pipeline::makeCodec(p33, o)->decode(render(p33, 2.2, 0.0, 1), 16));
+  CHECK(e.valid_fraction > 0.99);
+  CHECK(e.rms < 0.1);
+
+  // Bad input: named errors, non-zero exit codes, no file.
+  const auto bad_levels = run("sl_calibrate --projector-response " + (dir / "camera").string() +
+                              " --levels 0,0.5,1 --out " + (dir / "bad.yaml").string());
+  CHECK(bad_levels.first != 0);
+  CHECK_THAT(bad_levels.second, Catch::Contains("9 images but 3 --levels"));
+  CHECK_FALSE(fs::exists(dir / "bad.yaml"));
+  const auto short_ramp = run("sl_patterns --ramp 1 --out " + (dir / "ramp1").string());
+  CHECK(short_ramp.first != 0);
+  CHECK_THAT(short_ramp.second, Catch::Contains("--ramp N needs N in 2..255"));
 }
