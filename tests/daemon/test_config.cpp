@@ -12,6 +12,7 @@
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds_environment.h"
 #include "sl/daemon/log.h"
+#include "sl/pipeline/projector_response.h"
 #include "support/config_text.h"
 
 #include <unistd.h>
@@ -108,6 +109,17 @@ TEST_CASE("config mistakes are reported with file, line and key") {
       Case{"min_modulation: auto", "min_modulation: -3",
            "key 'decoder.min_modulation': must be >= 0"},
       Case{"min_modulation: auto", "min_modulation: bright", "key 'decoder.min_modulation'"},
+      Case{"max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_gamma: 0",
+           "key 'decoder.projector_gamma': must be > 0"},
+      Case{"max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_gamma: bright",
+           "key 'decoder.projector_gamma': expected a number"},
+      Case{"max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_response: [0, 0.6, 0.5, 1]",
+           "key 'decoder.projector_response': "},
+      Case{"max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_response: [0.5]",
+           "key 'decoder.projector_response': "},
+      Case{"max_unwrap_error: 0.3",
+           "max_unwrap_error: 0.3\n  projector_gamma: 2.2\n  projector_response: [0, 1]",
+           "key 'decoder.projector_response': give one of projector_gamma and projector_response"},
       Case{"use: best", "use: diagonal", "key 'triangulator.use': must be best, columns or rows"},
       Case{"rotation_deg: [0, 15.25, 0],", "rotation_deg: [0, 15.25, 0], rotation: [1,0,0,0,1,0,0,0,1],",
            "give exactly one of 'rotation'"},
@@ -244,6 +256,18 @@ TEST_CASE("decoder.min_modulation takes a number or auto") {
   CHECK(numeric.decoder.min_modulation == 12.0f);
   const auto derived = sl::daemon::parseConfig(shippedConfig(), "test.yaml");
   CHECK(derived.decoder.min_modulation == sl::pipeline::kDerivedMinModulation);
+}
+
+TEST_CASE("decoder.projector_gamma / projector_response set the decoder's response") {
+  const auto linear = sl::daemon::parseConfig(shippedConfig(), "test.yaml");
+  CHECK(linear.decoder.projector_response.empty());
+  const auto gamma = sl::daemon::parseConfig(
+      edited("max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_gamma: 2.2"), "test.yaml");
+  CHECK(gamma.decoder.projector_response == sl::pipeline::gammaResponse(2.2));
+  const auto table = sl::daemon::parseConfig(
+      edited("max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_response: [0, 0.2, 0.5, 1]"),
+      "test.yaml");
+  CHECK(table.decoder.projector_response == std::vector<float>{0.0f, 0.2f, 0.5f, 1.0f});
 }
 
 TEST_CASE("a missing file and malformed YAML are one clear error") {
