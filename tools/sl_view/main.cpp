@@ -64,8 +64,10 @@ const char* kUsage =
     "  --queue N         messages queued per viewer subscription (default 2; the\n"
     "                    oldest is dropped and counted when full)\n"
     "  --decimate N      the web page's cloud: every Nth pixel per direction (default 4)\n"
-    "  --web-dir DIR     the page's files (default: the source tree's tools/sl_view/web)\n"
-    "  --three-dir DIR   three.js from npm (default: tools/sl_view/node_modules/three)\n"
+    "  --web-dir DIR     the page's files (default: installed ../share/sl-sensor/sl_view/web\n"
+    "                    beside the binary, else the source tree's tools/sl_view/web)\n"
+    "  --three-dir DIR   three.js from npm (default: installed .../sl_view/three, else\n"
+    "                    tools/sl_view/node_modules/three)\n"
     "record:\n"
     "  --topics A,B      ROS topic names to record (default: all but image sets and maps)\n"
     "  --count N         stop after N clouds (default: until Ctrl-C or --seconds)\n"
@@ -122,11 +124,24 @@ std::string requestJson(const std::string& text, sl::daemon::SensorClient& clien
   return Json::writeString(w, out);
 }
 
+// The page's files: installed beside the binary (bin/../share/sl-sensor/
+// sl_view, by cmake --install) or, in a build tree, the source tree's.
+std::pair<std::string, std::string> defaultAssetDirs() {
+  std::error_code ec;
+  const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const auto installed = exe.parent_path().parent_path() / "share/sl-sensor/sl_view";
+    if (std::filesystem::exists(installed / "web/index.html", ec))
+      return {(installed / "web").string(), (installed / "three").string()};
+  }
+  return {SL_VIEW_WEB_DIR, SL_VIEW_THREE_DIR};
+}
+
 int serve(int argc, char** argv) {
   sl::view::ServerOptions server;
   sl::view::RawTopicsOptions topics;
   int decimate = 4;
-  std::string web_dir = SL_VIEW_WEB_DIR, three_dir = SL_VIEW_THREE_DIR;
+  auto [web_dir, three_dir] = defaultAssetDirs();
   for (ArgCursor args(argc, argv, 1); args.next();) {
     const std::string a = args.option();
     if (a == "--help" || a == "-h") {
