@@ -17,6 +17,9 @@
 //   frames read, the cloud and optionally the maps written), the floor the
 //   processing cannot beat on this machine.
 //
+// - BM_DecodeGammaCompensation: 3+3 horizontal decode with and without the
+//   projector gamma compensation (decoder.projector_gamma 2.2), same frames.
+//
 // Patterns: 0 = 3+3 horizontal, 1 = 3+3 both, 2 = 12 steps at each of 4
 // frequencies (64, 16, 4, 1 periods; 48 frames, hierarchical unwrapping).
 // proj_iter: projector distortion iterations of the triangulator (0 = the
@@ -37,6 +40,7 @@
 #include <vector>
 
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/projector_response.h"
 #include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
@@ -136,6 +140,22 @@ const Triangulator& triangulator(int iterations) {
 }
 
 // Args: pattern, threads.
+// 3+3 horizontal decode with the projector's response compensated (arg
+// gamma 1: decoder.projector_gamma 2.2, the phase corrected through the
+// response's table) or not (0), same frames: what the compensation costs.
+void BM_DecodeGammaCompensation(benchmark::State& state) {
+  DecoderOptions options;
+  if (state.range(0) != 0) options.projector_response = gammaResponse(2.2);
+  const auto compensating = makeCodec(patternNumber(0), options);
+  const CameraImages in = images(0);
+  ScanProcessor processor(int(state.range(1)));
+  for (auto _ : state) {
+    auto maps = processor.decode(*compensating, in, 0);
+    benchmark::DoNotOptimize(maps->up.data);
+  }
+  reportScans(state);
+}
+
 void BM_Decode(benchmark::State& state) {
   const int pattern = int(state.range(0));
   const CameraImages in = images(pattern);
@@ -335,6 +355,13 @@ BENCHMARK(BM_MemoryFloor)
 BENCHMARK(BM_Decode)
     ->ArgsProduct({{0, 1, 2}, {1, 2}})
     ->ArgNames({"pattern", "threads"})
+    ->Unit(benchmark::kMillisecond)
+    ->MinWarmUpTime(0.3)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
+BENCHMARK(BM_DecodeGammaCompensation)
+    ->ArgsProduct({{0, 1}, {1, 2}})
+    ->ArgNames({"gamma", "threads"})
     ->Unit(benchmark::kMillisecond)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()
