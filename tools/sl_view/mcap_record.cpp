@@ -1,5 +1,6 @@
 #include "mcap_record.h"
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
@@ -220,6 +221,12 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
       if (i != status_topic)
         for (int k = 0; k < 200 && raw.matchedWriters(i) == 0; ++k)
           std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    // Our readers see the daemon's writers; the writers learn of our readers
+    // by a separate discovery message, which can lag on a loaded machine (a
+    // scan published before misses this file, and is named at the end).
+    // Give it as long again as finding the daemon took, 0.5 to 3 s.
+    std::this_thread::sleep_for(std::clamp<std::chrono::steady_clock::duration>(
+        std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(500), std::chrono::seconds(3)));
     for (std::size_t i = 0; i < raw.topics().size(); ++i) {
       std::int32_t policy = 0;
       if (raw.matchedWriters(i) == 0 && raw.incompatibleWriters(i, &policy) > 0)
@@ -242,10 +249,11 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
 
   // A scan's cloud, depth and shading images and camera_info share the
   // cloud's header stamp and frame, and the daemon publishes the images
-  // after the cloud: a recording that ends with the N-th cloud waits (up to
-  // kTailWait) for that scan's other messages, and leaves out the next
-  // scan's. At the end, each scan topic is checked against the clouds: a
-  // message missing is named and makes the exit code 5.
+  // after the cloud: a recording that ends (the N-th cloud, --seconds,
+  // Ctrl-C, the daemon idle) waits up to kTailWait for the latest recorded
+  // cloud's other messages, and leaves out the next scan's. At the end, each
+  // scan topic is checked against the clouds: a message missing is named and
+  // makes the exit code 5.
   std::vector<std::size_t> scan_topics;  // topics other than the cloud carrying one per scan
   for (std::size_t i = 0; i < raw.topics().size(); ++i)
     if (i != points_topic && isScanTopic(raw.topics()[i].type_name)) scan_topics.push_back(i);
@@ -273,19 +281,26 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   std::optional<std::chrono::steady_clock::time_point> idle_since;
   WriteQueue queue(writer, buffer_mb << 20);
   std::vector<std::uint64_t> not_written(raw.topics().size(), 0);
-  while (!stop && !queue.failed()) {
+  while (!queue.failed()) {
     const auto now = std::chrono::steady_clock::now();
     if (last_cloud) {
       if (tailComplete()) break;
       if (!tail_since) tail_since = now;
       if (now - *tail_since > kTailWait) break;
+    } else {
+      // Ctrl-C, --seconds, or the daemon idle before --scan N was done: the
+      // recording still ends with the latest cloud's scan complete.
+      bool end = stop || (seconds > 0 && std::chrono::duration<double>(now - t0).count() >= seconds);
+      if (idle_since && now - *idle_since > std::chrono::milliseconds(500)) {
+        std::cerr << "sl_view record: the daemon went idle after " << clouds << " of " << count
+                  << " clouds\n";
+        end = true;
+      }
+      if (end) {
+        if (cloud_keys.empty()) break;
+        last_cloud = *cloud_keys.rbegin();
+      }
     }
-    if (idle_since && now - *idle_since > std::chrono::milliseconds(500)) {
-      std::cerr << "sl_view record: the daemon went idle after " << clouds << " of " << count
-                << " clouds\n";
-      break;
-    }
-    if (seconds > 0 && std::chrono::duration<double>(now - t0).count() >= seconds) break;
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const RawSample> s) {
       const TopicInfo& t = raw.topics()[s->topic];
       std::optional<ScanKey> key;
