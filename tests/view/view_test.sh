@@ -42,7 +42,11 @@ grep -q "namespace: $ns" "$work/sim.yaml" && grep -q "publish_images: true" "$wo
 
 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
 pids+=($!)
-# VIEW_ARGS: options for sl_view (e.g. --reliable, to see `starved` fail).
+# VIEW_ARGS: options for sl_view. `stalled` is about the bridge's WebSocket
+# side (another viewer gets every cloud): its DDS readers are reliable there,
+# so that the best-effort profile's DDS losses under load do not blur it
+# (`starved` checks the best-effort readers).
+[ "$mode" = stalled ] && VIEW_ARGS=${VIEW_ARGS:---reliable}
 "$bin/tools/sl_view/sl_view" --ns "$ns" --port 0 ${VIEW_ARGS:-} > "$work/view.log" 2>&1 &
 pids+=($!)
 view_pid=$!
