@@ -10,6 +10,8 @@
 #   5hz      camera 30 fps (6-frame 3+3 sequences: 5 scans/s), one subscriber
 #   max      camera 180 fps (30 scans/s), one subscriber, 30 s
 #   3subs    camera 180 fps, three subscribers (the figures: the worst of the three)
+#   5hz-sets as 5hz with dds.publish_image_sets on (loopback only): what
+#            publishing the raw image sets costs the clouds
 #   stalled  camera 30 fps, two subscribers, the second SIGSTOPped for 30 s
 #            (SL_BENCH_SECONDS) after 5 s; the figures are the first's; the second's clouds
 #            after it resumes are reported on their own line
@@ -120,7 +122,7 @@ if [ -n "${SL_BENCH_CONFIGS:-}" ]; then
   done
   configs=("${kept[@]}")
 fi
-scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz stalled max 3subs fastdds}
+scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz stalled sets max 3subs fastdds}
 wanted() { case " $scenarios " in *" $1 "*) return 0 ;; esac; return 1; }
 
 # --- statistics ---
@@ -278,6 +280,14 @@ for entry in "${configs[@]}"; do
     start_daemon 30
     ! wanted 5hz || scenario 5hz "$cfg" 30 1 "$((secs * 2 / 3))"
     ! wanted stalled || scenario stalled "$cfg" 30 2 "$((secs + 12))" 1
+    stop_daemon
+  fi
+  if wanted sets && [ "$cfg" = loopback ]; then
+    # What publishing the image sets (dds.publish_image_sets, 9.3 MB per 3+3
+    # scan, written after the cloud) costs the clouds: compare with 5hz.
+    start_daemon 30 's/^  publish_projector_maps: false$/  publish_projector_maps: false\n  publish_image_sets: true/'
+    grep -q 'publish_image_sets: true' "$work/sim.yaml" || { echo "bench-delivery: could not enable image sets" >&2; exit 2; }
+    scenario 5hz-sets "$cfg" 30 1 "$((secs * 2 / 3))"
     stop_daemon
   fi
   if wanted max || wanted 3subs; then
