@@ -1,4 +1,4 @@
-#include "aravis_config.h"
+#include "aravis_config_yaml.h"
 
 #include <set>
 
@@ -93,7 +93,7 @@ void parseAravisSection(const YamlMap& root, DaemonConfig& config) {
     if (!names.insert(c.name).second) m.fail("name", "duplicate camera name '" + c.name + "'");
     config.aravis.cameras.push_back(std::move(c));
   }
-  if (config.sensor != "fake_gige") return;
+  if (config.sensor != SensorKind::kFakeGige) return;
 
   const YamlMap fake = root.map("fake_gige");
   drivers::FakeGigeOptions& o = config.aravis.fake;

@@ -99,7 +99,7 @@ void appendAravisCameras(const DaemonConfig& config, EngineDevices& devices) {
     devices.cameras.push_back(openCamera(c));
     // Its trigger source is fixed at open: only the daemon triggers it.
     const bool software_only = c.trigger.mode == drivers::AravisTriggerConfig::Mode::kSoftware;
-    if (config.sensor == "hardware" && software_only &&
+    if (config.sensor == SensorKind::kHardware && software_only &&
         config.runtime.trigger == TriggerMode::kHardware)
       logWarning("camera '" + c.name +
                  "': trigger mode software, but runtime.trigger is hardware: "

@@ -3,7 +3,9 @@
 #include <map>
 #include <stdexcept>
 
+#if SL_HAVE_ARAVIS
 #include "aravis_devices.h"
+#endif
 #include "sl/daemon/log.h"
 #include "sl/drivers/camera_stamp_trigger.h"
 #include "sl/drivers/lightcrafter4500.h"
@@ -73,7 +75,12 @@ EngineDevices openReplay(const DaemonConfig& config, std::shared_ptr<void>& keep
 EngineDevices openHardware(const DaemonConfig& config) {
   EngineDevices devices;
   // --- cameras (Aravis, section `cameras:`): appended to devices.cameras here ---
+#if SL_HAVE_ARAVIS
   appendAravisCameras(config, devices);
+#else
+  throw std::runtime_error(config.source_path + ": sensor 'hardware' needs the Aravis cameras, "
+                           "which this build lacks (configure with libaravis-dev installed)");
+#endif
 
   if (devices.cameras.empty())
     throw std::runtime_error(config.source_path +
@@ -81,6 +88,7 @@ EngineDevices openHardware(const DaemonConfig& config) {
                              "driver configured)");
 
   const drivers::LightCrafter4500Config& p = config.hardware.projector;
+#if SL_HAVE_HIDAPI
   try {
     devices.projector = std::make_shared<drivers::LightCrafter4500Projector>(
         p, [p] { return drivers::openHidapiTransport(p.vendor_id, p.product_id, p.serial); },
@@ -88,6 +96,10 @@ EngineDevices openHardware(const DaemonConfig& config) {
   } catch (const std::exception& e) {
     throw std::runtime_error("projector '" + p.id + "': " + e.what());
   }
+#else
+  throw std::runtime_error("projector '" + p.id + "': this build has no USB HID transport "
+                           "(configure with libhidapi-dev installed)");
+#endif
 
   if (config.hardware.trigger == HardwareConfig::Trigger::kVersavis) {
     return composeVersavis(config, std::move(devices.cameras), std::move(devices.projector),
@@ -154,11 +166,20 @@ EngineDevices composeVersavis(const DaemonConfig& config,
 }
 
 EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
-  if (config.sensor == "sim") return openSimulated(config, keep_alive);
-  if (config.sensor == "hardware") return openHardware(config);
-  if (config.sensor == "fake_gige") return openFakeGige(config, keep_alive);
-  if (config.sensor == "replay") return openReplay(config, keep_alive);
-  throw std::runtime_error("sensor '" + config.sensor + "' is not supported by this build");
+  switch (config.sensor) {
+    case SensorKind::kSim: return openSimulated(config, keep_alive);
+    case SensorKind::kHardware: return openHardware(config);
+    case SensorKind::kFakeGige:
+#if SL_HAVE_ARAVIS
+      return openFakeGige(config, keep_alive);
+#else
+      throw std::runtime_error(config.source_path + ": sensor 'fake_gige' needs Aravis, which this "
+                               "build lacks (configure with libaravis-dev installed)");
+#endif
+    case SensorKind::kReplay: return openReplay(config, keep_alive);
+  }
+  throw std::runtime_error(std::string("sensor '") + toString(config.sensor) +
+                           "' is not supported by this build");
 }
 
 }  // namespace sl::daemon

@@ -9,7 +9,7 @@
 #include <stdexcept>
 
 #include "pattern_config_yaml.h"
-#include "sl/daemon/config.h"
+#include "sl/daemon/config_error.h"
 
 namespace sl::daemon {
 

@@ -10,7 +10,7 @@
 #include <Eigen/Core>
 #include <yaml-cpp/yaml.h>
 
-#include "sl/daemon/config.h"
+#include "sl/daemon/config_error.h"
 
 namespace sl::daemon {
 

@@ -275,7 +275,4 @@ std::unique_ptr<Codec> makeCodec(const PatternSpec& spec, const DecoderOptions& 
   throw std::invalid_argument("makeCodec: unknown family");
 }
 
-Decoder::Decoder(const PatternSpec& spec, const DecoderOptions& options)
-    : codec_(makeCodec(spec, options)) {}
-
 }  // namespace sl::pipeline

@@ -4,6 +4,9 @@
 
 namespace sl::pipeline {
 
+Decoder::Decoder(const PatternSpec& spec, const DecoderOptions& options)
+    : codec_(makeCodec(spec, options)) {}
+
 PhaseShift33Decoder::PhaseShift33Decoder(PhaseShift33Pattern pattern, DecoderOptions options)
     : pattern_(std::move(pattern)), decoder_((pattern_.validate(), toSpec(pattern_)), options) {}
 

@@ -29,7 +29,7 @@
 #include "sl/drivers/aravis_camera.h"
 #include "sl/drivers/aravis_fake_camera.h"
 #include "sl/drivers/sim.h"
-#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/triangulator.h"
 
 using namespace std::chrono_literals;
@@ -367,7 +367,7 @@ TEST_CASE("fake GigE camera: a camera that disappears is reported and reopened w
 TEST_CASE("config: the fake GigE sensor file loads; camera keys are checked", "[aravis][config]") {
   const auto config =
       sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/fake-gige.yaml");
-  CHECK(config.sensor == "fake_gige");
+  CHECK(config.sensor == sl::daemon::SensorKind::kFakeGige);
   REQUIRE(config.aravis.cameras.size() == 1);
   const auto& c = config.aravis.cameras.front();
   CHECK(c.device == "127.0.0.1");

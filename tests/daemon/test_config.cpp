@@ -38,7 +38,7 @@ std::string errorOf(const std::string& yaml) { return sl::test::configErrorOf(ya
 
 TEST_CASE("the shipped sim config loads with the documented values") {
   const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
-  CHECK(config.sensor == "sim");
+  CHECK(config.sensor == sl::daemon::SensorKind::kSim);
   CHECK(config.sim.rig.camera.width == 1440);
   CHECK(config.sim.rig.camera.height == 1080);
   CHECK(config.sim.rig.projector.width == 1824);

@@ -41,7 +41,7 @@ daemon::DaemonConfig loadVariant(const std::string& from, const std::string& to)
 
 TEST_CASE("config/hardware-paper.yaml loads into the driver structs") {
   const daemon::DaemonConfig c = daemon::loadConfig(SL_SOURCE_DIR "/config/hardware-paper.yaml");
-  CHECK(c.sensor == "hardware");
+  CHECK(c.sensor == sl::daemon::SensorKind::kHardware);
   const auto& p = c.hardware.projector;
   CHECK(p.vendor_id == 0x0451);
   CHECK(p.product_id == 0x6401);

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "sl/drivers/sim.h"
-#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/triangulator.h"
 #include "support/sim_rig.h"
 

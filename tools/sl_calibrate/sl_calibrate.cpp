@@ -26,10 +26,9 @@
 #include "common/frame_files.h"
 #include "residual_plot.h"
 #include "sl/daemon/calibration_io.h"
-#include "sl/daemon/config.h"
 #include "sl/daemon/pattern_config.h"
 #include "sl/pipeline/calibration.h"
-#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/projector_response.h"
 

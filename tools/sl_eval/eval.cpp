@@ -17,7 +17,7 @@
 #include "common.h"
 #include "plots.h"
 #include "sl/drivers/sim.h"
-#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/motion_compensation.h"
 #include "sl/pipeline/triangulator.h"
 

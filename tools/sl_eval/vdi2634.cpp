@@ -11,7 +11,7 @@
 #include "common.h"
 #include "eval.h"
 #include "plots.h"
-#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/triangulator.h"
 
 namespace sl::eval {

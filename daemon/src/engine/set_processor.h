@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "sl/daemon/config.h"
-#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/motion_compensation.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"

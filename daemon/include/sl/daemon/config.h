@@ -9,6 +9,7 @@
 
 #include "sl/daemon/aravis_config.h"
 #include "sl/daemon/cloud_layout.h"
+#include "sl/daemon/config_error.h"
 #include "sl/daemon/hardware_config.h"
 #include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
@@ -20,13 +21,6 @@
 #include "sl/pipeline/triangulator.h"
 
 namespace sl::daemon {
-
-// A configuration error: the message names the file, the key and, where
-// known, the line ("config/sim.yaml:12: key 'sim.camera.fx': expected a number").
-class ConfigError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 // Writer QoS of one published topic (`dds.qos.<topic>`). Keep-last writers
 // never wait for a slow reader beyond their history: a reader that falls
@@ -85,10 +79,19 @@ struct RuntimeConfig {
   TriggerMode trigger = TriggerMode::kHardware;  // default of start requests
 };
 
+// Which sensor the daemon runs (`sensor:`).
+enum class SensorKind {
+  kSim,       // the simulated sensor
+  kHardware,  // cameras through Aravis, LightCrafter 4500, VersaVIS or camera-stamp triggers
+  kFakeGige,  // the simulator behind Aravis' fake GigE Vision camera
+  kReplay,    // a recording played back
+};
+const char* toString(SensorKind kind);  // as written in the config: sim, hardware, ...
+
 struct DaemonConfig {
   std::string source_path;  // the file it was loaded from
   std::string source_text;  // its text, as loaded (served by COMMAND_GET_CONFIG)
-  std::string sensor = "sim";  // "sim" or "hardware"
+  SensorKind sensor = SensorKind::kSim;
   drivers::SimConfig sim;
   HardwareConfig hardware;  // sensor: hardware (projector, trigger)
   drivers::ReplayConfig replay;  // sensor: replay (a recording played back)

@@ -1,5 +1,8 @@
-// Builds the devices named by the config: the one place that knows every
-// driver (the simulated sensor now; Aravis / LightCrafter / VersaVIS later).
+// Builds the devices named by the config (`sensor:`): the one place that
+// knows every driver family -- the simulated sensor, a replayed recording,
+// Aravis cameras, the LightCrafter 4500, VersaVIS or camera-stamp trigger
+// times. Families this build lacks (SL_WITH_ARAVIS, SL_WITH_HIDAPI off) are
+// refused with an error naming the missing library.
 #pragma once
 
 #include <memory>
@@ -12,7 +15,7 @@ namespace sl::daemon {
 
 // Opens the devices; throws std::runtime_error naming the device on failure.
 // `keep_alive` receives an owner that must outlive the devices (the simulated
-// sensor's shared world).
+// sensor's shared world, a replay, the fake GigE camera's feeder).
 EngineDevices openDevices(const DaemonConfig& config, std::shared_ptr<void>& keep_alive);
 
 // The VersaVIS part of `sensor: hardware` (also used by the tests with fake

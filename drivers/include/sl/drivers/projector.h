@@ -15,6 +15,10 @@ struct ProjectorSequence {
   int frame_count = 0;       // patterns per sequence
 };
 
+// Implementations must be thread-safe: the engine calls select/start/stop
+// from the thread serving requests and from its control thread (switches,
+// software trigger: projectSingle), and stop from its destructor
+// (LightCrafter4500Projector and the simulated projector take a mutex).
 class Projector {
  public:
   virtual ~Projector() = default;

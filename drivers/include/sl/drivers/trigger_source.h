@@ -15,6 +15,9 @@ struct TriggerEvent {
   std::uint64_t sequence_index = 0;    // counter since start
 };
 
+// Implementations must be thread-safe for next() on the engine's trigger
+// thread against stop() from the thread shutting the engine down, which
+// must wake a waiting next().
 class TriggerSource {
  public:
   virtual ~TriggerSource() = default;

@@ -155,19 +155,4 @@ class Codec {
 // invalid spec (PatternSpec::validate()) or invalid options.
 std::unique_ptr<Codec> makeCodec(const PatternSpec& spec, const DecoderOptions& options);
 
-// A decoder by value: shares one immutable codec. Thread-compatible, cheap to
-// copy; what the daemon keeps per pattern.
-class Decoder {
- public:
-  Decoder(const PatternSpec& spec, const DecoderOptions& options);
-  ProjectorMaps decode(const std::vector<cv::Mat>& frames, int bit_depth) const {
-    return codec_->decode(frames, bit_depth);
-  }
-  const Codec& codec() const { return *codec_; }
-  const PatternSpec& spec() const { return codec_->spec(); }
-
- private:
-  std::shared_ptr<const Codec> codec_;
-};
-
 }  // namespace sl::pipeline

@@ -1,6 +1,6 @@
-// Legacy 3+3 decoder API, kept for existing users: a thin wrapper over the
-// phase-shift codec (codec.h) of toSpec(pattern). New code uses
-// makeCodec() / Decoder with a PatternSpec.
+// Decoders: the per-pattern Decoder over a shared Codec (codec.h) that the
+// daemon and the tools keep, and PhaseShift33Decoder, the 3+3 convenience
+// wrapper of toSpec(pattern) that the analytic tests and benchmarks use.
 #pragma once
 
 #include <vector>
@@ -12,6 +12,21 @@
 #include "sl/pipeline/types.h"
 
 namespace sl::pipeline {
+
+// A decoder by value: shares one immutable codec. Thread-compatible, cheap to
+// copy; what the daemon keeps per pattern.
+class Decoder {
+ public:
+  Decoder(const PatternSpec& spec, const DecoderOptions& options);
+  ProjectorMaps decode(const std::vector<cv::Mat>& frames, int bit_depth) const {
+    return codec_->decode(frames, bit_depth);
+  }
+  const Codec& codec() const { return *codec_; }
+  const PatternSpec& spec() const { return codec_->spec(); }
+
+ private:
+  std::shared_ptr<const Codec> codec_;
+};
 
 // Thread-compatible; immutable after construction. decode() follows the
 // Codec output contract (codec.h). DecoderOptions and the pattern are
