@@ -106,8 +106,8 @@ int run(const std::string& config_path, const sigset_t& signals) {
 
   const TopicNames topics = TopicNames::forNamespace(config.dds.ns);
   endStartupWatch();  // from here on the loop below takes the signals
-  logInfo("ready: sensor '" + std::string(toString(config.sensor)) + "', pattern '" + config.runtime.default_pattern +
-          "', domain " + std::to_string(config.dds.domain_id) + ", clouds on '" + topics.points +
+  logInfo("ready: sensor '" + std::string(toString(config.sensor)) + "', pattern '" +
+          config.runtime.default_pattern + "', domain " + std::to_string(config.dds.domain_id) + ", clouds on '" + topics.points +
           "', requests on '" + topics.request + "'");
   systemdNotify("READY=1");
 
