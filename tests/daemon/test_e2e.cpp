@@ -48,6 +48,7 @@
 #include "sl_msgs/msg/ImageSet.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
 #include "sl/daemon/config.h"
