@@ -52,6 +52,14 @@ pipeline::PatternSpec pattern33(const std::string& name, pipeline::Direction dir
   return pipeline::toSpec(p);
 }
 
+pipeline::TriangulatorOptions evalTriangulation(pipeline::TriangulatorOptions::Use use) {
+  pipeline::TriangulatorOptions t;
+  t.use = use;
+  t.min_depth_mm = 200;
+  t.max_depth_mm = 1500;
+  return t;
+}
+
 std::vector<cv::Mat> renderScan(const drivers::SimulatedSensor& sensor, const std::string& pattern,
                                 int frames, std::uint64_t seed) {
   std::vector<cv::Mat> images;

@@ -15,6 +15,7 @@
 #include "eval.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/pattern_spec.h"
+#include "sl/pipeline/triangulator.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::eval {
@@ -38,6 +39,10 @@ drivers::SimConfig baseConfig(const pipeline::CameraProjectorCalibration& rig,
                               const pipeline::PatternSpec& pattern, const EvalOptions& options);
 
 pipeline::PatternSpec pattern33(const std::string& name, pipeline::Direction direction);
+
+// The experiments' triangulation: `use` (columns for a horizontal baseline,
+// rows for a vertical one), depths 200..1500 mm.
+pipeline::TriangulatorOptions evalTriangulation(pipeline::TriangulatorOptions::Use use);
 
 // The frames of one sequence of the first camera, noise seeded from `seed`.
 std::vector<cv::Mat> renderScan(const drivers::SimulatedSensor& sensor, const std::string& pattern,

@@ -43,7 +43,8 @@ class Scanner {
         calibration_(rig({150, 0, 0}, 550)),
         spec_(pattern33("3+3_horizontal", pipeline::Direction::kHorizontal)),
         decoder_(spec_, pipeline::DecoderOptions{}),
-        triangulator_(calibration_, triangulatorOptions()) {}
+        triangulator_(calibration_,
+                      evalTriangulation(pipeline::TriangulatorOptions::Use::kColumns)) {}
 
   drivers::SimConfig config(const drivers::SimScene& scene) const {
     drivers::SimConfig c = baseConfig(calibration_, spec_, options_);
@@ -71,14 +72,6 @@ class Scanner {
   }
 
  private:
-  static pipeline::TriangulatorOptions triangulatorOptions() {
-    pipeline::TriangulatorOptions t;
-    t.use = pipeline::TriangulatorOptions::Use::kColumns;
-    t.min_depth_mm = 200;
-    t.max_depth_mm = 1500;
-    return t;
-  }
-
   EvalOptions options_;
   pipeline::CameraProjectorCalibration calibration_;
   pipeline::PatternSpec spec_;
