@@ -32,9 +32,10 @@ constexpr float kTwoPi = 2.0f * std::numbers::pi_v<float>;
 constexpr float kInvTwoPi = 1.0f / kTwoPi;
 constexpr float kPi = std::numbers::pi_v<float>;
 
-class GrayCodec final : public Codec {
+class GrayCodec final : public RowTemplateCodec<GrayCodec> {
  public:
-  GrayCodec(const PatternSpec& spec, const DecoderOptions& options) : Codec(spec, options) {
+  GrayCodec(const PatternSpec& spec, const DecoderOptions& options)
+      : RowTemplateCodec(spec, options) {
     const auto all = canonicalFrames(spec);
     const int per_direction = spec.framesPerDirection();
     for (int i = 0; i < per_direction; ++i) {
@@ -70,17 +71,9 @@ class GrayCodec final : public Codec {
 
   int scratchRows() const override { return 6; }
 
- protected:
-  void decodeRow8(const RowContext& c, const std::uint8_t* const* frames, int width,
-                  const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-  void decodeRow16(const RowContext& c, const std::uint16_t* const* frames, int width,
-                   const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-
  private:
+  friend class RowTemplateCodec<GrayCodec>;
+
   template <typename Pixel>
   void row(const RowContext& c, const Pixel* const* frames, int width, const RowOutput& out) const {
     const int n = width;

@@ -29,10 +29,10 @@ namespace {
 
 constexpr float kTwoPi = 2.0f * std::numbers::pi_v<float>;
 
-class MicroPhaseShiftCodec final : public Codec {
+class MicroPhaseShiftCodec final : public RowTemplateCodec<MicroPhaseShiftCodec> {
  public:
   MicroPhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options)
-      : Codec(spec, options) {
+      : RowTemplateCodec(spec, options) {
     const auto frames = canonicalFrames(spec);
     for (int n = 0; n < 3; ++n) {
       ws_[n] = static_cast<float>(std::sin(frames[n].delta));
@@ -57,17 +57,9 @@ class MicroPhaseShiftCodec final : public Codec {
 
   int scratchRows() const override { return 0; }
 
- protected:
-  void decodeRow8(const RowContext& c, const std::uint8_t* const* frames, int width,
-                  const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-  void decodeRow16(const RowContext& c, const std::uint16_t* const* frames, int width,
-                   const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-
  private:
+  friend class RowTemplateCodec<MicroPhaseShiftCodec>;
+
   template <typename Pixel>
   void row(const RowContext& c, const Pixel* const* frames, int width, const RowOutput& out) const {
     const int others = static_cast<int>(ratio_.size());

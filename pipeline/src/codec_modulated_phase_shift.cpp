@@ -32,10 +32,10 @@ namespace {
 constexpr float kTwoPi = 2.0f * std::numbers::pi_v<float>;
 constexpr float kInvTwoPi = 1.0f / kTwoPi;
 
-class ModulatedPhaseShiftCodec final : public Codec {
+class ModulatedPhaseShiftCodec final : public RowTemplateCodec<ModulatedPhaseShiftCodec> {
  public:
   ModulatedPhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options)
-      : Codec(spec, options) {
+      : RowTemplateCodec(spec, options) {
     if (!options.projector_response.empty())
       throw std::invalid_argument("pattern '" + spec.name +
                                   "': projector_response compensation is not implemented for "
@@ -66,17 +66,9 @@ class ModulatedPhaseShiftCodec final : public Codec {
 
   int scratchRows() const override { return 0; }
 
- protected:
-  void decodeRow8(const RowContext& c, const std::uint8_t* const* frames, int width,
-                  const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-  void decodeRow16(const RowContext& c, const std::uint16_t* const* frames, int width,
-                   const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-
  private:
+  friend class RowTemplateCodec<ModulatedPhaseShiftCodec>;
+
   struct Set {
     double frequency = 0;
     std::vector<float> ws, wc;

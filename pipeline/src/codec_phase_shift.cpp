@@ -431,9 +431,10 @@ std::shared_ptr<const std::vector<ThreeStepEntry>> makeThreeStepTable(const SetT
   return table;
 }
 
-class PhaseShiftCodec final : public Codec {
+class PhaseShiftCodec final : public RowTemplateCodec<PhaseShiftCodec> {
  public:
-  PhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options) : Codec(spec, options) {
+  PhaseShiftCodec(const PatternSpec& spec, const DecoderOptions& options)
+      : RowTemplateCodec(spec, options) {
     const auto all = canonicalFrames(spec);
     const int per_direction = spec.framesPerDirection();
     // Sets from the first direction's frames (both directions share the layout).
@@ -521,12 +522,9 @@ class PhaseShiftCodec final : public Codec {
     }
     row(c, frames, width, out);
   }
-  void decodeRow16(const RowContext& c, const std::uint16_t* const* frames, int width,
-                   const RowOutput& out) const override {
-    row(c, frames, width, out);
-  }
-
  private:
+  friend class RowTemplateCodec<PhaseShiftCodec>;
+
   struct Set {
     double frequency = 0;
     std::vector<int> frames;  // indices among the direction's frames
