@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -19,6 +20,25 @@ cv::Mat prepare(const cv::Mat& image, int factor, bool transpose) {
   if (factor > 1) cv::resize(f, f, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
   if (transpose) cv::transpose(f, f);
   return f;
+}
+
+// The periodic Hann window 0.5 (1 - cos(2 pi x / N)) along each axis (not
+// OpenCV's symmetric one, N - 1): its DFT has exactly the frequencies 0 and
+// +-1, so whatever does not vary along the motion axis stays in those
+// columns of the spectrum, which the correlation leaves out.
+cv::Mat periodicHann(cv::Size size) {
+  auto hann = [](int n) {
+    std::vector<float> w(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) w[i] = float(0.5 * (1 - std::cos(2 * CV_PI * i / n)));
+    return w;
+  };
+  const std::vector<float> wx = hann(size.width), wy = hann(size.height);
+  cv::Mat window(size, CV_32FC1);
+  for (int r = 0; r < size.height; ++r) {
+    float* row = window.ptr<float>(r);
+    for (int c = 0; c < size.width; ++c) row[c] = wy[r] * wx[c];
+  }
+  return window;
 }
 
 }  // namespace
@@ -41,7 +61,7 @@ double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat&
   a -= cv::mean(a);
   b -= cv::mean(b);
   if (options_.window) {
-    if (window_.size() != a.size()) cv::createHanningWindow(window_, a.size(), CV_32F);
+    if (window_.size() != a.size()) window_ = periodicHann(a.size());
     a = a.mul(window_);
     b = b.mul(window_);
   }
@@ -57,7 +77,16 @@ double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat&
   // the axis. Summing before normalising matters: the fringes multiply the
   // scene, and the sidebands they create carry the fringes' phase step with
   // opposite signs at +f and -f, which cancels only in the sum. Column 0 (no
-  // variation along the motion axis: the fringes themselves) is left out.
+  // variation along the motion axis: the fringes themselves) is left out,
+  // and with the Hann window also columns +-1: the (periodic) window's
+  // spectrum has exactly the frequencies 0 and +-1, so the static fringes
+  // times the window lie there. Kept, they pull the peak away from the true shift: two frames
+  // of the same fringes phase-stepped by 2 pi / 3 (3+3's unit-frequency
+  // frames) correlate there with the sign of cos(2 pi / 3) < 0, a cosine of
+  // one period over the image whose maximum is half an image away, so the
+  // peak went to the edge of the search range (measured on sl_eval wall's
+  // frames: -201 px and +199 px against a true -4.2 px; -4.24 px without
+  // columns +-1).
   //
   // The sum is then whitened partially (divided by the square root of its
   // magnitude) rather than fully as in eq. 10: with strong fringes, full
@@ -67,14 +96,18 @@ double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat&
   // fringe contrast 0.3-0.8, shifts up to 9 px): max error 0.036 px with the
   // square root, 7-12 px with full whitening (1-D or OpenCV's 2-D
   // phaseCorrelate), up to 229 px without whitening.
+  const int skipped = options_.window ? 1 : 0;  // |frequency| <= skipped left out
+  auto used = [&](int c) { return std::min(c, cols - c) > skipped; };
   std::vector<cv::Vec2d> sum(cols, cv::Vec2d(0, 0));
   for (int r = 0; r < rows; ++r) {
     const auto* in = cross.ptr<cv::Vec2f>(r);
-    for (int c = 1; c < cols; ++c) sum[c] += cv::Vec2d(in[c][0], in[c][1]);
+    for (int c = 1; c < cols; ++c)
+      if (used(c)) sum[c] += cv::Vec2d(in[c][0], in[c][1]);
   }
   cv::Mat line(1, cols, CV_32FC2, cv::Scalar(0, 0));
   auto* out = line.ptr<cv::Vec2f>(0);
   for (int c = 1; c < cols; ++c) {
+    if (!used(c)) continue;
     const double magnitude = std::hypot(sum[c][0], sum[c][1]);
     if (magnitude > 1e-30) {
       const double scale = 1.0 / std::sqrt(magnitude);
@@ -88,11 +121,15 @@ double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat&
   // (measured with the Hann window on unit-frequency frames: +620 px against a
   // true -9.3 px) cannot win.
   const int reach = std::min(cols / 2, static_cast<int>(std::ceil(options_.max_shift_px / factor)));
-  int best = 0;
+  int best = 0, best_d = 0;
   for (int d = -reach; d <= reach; ++d) {
     const int x = (d + cols) % cols;
-    if (c[x] > c[best]) best = x;
+    if (c[x] > c[best]) best = x, best_d = d;
   }
+  // A maximum on the edge of the search range is no peak (the correlation
+  // still rises beyond it): reported as beyond the limit.
+  if (std::abs(best_d) == reach && reach < cols / 2)
+    return std::copysign(options_.max_shift_px + factor, double(best_d));
   // Sub-pixel: parabola through the peak and its neighbours (circular).
   const float left = c[(best + cols - 1) % cols], right = c[(best + 1) % cols];
   const float denominator = left - 2 * c[best] + right;

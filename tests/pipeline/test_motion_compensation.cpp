@@ -37,13 +37,14 @@ struct Texture {
 };
 
 // Frame `i` of a 3-step set: the texture moved by `shift` px along x, lit by
-// fringes along y with phase step i (16-bit, no noise).
-cv::Mat frame(const Texture& t, double shift, int i, int width = 480, int height = 360) {
+// fringes along y (of `period` px) with phase step i (16-bit, no noise).
+cv::Mat frame(const Texture& t, double shift, int i, int width = 480, int height = 360,
+             double period = 37.0, double texture = 0.05) {
   cv::Mat image(height, width, CV_16UC1);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
-      const double albedo = 0.5 + 0.05 * t.at(x - shift, y);
-      const double fringe = 0.5 + 0.5 * std::cos(2 * M_PI * y / 37.0 - 2 * M_PI * i / 3.0);
+      const double albedo = 0.5 + texture * t.at(x - shift, y);
+      const double fringe = 0.5 + 0.5 * std::cos(2 * M_PI * y / period - 2 * M_PI * i / 3.0);
       image.at<std::uint16_t>(y, x) = cv::saturate_cast<std::uint16_t>(60000 * albedo * (0.2 + 0.8 * fringe));
     }
   return image;
@@ -108,4 +109,48 @@ TEST_CASE("motion compensation rejects bad options and inputs", "[motion]") {
   CHECK_THROWS_AS(ok.compensate(ImageSet{}), std::invalid_argument);
   CHECK_THROWS_AS(ok.estimateShift(cv::Mat(10, 10, CV_8UC1), cv::Mat(10, 12, CV_8UC1)),
                   std::invalid_argument);
+}
+
+// 3+3's unit-frequency frames: one fringe period over the image, a faint
+// texture (0.2 % of the albedo). The windowed fringes of two frames
+// phase-stepped by 2 pi / 3 correlate negatively at one period per image;
+// left in, they pushed the peak to the edge of the search range (here
+// +-101 px for -+2.1 px, up to a texture of 0.7 %; sl_eval wall: -201 px
+// for -4.2 px), and with OpenCV's symmetric Hann window the static fringes
+// leak beyond frequency +-1 (-74 / -70 px at 0.2 %).
+TEST_CASE("phase correlation between unit-frequency fringe frames is not pulled by the fringes",
+          "[motion]") {
+  const Texture texture(11);
+  const std::vector<double> truth = {0.0, 2.1, 4.2};
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < 3; ++i) frames.push_back(frame(texture, truth[i], i, 480, 360, 420.0, 0.002));
+  MotionCompensationOptions options;
+  options.subsample = 2;
+  options.max_shift_px = 100;
+  const MotionCompensator compensator(options);
+  for (int i : {0, 2}) {
+    const double estimated = compensator.estimateShift(frames[1], frames[i]);
+    INFO("frame " << i << ": estimated " << estimated << ", true " << truth[i] - truth[1]);
+    CHECK(estimated == Approx(truth[i] - truth[1]).margin(0.15));
+  }
+}
+
+TEST_CASE("a correlation maximum on the edge of the search range counts as beyond the limit",
+          "[motion]") {
+  const Texture texture(3);
+  MotionCompensationOptions options;
+  options.subsample = 1;
+  options.max_shift_px = 4;  // the true shift, 9 px, lies beyond
+  const MotionCompensator compensator(options);
+  const cv::Mat a = frame(texture, 0, 0), b = frame(texture, 9, 0);
+  CHECK(std::abs(compensator.estimateShift(a, b)) > options.max_shift_px);
+  ImageSet set;
+  set.cameras.resize(1);
+  set.cameras[0].frames = {a, a, b};
+  set.cameras[0].stamps_ns = {1, 2, 3};
+  options.reference_frame = 0;
+  MotionEstimate estimate;
+  MotionCompensator(options).compensate(set, &estimate);
+  CHECK_FALSE(estimate.all_within_limit);
+  CHECK(estimate.shifts_px[0][2] == 0.0);
 }

@@ -11,8 +11,9 @@
 // summed over the frequencies across the motion axis (its inverse transform
 // is the correlation on the line of zero shift across the axis) and whitened
 // by the square root of its magnitude; the frequency zero along the motion
-// axis is left out, because the projected fringes do not move with the scene
-// and would pull the peak towards zero (see motion_compensation.cpp).
+// axis (and +-1 with the Hann window) is left out, because the projected
+// fringes do not move with the scene and would pull the peak (see
+// motion_compensation.cpp).
 #pragma once
 
 #include <memory>
@@ -45,7 +46,9 @@ class MotionCompensator {
   explicit MotionCompensator(MotionCompensationOptions options);
 
   // Shift of `moving`'s content relative to `reference` along the axis (px).
-  // Both images the same size, CV_8UC1 / CV_16UC1 / CV_32FC1.
+  // Both images the same size, CV_8UC1 / CV_16UC1 / CV_32FC1. A correlation
+  // whose maximum lies on the edge of the +-max_shift_px search range has no
+  // peak within it: the result is then beyond max_shift_px (by the sign).
   double estimateShift(const cv::Mat& reference, const cv::Mat& moving) const;
 
   // A new image set whose frames are aligned with the reference frame (by
