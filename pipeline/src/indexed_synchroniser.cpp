@@ -14,31 +14,41 @@ void IndexedSynchroniser::startRun() {
   next_sequence_id_ = 0;
 }
 
-void IndexedSynchroniser::begin(std::string pattern, int frame_count, TimestampNs trigger_stamp_ns) {
+void IndexedSynchroniser::begin(std::string pattern, int frame_count, TimestampNs trigger_stamp_ns,
+                                std::vector<std::size_t> cameras) {
   if (frame_count < 1) throw std::invalid_argument("IndexedSynchroniser: frame_count must be >= 1");
+  std::vector<bool> expected(camera_ids_.size(), cameras.empty());
+  for (std::size_t c : cameras) {
+    if (c >= camera_ids_.size())
+      throw std::out_of_range("IndexedSynchroniser: camera index " + std::to_string(c) +
+                              " but only " + std::to_string(camera_ids_.size()) + " cameras");
+    expected[c] = true;
+  }
   abandon(true);
   open_ = std::make_shared<ImageSet>();
   open_->pattern_name = std::move(pattern);
   open_->trigger_stamp_ns = trigger_stamp_ns;
   frames_.assign(camera_ids_.size(), std::vector<std::optional<Frame>>(frame_count));
-  missing_ = camera_ids_.size() * static_cast<std::size_t>(frame_count);
+  expected_ = std::move(expected);
+  missing_ = 0;
+  for (bool e : expected_) missing_ += e ? static_cast<std::size_t>(frame_count) : 0;
 }
 
 void IndexedSynchroniser::pushFrame(std::size_t camera_index, int index, Frame frame) {
   if (camera_index >= camera_ids_.size())
     throw std::out_of_range("IndexedSynchroniser: camera index " + std::to_string(camera_index) +
                             " but only " + std::to_string(camera_ids_.size()) + " cameras");
-  if (!open_ || index < 0 || index >= static_cast<int>(frames_[camera_index].size()) ||
-      frames_[camera_index][index]) {
+  if (!open_ || !expected_[camera_index] || index < 0 ||
+      index >= static_cast<int>(frames_[camera_index].size()) || frames_[camera_index][index]) {
     ++counters_.frames_unmatched;
     return;
   }
   frames_[camera_index][index] = std::move(frame);
   if (--missing_ > 0) return;
   open_->sequence_id = next_sequence_id_++;
-  open_->cameras.resize(camera_ids_.size());
   for (std::size_t c = 0; c < camera_ids_.size(); ++c) {
-    CameraImages& images = open_->cameras[c];
+    if (!expected_[c]) continue;
+    CameraImages& images = open_->cameras.emplace_back();
     images.camera_id = camera_ids_[c];
     images.bit_depth = frames_[c][0]->bit_depth;
     for (auto& f : frames_[c]) {

@@ -523,3 +523,39 @@ TEST_CASE("decoder.projector_gamma takes effect in the engine's decoding", "[eng
   CHECK(compensated > 0.97 * linear);
   CHECK(uncompensated < 0.9 * compensated);
 }
+
+// Software trigger on a two-camera sensor: only the cameras a request
+// triangulates with are triggered (a simulated camera not triggered renders
+// nothing, which halves sl_eval wall's rendering).
+TEST_CASE("software trigger: only the request's cameras are triggered") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim-motion.yaml");
+  config.sim.motion = {};
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  std::mutex mutex;
+  std::vector<std::string> cameras;
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [&](const sl::daemon::ScanResult& r) {
+                                  std::lock_guard lock(mutex);
+                                  cameras.push_back(r.camera_id);
+                                });
+  StartRequest r;
+  r.pattern = "3+3_horizontal";
+  r.count = 1;
+  r.trigger = TriggerMode::kSoftware;
+  r.cameras = {"sim_left"};
+  const auto before = sim->counters().frames_delivered;
+  REQUIRE(engine.start(r).accepted());
+  const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(20s);
+  auto got = [&] {
+    std::lock_guard lock(mutex);
+    return cameras.size();
+  };
+  while (got() < 1 && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(5ms);
+  REQUIRE(got() == 1);
+  for (int i = 0; i < 400 && engine.status().state != ScanState::kIdle; ++i)
+    std::this_thread::sleep_for(5ms);
+  CHECK(cameras[0] == "sim_left");
+  // 6 frames of the one camera, none of sim_top.
+  CHECK(sim->counters().frames_delivered - before == 6);
+  CHECK(engine.status().sets_incomplete == 0);
+}

@@ -82,3 +82,35 @@ TEST_CASE("indexed grouping: stray frames and abandoned sequences are counted") 
   REQUIRE(sets.size() == 1);
   CHECK(sets[0]->sequence_id == 0);
 }
+
+TEST_CASE("indexed grouping: a sequence of some cameras completes without the others") {
+  IndexedSynchroniser g({"a", "b", "c"});
+  g.begin("P", 2, 1000, {2});
+  g.pushFrame(2, 0, tagged(20, 1100));
+  g.pushFrame(0, 0, tagged(0, 1100));  // not asked for: stray
+  CHECK(g.takeCompleted().empty());
+  g.pushFrame(2, 1, tagged(21, 1200));
+  auto sets = g.takeCompleted();
+  REQUIRE(sets.size() == 1);
+  REQUIRE(sets[0]->cameras.size() == 1);
+  CHECK(sets[0]->cameras[0].camera_id == "c");
+  REQUIRE(sets[0]->cameras[0].frames.size() == 2);
+  CHECK(sets[0]->cameras[0].frames[1].at<std::uint8_t>(0, 0) == 21);
+  CHECK(g.counters().frames_unmatched == 1);
+  // Cameras in camera_ids order whatever order they are asked in; all again by default.
+  g.begin("P", 1, 2000, {2, 0});
+  g.pushFrame(0, 0, tagged(0, 2100));
+  g.pushFrame(2, 0, tagged(20, 2100));
+  sets = g.takeCompleted();
+  REQUIRE(sets.size() == 1);
+  REQUIRE(sets[0]->cameras.size() == 2);
+  CHECK(sets[0]->cameras[0].camera_id == "a");
+  CHECK(sets[0]->cameras[1].camera_id == "c");
+  g.begin("P", 1, 3000);
+  g.pushFrame(0, 0, tagged(0, 3100));
+  g.pushFrame(1, 0, tagged(1, 3100));
+  CHECK(g.takeCompleted().empty());
+  g.pushFrame(2, 0, tagged(2, 3100));
+  CHECK(g.takeCompleted().size() == 1);
+  CHECK_THROWS_AS(g.begin("P", 1, 4000, {3}), std::out_of_range);
+}

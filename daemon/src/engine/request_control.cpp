@@ -184,8 +184,16 @@ void RequestControl::waitForChange(std::chrono::milliseconds timeout) {
 std::optional<RequestControl::SoftwareRun> RequestControl::softwareRun() const {
   std::lock_guard lock(mutex_);
   if (state_ != ScanState::kScanning || trigger_ != TriggerMode::kSoftware) return std::nullopt;
-  return SoftwareRun{generation_.load(), current_pattern_,
-                     config_.findPattern(current_pattern_)->frameCount(), scans_requested_};
+  SoftwareRun run{generation_.load(), current_pattern_,
+                  config_.findPattern(current_pattern_)->frameCount(), scans_requested_, {}};
+  if (recording_.empty()) {
+    run.cameras = camerasFor(current_pattern_, *options_);
+    if (const auto it = config_.pattern_intensity_camera.find(current_pattern_);
+        it != config_.pattern_intensity_camera.end() &&
+        std::find(run.cameras.begin(), run.cameras.end(), it->second) == run.cameras.end())
+      run.cameras.push_back(it->second);
+  }
+  return run;
 }
 
 std::optional<std::uint64_t> RequestControl::countScan(std::uint64_t generation) {

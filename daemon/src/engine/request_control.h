@@ -65,6 +65,10 @@ class RequestControl {
     std::string pattern;  // read at each sequence boundary
     int frame_count = 0;
     std::uint64_t scans_requested = 0;  // 0 = continuous
+    // The cameras to trigger: those that triangulate the pattern for the
+    // request and its intensity camera; every camera while recording (a
+    // recording keeps all images of the set).
+    std::vector<std::string> cameras;
   };
   std::optional<SoftwareRun> softwareRun() const;
 

@@ -330,7 +330,7 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
       }
       holding = true;
     }
-    SoftwareRuns::Outcome outcome = software.acquire(gen, run->pattern, run->frame_count, [&] {
+    SoftwareRuns::Outcome outcome = software.acquire(gen, run->pattern, run->frame_count, run->cameras, [&] {
       hb.beat();
       return !running || control.generation() != gen;
     });

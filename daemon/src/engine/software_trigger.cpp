@@ -1,5 +1,6 @@
 #include "engine/software_trigger.h"
 
+#include <algorithm>
 #include <stdexcept>
 #include <thread>
 
@@ -27,8 +28,12 @@ std::string SoftwareTrigger::unsupportedReason() const {
 }
 
 bool SoftwareTrigger::acquire(const std::string& pattern, int frame_count,
+                              const std::vector<std::size_t>& cameras,
                               const std::function<bool()>& cancelled,
                               pipeline::IndexedSynchroniser& grouping) {
+  std::vector<std::size_t> used = cameras;
+  if (used.empty())
+    for (std::size_t c = 0; c < cameras_.size(); ++c) used.push_back(c);
   if (selected_ != pattern) {
     projector_->stop();
     projector_->select(pattern);
@@ -41,9 +46,9 @@ bool SoftwareTrigger::acquire(const std::string& pattern, int frame_count,
     projector_->projectSingle(i);
     std::this_thread::sleep_for(settle);
     const pipeline::TimestampNs trigger_ns = pipeline::systemClockNs();
-    if (i == 0) grouping.begin(pattern, frame_count, trigger_ns);
-    for (const auto& camera : cameras_) camera->triggerSoftware();
-    for (std::size_t c = 0; c < cameras_.size(); ++c) {
+    if (i == 0) grouping.begin(pattern, frame_count, trigger_ns, used);
+    for (std::size_t c : used) cameras_[c]->triggerSoftware();
+    for (std::size_t c : used) {
       const auto deadline = std::chrono::steady_clock::now() + toMs(config_.grab_timeout_s);
       std::optional<pipeline::Frame> frame;
       // Frames exposed before this pattern was shown are left over from an
@@ -81,10 +86,13 @@ std::vector<std::string> idsOf(const std::vector<std::shared_ptr<drivers::Camera
 
 SoftwareRuns::SoftwareRuns(std::vector<std::shared_ptr<drivers::Camera>> cameras,
                            std::shared_ptr<drivers::Projector> projector, SoftwareTriggerConfig config)
-    : trigger_(cameras, std::move(projector), config), grouping_(idsOf(cameras)) {}
+    : trigger_(cameras, std::move(projector), config),
+      grouping_(idsOf(cameras)),
+      camera_ids_(idsOf(cameras)) {}
 
 SoftwareRuns::Outcome SoftwareRuns::acquire(std::uint64_t generation, const std::string& pattern,
-                                            int frame_count, const std::function<bool()>& cancelled) {
+                                            int frame_count, const std::vector<std::string>& cameras,
+                                            const std::function<bool()>& cancelled) {
   if (generation != generation_) {
     trigger_.stop();  // a new request: select its pattern afresh
     grouping_.startRun();
@@ -94,7 +102,15 @@ SoftwareRuns::Outcome SoftwareRuns::acquire(std::uint64_t generation, const std:
   }
   Outcome out;
   try {
-    if (!trigger_.acquire(pattern, frame_count, cancelled, grouping_)) {
+    std::vector<std::size_t> indices;
+    for (const std::string& id : cameras) {
+      const auto it = std::find(camera_ids_.begin(), camera_ids_.end(), id);
+      if (it == camera_ids_.end())
+        throw std::runtime_error("software trigger: no camera '" + id + "'");
+      indices.push_back(static_cast<std::size_t>(it - camera_ids_.begin()));
+    }
+    std::sort(indices.begin(), indices.end());
+    if (!trigger_.acquire(pattern, frame_count, indices, cancelled, grouping_)) {
       grouping_.abandon(false);  // stopped meanwhile
       return out;
     }

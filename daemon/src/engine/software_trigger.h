@@ -39,8 +39,10 @@ class SoftwareTrigger {
   // is left open). Throws std::runtime_error (naming the device) on a device
   // fault or an image that did not arrive within grab_timeout_s; the
   // projector is stopped then.
-  bool acquire(const std::string& pattern, int frame_count, const std::function<bool()>& cancelled,
-               pipeline::IndexedSynchroniser& grouping);
+  // `cameras`: the indices of the cameras to trigger (empty = all); the others
+  // are left alone (a simulated camera not triggered renders nothing).
+  bool acquire(const std::string& pattern, int frame_count, const std::vector<std::size_t>& cameras,
+               const std::function<bool()>& cancelled, pipeline::IndexedSynchroniser& grouping);
 
   // Ends the held pattern; the next acquire() selects its pattern again.
   void stop();
@@ -79,10 +81,12 @@ class SoftwareRuns {
     bool end_request = false;  // the third fault in a row: end the request
   };
   // One sequence of `pattern` for the request `generation` (a new generation
-  // is a new run: the pattern selected afresh, sequence ids from 0).
-  // `cancelled` turning true (the request stopped) is no fault.
+  // is a new run: the pattern selected afresh, sequence ids from 0), from
+  // the cameras named in `cameras` (empty = all; the set holds only them).
+  // `cancelled` turning true (the request stopped) is no fault; a camera id
+  // no device has is a fault of the sequence.
   Outcome acquire(std::uint64_t generation, const std::string& pattern, int frame_count,
-                  const std::function<bool()>& cancelled);
+                  const std::vector<std::string>& cameras, const std::function<bool()>& cancelled);
   // Ends the held pattern (no software run any more).
   void stop() { trigger_.stop(); }
 
@@ -92,6 +96,7 @@ class SoftwareRuns {
  private:
   SoftwareTrigger trigger_;
   pipeline::IndexedSynchroniser grouping_;
+  std::vector<std::string> camera_ids_;  // of the devices, in order
   std::uint64_t generation_ = 0;  // of the run in progress
   std::uint64_t acquired_ = 0;    // its sets so far
   int failures_ = 0;              // consecutive failed sequences

@@ -32,8 +32,13 @@ class IndexedSynchroniser {
   void startRun();
   // Opens a sequence of `frame_count` frames of `pattern`. A sequence still
   // open is abandoned and counted (begin() implies it will not complete).
-  // Throws std::invalid_argument on frame_count < 1.
-  void begin(std::string pattern, int frame_count, TimestampNs trigger_stamp_ns);
+  // `cameras`: the indices (into camera_ids) of the cameras this sequence
+  // waits for and its set holds, in camera_ids order; empty = all. Frames of
+  // other cameras are counted in frames_unmatched. Throws
+  // std::invalid_argument on frame_count < 1, std::out_of_range on an index
+  // outside camera_ids.
+  void begin(std::string pattern, int frame_count, TimestampNs trigger_stamp_ns,
+             std::vector<std::size_t> cameras = {});
   // Frame `index` of the open sequence from camera `camera_index`. A frame
   // with no open sequence, an index outside it or one already delivered is
   // counted in frames_unmatched. Throws std::out_of_range on a camera index
@@ -52,6 +57,7 @@ class IndexedSynchroniser {
   std::uint64_t next_sequence_id_ = 0;
   std::shared_ptr<ImageSet> open_;  // null: none open
   std::vector<std::vector<std::optional<Frame>>> frames_;  // [camera][index] of the open sequence
+  std::vector<bool> expected_;  // [camera]: the open sequence waits for it
   std::size_t missing_ = 0;  // frames the open sequence still lacks
   std::vector<std::shared_ptr<const ImageSet>> completed_;
   SynchroniserCounters counters_;
