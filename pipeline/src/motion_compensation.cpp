@@ -171,6 +171,24 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
       cv::Mat aligned;
       cv::warpAffine(camera.frames[i], aligned, m, camera.frames[i].size(), cv::INTER_LINEAR,
                      cv::BORDER_CONSTANT, cv::Scalar(0));
+      // Pixels whose source lies even partly outside the frame (bilinear
+      // blends of an edge pixel with the border's 0) are set to 0 as well:
+      // dimmed, they would decode to a wrong phase instead of an invalid one.
+      const bool along_x = options_.axis == MotionCompensationOptions::Axis::kX;
+      const int length = along_x ? aligned.cols : aligned.rows;
+      int from = 0, to = 0;  // [from, to) along the axis is zeroed
+      if (shift < 0) {
+        to = std::min(length, static_cast<int>(std::ceil(-shift)));
+      } else if (shift > 0) {
+        from = std::max(0, static_cast<int>(std::floor(length - 1 - shift)) + 1);
+        to = length;
+      }
+      if (to > from) {
+        if (along_x)
+          aligned.colRange(from, to).setTo(cv::Scalar(0));
+        else
+          aligned.rowRange(from, to).setTo(cv::Scalar(0));
+      }
       camera.frames[i] = aligned;
     }
     if (&camera == &out->cameras.front() && ref < static_cast<int>(camera.stamps_ns.size()))

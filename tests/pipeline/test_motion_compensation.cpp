@@ -154,3 +154,31 @@ TEST_CASE("a correlation maximum on the edge of the search range counts as beyon
   CHECK_FALSE(estimate.all_within_limit);
   CHECK(estimate.shifts_px[0][2] == 0.0);
 }
+
+// Pixels whose source lies partly outside the frame are 0, not a blend of
+// the edge pixel with the border (a dimmed pixel decodes to a wrong phase).
+TEST_CASE("pixels shifted in from outside the frame are 0, partly outside included", "[motion]") {
+  const Texture texture(5);
+  for (const double shift : {2.4, -2.4, 3.0}) {
+    ImageSet set;
+    set.cameras.resize(1);
+    set.cameras[0].frames = {frame(texture, 0, 0), frame(texture, shift, 0)};
+    set.cameras[0].stamps_ns = {1, 2};
+    MotionCompensationOptions options;
+    options.reference_frame = 0;
+    options.subsample = 1;
+    MotionEstimate estimate;
+    const auto aligned = MotionCompensator(options).compensate(set, &estimate);
+    const cv::Mat& f = aligned->cameras[0].frames[1];
+    const double s = estimate.shifts_px[0][1];
+    INFO("shift " << shift << ", estimated " << s);
+    REQUIRE(s == Approx(shift).margin(0.1));
+    // aligned(x) = frame(x + s): valid where 0 <= x + s <= width - 1.
+    for (int x = 0; x < f.cols; ++x) {
+      const bool inside = x + s >= 0 && x + s <= f.cols - 1;
+      INFO("column " << x);
+      if (!inside) CHECK(cv::countNonZero(f.col(x)) == 0);
+      if (inside && (x + s >= 1 && x + s <= f.cols - 2)) CHECK(cv::countNonZero(f.col(x)) == f.rows);
+    }
+  }
+}

@@ -52,9 +52,9 @@ class MotionCompensator {
   double estimateShift(const cv::Mat& reference, const cv::Mat& moving) const;
 
   // A new image set whose frames are aligned with the reference frame (by
-  // sub-pixel resampling along the axis; pixels shifted in from outside are
-  // 0, so the decoder marks them invalid), stamped with the reference frame's
-  // time. Throws std::invalid_argument on an empty set or a bad reference.
+  // sub-pixel resampling along the axis; pixels whose source lies even partly
+  // outside the frame are 0, so the decoder marks them invalid), stamped with
+  // the reference frame's time. Throws std::invalid_argument on an empty set or a bad reference.
   std::shared_ptr<const ImageSet> compensate(const ImageSet& set,
                                              MotionEstimate* estimate = nullptr) const;
 
