@@ -251,6 +251,7 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.state = s.state == sl_msgs_msg_STATE_SCANNING ? ScanState::kScanning
                    : s.state == sl_msgs_msg_STATE_IDLE   ? ScanState::kIdle
                    : s.state == sl_msgs_msg_STATE_WAITING ? ScanState::kWaiting
+                   : s.state == sl_msgs_msg_STATE_DEGRADED ? ScanState::kDegraded
                                                          : ScanState::kError;
       info.pattern = s.pattern ? s.pattern : "";
       info.scans_done = s.scans_done;
@@ -280,6 +281,11 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.requests_rate_limited = s.requests_rate_limited;
       info.requests_invalid = s.requests_invalid;
       info.replies_timed_out = s.replies_timed_out;
+      info.degraded_reason = s.degraded_reason ? s.degraded_reason : "";
+      info.last_error_ns = fromTime(s.last_error_stamp);
+      info.errors_reported = s.errors_reported;
+      info.requests_malformed = s.requests_malformed;
+      info.sets_over_quota = s.sets_over_quota;
       latest = info;
     }
     if (!latest) std::this_thread::sleep_for(std::chrono::milliseconds(10));

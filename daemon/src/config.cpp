@@ -200,6 +200,21 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   if (trigger == "hardware") r.trigger = TriggerMode::kHardware;
   else if (trigger == "software") r.trigger = TriggerMode::kSoftware;
   else m.fail("trigger", "must be hardware or software, not '" + trigger + "'");
+  r.stall_timeout_s = m.get<double>("stall_timeout_s", r.stall_timeout_s);
+  if (!(r.stall_timeout_s >= 0.1 && r.stall_timeout_s <= 3600))
+    m.fail("stall_timeout_s", "must be in [0.1, 3600] seconds");
+  r.last_error_hold_s = m.get<double>("last_error_hold_s", r.last_error_hold_s);
+  if (!(r.last_error_hold_s >= 0 && r.last_error_hold_s <= 1e6))
+    m.fail("last_error_hold_s", "must be in [0, 1e6] seconds (0 = until cleared)");
+  auto count = [&](const char* key, std::uint64_t fallback, std::uint64_t max) {
+    const double v = m.get<double>(key, static_cast<double>(fallback));
+    if (!(v >= 0 && v <= static_cast<double>(max) && v == static_cast<double>(static_cast<std::uint64_t>(v))))
+      m.fail(key, "must be a whole number in 0.." + std::to_string(max) + " (0 = no limit)");
+    return static_cast<std::uint64_t>(v);
+  };
+  r.recording_max_mb = count("recording_max_mb", r.recording_max_mb, 1ull << 40);
+  r.recording_max_sets = count("recording_max_sets", r.recording_max_sets, 1ull << 40);
+  r.recording_min_free_mb = count("recording_min_free_mb", r.recording_min_free_mb, 1ull << 40);
   m.done();
 }
 

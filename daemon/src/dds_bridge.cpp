@@ -47,6 +47,7 @@ sl_msgs_msg_State toState(ScanState s) {
     case ScanState::kScanning: return sl_msgs_msg_STATE_SCANNING;
     case ScanState::kError: return sl_msgs_msg_STATE_ERROR;
     case ScanState::kWaiting: return sl_msgs_msg_STATE_WAITING;
+    case ScanState::kDegraded: return sl_msgs_msg_STATE_DEGRADED;
   }
   return sl_msgs_msg_STATE_ERROR;
 }
@@ -191,6 +192,7 @@ struct DdsBridge::Impl {
   // writer's blocking time count separately.
   RequestGuard guard;
   std::uint64_t replies_timed_out = 0;
+  std::uint64_t requests_malformed = 0;
   std::uint64_t rate_limited_logged = 0;
 
   // Publish-thread scratch buffer (metres), reused between clouds.
@@ -368,7 +370,8 @@ void DdsBridge::Impl::publishImageSet(const pipeline::ImageSet& set) {
 
 void DdsBridge::Impl::publishStatus(const EngineStatus& s,
                                     const std::vector<std::string>& patterns) {
-  std::string pattern = s.pattern, last_error = s.last_error, recording = s.recording;
+  std::string pattern = s.pattern, last_error = s.last_error, recording = s.recording,
+              degraded = s.degraded_reason;
   StringList names(patterns);
   Status msg{};
   msg.stamp = toTime(pipeline::systemClockNs());
@@ -402,6 +405,11 @@ void DdsBridge::Impl::publishStatus(const EngineStatus& s,
   msg.requests_rate_limited = guard.counters.rate_limited;
   msg.requests_invalid = guard.counters.invalid;
   msg.replies_timed_out = replies_timed_out;
+  msg.degraded_reason = degraded.data();
+  msg.last_error_stamp = toTime(s.last_error_ns);
+  msg.errors_reported = s.errors_reported;
+  msg.requests_malformed = requests_malformed;
+  msg.sets_over_quota = s.sets_over_quota;
   status_writer.write(msg);
 }
 

@@ -55,16 +55,17 @@ void reload(const std::string& path, const sl::daemon::DaemonConfig& running,
       const std::string message = "config reload rejected: " + keys +
                                   " changed, which needs a restart; nothing was applied";
       logWarning(message);
-      engine.reportError(message);
+      engine.reportError(message, "reload");
     } else {
       engine.applyRuntimeSettings(loaded);
+      engine.clearError("reload");  // an earlier reload's error no longer holds
       bridge.setStatusPeriod(loaded.dds.status_period_s);
       logInfo("config reloaded from " + path +
               " (decoder, triangulator, motion_compensation, dds.status_period_s)");
     }
   } catch (const std::exception& e) {
     logWarning(std::string("config reload failed, keeping the running config: ") + e.what());
-    engine.reportError(std::string("config reload failed: ") + e.what());
+    engine.reportError(std::string("config reload failed: ") + e.what(), "reload");
   }
   systemdNotify("READY=1");
 }

@@ -9,7 +9,9 @@
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <filesystem>
 #include <functional>
+#include <unistd.h>
 #include <map>
 #include <optional>
 #include <set>
@@ -21,6 +23,7 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
+#include "sl/drivers/recording.h"
 #include "sl/drivers/sim.h"
 
 using namespace std::chrono_literals;
@@ -477,6 +480,233 @@ TEST_CASE("clouds in metres are the clouds in millimetres scaled, with the same 
   }
   CHECK(valid > mm.cloud->points.size() / 2);
   CHECK(mismatched == 0);
+
+namespace {
+
+// A camera that can be made to deliver nothing (a device gone quiet) or to
+// fail every grab (a device gone), and then to recover.
+class FaultyCamera : public sl::drivers::Camera {
+ public:
+  explicit FaultyCamera(std::shared_ptr<sl::drivers::Camera> inner) : inner_(std::move(inner)) {}
+  std::string id() const override { return inner_->id(); }
+  int width() const override { return inner_->width(); }
+  int height() const override { return inner_->height(); }
+  void start() override { inner_->start(); }
+  void stop() override { inner_->stop(); }
+  std::optional<sl::pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
+    if (fail) {
+      std::this_thread::sleep_for(10ms);
+      throw std::runtime_error("device unplugged");
+    }
+    if (silent) {
+      std::this_thread::sleep_for(timeout);
+      return std::nullopt;
+    }
+    return inner_->grab(timeout);
+  }
+  std::atomic<bool> silent{false}, fail{false};
+
+ private:
+  std::shared_ptr<sl::drivers::Camera> inner_;
+};
+
+// A trigger source that can be made to deliver no triggers.
+class FaultyTrigger : public sl::drivers::TriggerSource {
+ public:
+  explicit FaultyTrigger(std::shared_ptr<sl::drivers::TriggerSource> inner) : inner_(std::move(inner)) {}
+  std::optional<sl::drivers::TriggerEvent> next(std::chrono::milliseconds timeout) override {
+    if (silent) {
+      std::this_thread::sleep_for(timeout);
+      return std::nullopt;
+    }
+    return inner_->next(timeout);
+  }
+  void stop() override { inner_->stop(); }
+  std::atomic<bool> silent{false};
+
+ private:
+  std::shared_ptr<sl::drivers::TriggerSource> inner_;
+};
+
+}  // namespace
+
+TEST_CASE("a camera or trigger that stalls makes the scan degraded with its cause; it recovers") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  config.runtime.stall_timeout_s = 0.6 * sl::test::kTimeScale;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  auto camera = std::make_shared<FaultyCamera>(sim->camera());
+  auto trigger = std::make_shared<FaultyTrigger>(sim->triggerSource());
+  std::atomic<int> clouds{0};
+  sl::daemon::ScanEngine engine(config, {{camera}, sim->projector(), trigger},
+                                [&](const sl::daemon::ScanResult&) { ++clouds; });
+  using sl::daemon::EngineStatus;
+  auto waitFor = [&](const std::function<bool(const EngineStatus&)>& condition, std::chrono::milliseconds bound) {
+    const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(bound);
+    EngineStatus s = engine.status();
+    while (!condition(s) && std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(20ms);
+      s = engine.status();
+    }
+    return s;
+  };
+  auto scanningWell = [&](int after) {
+    return [&, after](const EngineStatus& s) {
+      return s.state == ScanState::kScanning && clouds > after && s.scan_rate_hz > 1;
+    };
+  };
+  REQUIRE(engine.start("", 0).accepted());
+  EngineStatus s = waitFor(scanningWell(2), 5000ms);
+  REQUIRE(s.state == ScanState::kScanning);
+  CHECK(s.degraded_reason.empty());
+  s = waitFor([](const EngineStatus& s) { return s.frame_rate_hz > 10; }, 3000ms);  // 30 Hz camera
+  CHECK(s.frame_rate_hz > 10);
+  const std::uint64_t errors_before = s.errors_reported;
+
+  SECTION("a silent camera") {
+    const auto t0 = sl::pipeline::systemClockNs();
+    camera->silent = true;
+    s = waitFor([](const EngineStatus& s) { return s.state == ScanState::kDegraded; }, 3000ms);
+    REQUIRE(s.state == ScanState::kDegraded);
+    INFO("degraded: " << s.degraded_reason);
+    CHECK(s.degraded_reason.find("camera 'sim_top': no frame for") != std::string::npos);
+    CHECK(s.last_error.find("degraded: camera 'sim_top'") != std::string::npos);
+    CHECK(s.last_error_ns >= t0);
+    CHECK(s.errors_reported > errors_before);
+    // The rates fall to 0 instead of keeping their last values.
+    s = waitFor([](const EngineStatus& s) { return s.scan_rate_hz == 0 && s.frame_rate_hz == 0; }, 3000ms);
+    CHECK(s.scan_rate_hz == 0);
+    CHECK(s.frame_rate_hz == 0);
+    // A scan that keeps failing says so as well.
+    s = waitFor([](const EngineStatus& s) { return s.degraded_reason.find("no scan published") != std::string::npos; },
+                3000ms);
+    CHECK(s.degraded_reason.find("no scan published for") != std::string::npos);
+
+    const int before = clouds;
+    camera->silent = false;
+    s = waitFor(scanningWell(before + 1), 5000ms);
+    CHECK(s.state == ScanState::kScanning);
+    CHECK(s.degraded_reason.empty());
+    CHECK(s.last_error.empty());  // the fault it reported has recovered
+    CHECK(s.last_error_ns == 0);
+    CHECK(s.errors_reported > errors_before);  // still counted
+  }
+  SECTION("a camera that fails every grab") {
+    camera->fail = true;
+    s = waitFor([](const EngineStatus& s) { return s.state == ScanState::kDegraded; }, 3000ms);
+    REQUIRE(s.state == ScanState::kDegraded);
+    INFO("degraded: " << s.degraded_reason);
+    CHECK(s.degraded_reason.find("camera 'sim_top': no frame for") != std::string::npos);
+    CHECK(s.degraded_reason.find("(device unplugged)") != std::string::npos);
+    const int before = clouds;
+    camera->fail = false;
+    s = waitFor(scanningWell(before + 1), 5000ms);
+    CHECK(s.state == ScanState::kScanning);
+    CHECK(s.last_error.empty());
+  }
+  SECTION("a silent trigger source") {
+    trigger->silent = true;
+    s = waitFor([](const EngineStatus& s) { return s.state == ScanState::kDegraded; }, 3000ms);
+    REQUIRE(s.state == ScanState::kDegraded);
+    INFO("degraded: " << s.degraded_reason);
+    CHECK(s.degraded_reason.find("trigger source: no trigger for") != std::string::npos);
+    s = waitFor([](const EngineStatus& s) { return s.scan_rate_hz == 0; }, 3000ms);
+    CHECK(s.scan_rate_hz == 0);
+    const int before = clouds;
+    trigger->silent = false;
+    s = waitFor(scanningWell(before + 1), 5000ms);
+    CHECK(s.state == ScanState::kScanning);
+    CHECK(s.last_error.empty());
+  }
+  // STOP ends a degraded scan like any other; idle is never degraded.
+  CHECK(engine.stop().accepted());
+  s = engine.status();
+  CHECK(s.state == ScanState::kIdle);
+  CHECK(s.degraded_reason.empty());
+  CHECK(s.scan_rate_hz == 0);
+}
+
+TEST_CASE("last_error ages out after runtime.last_error_hold_s and keeps its count") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  config.runtime.last_error_hold_s = 0.3;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [](const sl::daemon::ScanResult&) {});
+  const auto t0 = sl::pipeline::systemClockNs();
+  engine.reportError("config reload failed: test", "reload");
+  auto s = engine.status();
+  CHECK(s.last_error == "config reload failed: test");
+  CHECK(s.last_error_ns >= t0);
+  CHECK(s.errors_reported == 1);
+  engine.clearError("camera:");  // another source: kept
+  CHECK(engine.status().last_error == "config reload failed: test");
+  engine.clearError("reload");   // a good reload clears it
+  CHECK(engine.status().last_error.empty());
+  engine.reportError("something else");
+  CHECK(engine.status().last_error == "something else");
+  std::this_thread::sleep_for(400ms);
+  s = engine.status();
+  CHECK(s.last_error.empty());
+  CHECK(s.last_error_ns == 0);
+  CHECK(s.errors_reported == 2);
+}
+
+TEST_CASE("a recording stops at its quota with the reason, counting the sets it did not record") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const std::string root = std::filesystem::temp_directory_path() /
+                           ("sl_quota_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  config.runtime.recording_root = root;
+  SECTION("a set count") {
+    config.runtime.recording_max_sets = 2;
+    const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+    std::atomic<int> clouds{0};
+    sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                  [&](const sl::daemon::ScanResult&) { ++clouds; });
+    REQUIRE(engine.start("", 5, "quota").accepted());
+    const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(10s);
+    while ((engine.status().state != ScanState::kIdle || engine.status().sets_recorded +
+                                                                 engine.status().sets_over_quota < 5) &&
+           std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(50ms);
+    const auto s = engine.status();
+    CHECK(clouds == 5);  // scanning goes on; only the recording stops
+    CHECK(s.sets_recorded == 2);
+    CHECK(s.sets_over_quota == 3);
+    CHECK(s.sets_not_recorded == 0);
+    CHECK(s.recording.empty());
+    INFO("last_error: " << s.last_error);
+    CHECK(s.last_error.find("recording 'quota' stopped after 2 sets") != std::string::npos);
+    CHECK(s.last_error.find("runtime.recording_max_sets (2 sets) reached") != std::string::npos);
+    CHECK(sl::drivers::listRecordedSets(root + "/quota").size() == 2);
+  }
+  SECTION("a size in bytes") {
+    config.runtime.recording_max_mb = 1;  // a 1440 x 1080 set of 6 frames is 9.3 MB raw
+    const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+    sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                  [](const sl::daemon::ScanResult&) {});
+    const auto& cal = config.sim.rig.camera;
+    REQUIRE(static_cast<double>(cal.width) * cal.height * 6 > 1e6);
+    REQUIRE(engine.start("", 2, "big").accepted());
+    const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(10s);
+    while (engine.status().sets_over_quota < 2 && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(50ms);
+    const auto s = engine.status();
+    CHECK(s.sets_recorded == 0);
+    CHECK(s.sets_over_quota == 2);
+    CHECK(s.last_error.find("runtime.recording_max_mb (1.0 MB) reached") != std::string::npos);
+  }
+  SECTION("the free-space floor refuses the start") {
+    config.runtime.recording_min_free_mb = 1ull << 40;  // an exabyte: more than any disk
+    const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+    sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                  [](const sl::daemon::ScanResult&) {});
+    const CommandResult r = engine.start("", 1, "full");
+    INFO("reason: " << r.reason);
+    CHECK(r.code == CommandResult::Code::kDeviceError);
+    CHECK(r.reason.find("below runtime.recording_min_free_mb") != std::string::npos);
+    CHECK(engine.status().state == ScanState::kIdle);
+  }
+  std::filesystem::remove_all(root);
 }
 
 // The daemon's decoder.projector_gamma reaches the engine's decoding: the

@@ -34,7 +34,7 @@ const std::map<std::string, std::string>& fieldLists() {
       // sl_msgs, from idl/sl_msgs/msg/*.idl (enums are uint32 on the wire).
       {"sl_msgs/Status",
        "uint32 STATE_IDLE=0\nuint32 STATE_SCANNING=1\nuint32 STATE_ERROR=2\n"
-       "uint32 STATE_WAITING=3\nuint32 TRIGGER_DEFAULT=0\nuint32 TRIGGER_HARDWARE=1\n"
+       "uint32 STATE_WAITING=3\nuint32 STATE_DEGRADED=4\nuint32 TRIGGER_DEFAULT=0\nuint32 TRIGGER_HARDWARE=1\n"
        "uint32 TRIGGER_SOFTWARE=2\n"
        "builtin_interfaces/Time stamp\nuint32 state\nstring pattern\nuint64 scans_done\n"
        "uint64 scans_requested\nfloat64 scan_rate_hz\nuint64 frames_dropped\n"

@@ -335,7 +335,7 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
         writes_timed_out = status.u64();
         if (!writes_timed_out_at_start) writes_timed_out_at_start = writes_timed_out;
         if (scan > 0) {
-          if (state == 1 || state == 3) scanning_seen = true;
+          if (state == 1 || state == 3 || state == 4) scanning_seen = true;
           if (state == 0 && scanning_seen && !idle_since) idle_since = std::chrono::steady_clock::now();
         }
       }

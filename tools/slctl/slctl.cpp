@@ -313,6 +313,8 @@ int printStatus(SensorClient& client, const Args& args) {
   const auto s = client.status(toMs(args.timeout_s));
   if (!s) return noDaemon(args);
   std::printf("state:            %s\n", sl::daemon::toString(s->state));
+  if (s->state == sl::daemon::ScanState::kDegraded)
+    std::printf("degraded:         %s\n", s->degraded_reason.c_str());
   std::printf("pattern:          %s\n", s->pattern.c_str());
   std::printf("scans:            %llu of %s\n", static_cast<unsigned long long>(s->scans_done),
               s->scans_requested ? std::to_string(s->scans_requested).c_str() : "continuous");
@@ -333,13 +335,20 @@ int printStatus(SensorClient& client, const Args& args) {
               u(s->sets_dropped), u(s->sets_overflow), u(s->writes_timed_out),
               u(s->sets_not_recorded));
   std::printf("sets incomplete:  %llu\n", u(s->sets_incomplete));
-  std::printf("recording:        %s (%llu sets recorded)\n",
-              s->recording.empty() ? "-" : s->recording.c_str(),
-              static_cast<unsigned long long>(s->sets_recorded));
-  std::printf("last error:       %s\n", s->last_error.empty() ? "-" : s->last_error.c_str());
+  std::printf("recording:        %s (%llu sets recorded, %llu over quota)\n",
+              s->recording.empty() ? "-" : s->recording.c_str(), u(s->sets_recorded),
+              u(s->sets_over_quota));
+  if (s->last_error.empty()) {
+    std::printf("last error:       -\n");
+  } else {
+    std::printf("last error:       %s (%.1f s ago)\n", s->last_error.c_str(),
+                (sl::pipeline::systemClockNs() - s->last_error_ns) * 1e-9);
+  }
+  std::printf("errors reported:  %llu\n", u(s->errors_reported));
   std::printf("requests:         %llu (answered %llu, rate-limited %llu, invalid %llu, reply timed out %llu)\n",
               u(s->requests_received), u(s->requests_answered), u(s->requests_rate_limited),
               u(s->requests_invalid), u(s->replies_timed_out));
+  std::printf("requests malformed: %llu\n", u(s->requests_malformed));
   return 0;
 }
 

@@ -1,10 +1,12 @@
 #include "engine/request_control.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <limits>
 #include <utility>
 
 #include "engine/start_validation.h"
+#include "sl/daemon/log.h"
 
 namespace sl::daemon {
 
@@ -49,7 +51,7 @@ CommandResult RequestControl::start(const StartRequest& request) {
     } catch (const std::exception& e) {
       links_.recorder->stop();
       recording_.clear();
-      last_error_ = std::string("projector: ") + e.what();
+      setErrorLocked(std::string("projector: ") + e.what(), "");
       ++status_version_;
       return {Code::kDeviceError, last_error_};
     }
@@ -61,6 +63,8 @@ CommandResult RequestControl::start(const StartRequest& request) {
   scans_done_ = 0;
   pending_count_ = accepted.count;
   last_error_.clear();
+  error_source_.clear();
+  last_error_ns_ = 0;
   if (accepted.launch_at_ns > context.now_ns) {
     state_ = ScanState::kWaiting;  // the control thread begins it
     launch_at_ns_ = accepted.launch_at_ns;
@@ -229,9 +233,66 @@ void RequestControl::endRequest(std::uint64_t generation, const std::string& err
   if (generation == generation_.load()) finishLocked(error);
 }
 
-void RequestControl::reportError(const std::string& message) {
+void RequestControl::reportError(const std::string& message, const std::string& source) {
   std::lock_guard lock(mutex_);
+  const bool repeat = message == last_error_ && source == error_source_;
+  setErrorLocked(message, source);
+  if (!repeat) ++status_version_;
+}
+
+void RequestControl::setErrorLocked(const std::string& message, const std::string& source) {
   last_error_ = message;
+  error_source_ = source;
+  last_error_ns_ = pipeline::systemClockNs();
+  ++errors_reported_;
+}
+
+void RequestControl::clearError(const std::string& source_prefix) {
+  std::lock_guard lock(mutex_);
+  if (source_prefix.empty() || last_error_.empty() ||
+      error_source_.compare(0, source_prefix.size(), source_prefix) != 0)
+    return;
+  last_error_.clear();
+  error_source_.clear();
+  last_error_ns_ = 0;
+  ++status_version_;
+}
+
+RequestControl::Health RequestControl::health() const {
+  std::lock_guard lock(mutex_);
+  return {state_ == ScanState::kScanning, trigger_, scanning_since_, sequence_s_};
+}
+
+void RequestControl::setDegraded(const std::string& cause) {
+  std::lock_guard lock(mutex_);
+  if (state_ != ScanState::kScanning || cause == degraded_reason_) return;
+  // The same cause with a longer duration: updated, but no new version (the
+  // periodic status shows it).
+  auto withoutNumbers = [](std::string text) {
+    text.erase(std::remove_if(text.begin(), text.end(), [](char c) { return (c >= '0' && c <= '9') || c == '.'; }),
+               text.end());
+    return text;
+  };
+  if (!cause.empty() && !degraded_reason_.empty() && withoutNumbers(cause) == withoutNumbers(degraded_reason_)) {
+    degraded_reason_ = cause;
+    return;
+  }
+  if (!cause.empty() && degraded_reason_.empty()) {
+    degraded_since_ = Clock::now();
+    logWarning("degraded: " + cause);
+    setErrorLocked("degraded: " + cause, "health");
+  } else if (cause.empty()) {
+    char seconds[32];
+    std::snprintf(seconds, sizeof seconds, "%.1f",
+                  std::chrono::duration<double>(Clock::now() - degraded_since_).count());
+    logInfo(std::string("recovered after ") + seconds + " s degraded (" + degraded_reason_ + ")");
+    if (error_source_ == "health") {
+      last_error_.clear();
+      error_source_.clear();
+      last_error_ns_ = 0;
+    }
+  }
+  degraded_reason_ = cause;
   ++status_version_;
 }
 
@@ -258,7 +319,14 @@ void RequestControl::fillStatus(EngineStatus& s) const {
   s.pattern = current_pattern_;
   s.scans_done = scans_done_;
   s.scans_requested = scans_requested_;
-  s.last_error = last_error_;
+  s.degraded_reason = state_ == ScanState::kScanning ? degraded_reason_ : "";
+  if (!s.degraded_reason.empty()) s.state = ScanState::kDegraded;
+  const double hold_ns = config_.runtime.last_error_hold_s * 1e9;
+  const bool aged = hold_ns > 0 && last_error_ns_ > 0 &&
+                    static_cast<double>(pipeline::systemClockNs() - last_error_ns_) > hold_ns;
+  s.last_error = aged ? "" : last_error_;
+  s.last_error_ns = aged ? 0 : last_error_ns_;
+  s.errors_reported = errors_reported_;
   s.recording = recording_;
   s.trigger = trigger_;
   s.cameras = camerasFor(current_pattern_, *options_);
@@ -305,6 +373,8 @@ void RequestControl::beginLocked() {
                          : Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                               std::chrono::duration<double>(count * sequence_s_ + 2.0));
   state_ = ScanState::kScanning;
+  scanning_since_ = Clock::now();
+  degraded_reason_.clear();
   launch_at_ns_ = 0;
   try {
     if (trigger_ == TriggerMode::kHardware) {
@@ -317,7 +387,7 @@ void RequestControl::beginLocked() {
     state_ = ScanState::kError;
     links_.recorder->stop();
     recording_.clear();
-    last_error_ = std::string("projector: ") + e.what();
+    setErrorLocked(std::string("projector: ") + e.what(), "");
   }
   ++status_version_;
 }
@@ -347,7 +417,7 @@ void RequestControl::finishLocked(const std::string& error) {
   try {
     links_.projector->stop();
   } catch (const std::exception& e) {
-    last_error_ = std::string("projector stop: ") + e.what();
+    setErrorLocked(std::string("projector stop: ") + e.what(), "");
   }
   tellSchedule({generation_.load(), RunEnded{!error.empty()}});
   generation_++;
@@ -357,7 +427,8 @@ void RequestControl::finishLocked(const std::string& error) {
   switch_draining_ = false;
   links_.recorder->stop();
   recording_.clear();
-  if (!error.empty()) last_error_ = error;
+  if (!error.empty()) setErrorLocked(error, "");
+  degraded_reason_.clear();
   ++status_version_;
   changed_.notify_all();
 }

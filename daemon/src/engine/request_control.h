@@ -82,7 +82,24 @@ class RequestControl {
   // Ends the request of `generation` (if still current) with an error.
   void endRequest(std::uint64_t generation, const std::string& error);
 
-  void reportError(const std::string& message);
+  // The latest error, with the time and what it came from ("camera:<id>",
+  // "trigger", "health", "reload", "" = other); a repeat of the same message
+  // refreshes its time and count without a new status version.
+  void reportError(const std::string& message, const std::string& source = "");
+  // Clears last_error if its source starts with `source_prefix` (non-empty).
+  void clearError(const std::string& source_prefix);
+  // What the health check needs of the running request.
+  struct Health {
+    bool scanning = false;
+    TriggerMode trigger = TriggerMode::kHardware;
+    Clock::time_point since;  // when the scan began
+    double sequence_s = 0;    // expected time per sequence
+  };
+  Health health() const;
+  // Output thread: the cause of a degraded scan ("" = healthy). A change is
+  // logged and published; entering puts it into last_error, leaving clears
+  // that again. Ignored when not scanning.
+  void setDegraded(const std::string& cause);
   // Bumps the status version (a change worth publishing).
   void touch();
 
@@ -116,6 +133,13 @@ class RequestControl {
   std::uint64_t scans_done_ = 0;
   std::uint64_t status_version_ = 0;
   std::string last_error_;
+  std::string error_source_;             // of last_error_
+  pipeline::TimestampNs last_error_ns_ = 0;
+  std::uint64_t errors_reported_ = 0;
+  std::string degraded_reason_;          // "" = healthy (or not scanning)
+  Clock::time_point degraded_since_;
+  Clock::time_point scanning_since_;
+  void setErrorLocked(const std::string& message, const std::string& source);
   std::string recording_;  // the recording in progress ("" = none)
   TriggerMode trigger_;    // of the current (or last) request
   std::shared_ptr<const RequestOptions> options_ = std::make_shared<RequestOptions>();

@@ -3,6 +3,7 @@
 #include "sl/daemon/scan_engine.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <chrono>
 #include <thread>
 #include <utility>
@@ -30,6 +31,7 @@ const char* toString(ScanState s) {
     case ScanState::kScanning: return "scanning";
     case ScanState::kError: return "error";
     case ScanState::kWaiting: return "waiting";
+    case ScanState::kDegraded: return "degraded";
   }
   return "?";
 }
@@ -66,6 +68,11 @@ struct ResultItem {
 constexpr std::size_t kInputQueueCapacity = 64;
 constexpr std::size_t kScheduleQueueCapacity = 64;
 
+RecordingQuota quotaOf(const RuntimeConfig& r) {
+  constexpr std::uint64_t kMB = 1000 * 1000;
+  return {r.recording_max_mb * kMB, r.recording_max_sets, r.recording_min_free_mb * kMB};
+}
+
 std::vector<std::string> idsOf(const EngineDevices& devices) {
   std::vector<std::string> ids;
   for (const auto& c : devices.cameras) ids.push_back(c->id());
@@ -89,6 +96,8 @@ struct ScanEngine::Impl {
         motion_enabled(processing_config.motion_enabled),
         software(this->devices.cameras, this->devices.projector, config.software_trigger),
         last_frame_ns(camera_ids.size()),
+        camera_seen(camera_ids.size()),
+        camera_errors(camera_ids.size()),
         control(config, linksOf(config)) {
     for (auto& camera : this->devices.cameras) camera->start();
   }
@@ -124,7 +133,7 @@ struct ScanEngine::Impl {
   BoundedQueue<SetItem> sets;             // grouping, control (software) -> processing
   BoundedQueue<ResultItem> results;       // processing -> output
 
-  Recorder recorder;  // writes the sets of requests that record (own thread)
+  Recorder recorder{8, quotaOf(config.runtime)};  // writes the sets of requests that record (own thread)
   EngineStatistics statistics;
 
   // --- stages, each used by one thread only ---
@@ -142,6 +151,16 @@ struct ScanEngine::Impl {
   std::atomic<pipeline::TimestampNs> last_trigger_ns{0};
   std::vector<std::atomic<pipeline::TimestampNs>> last_frame_ns;  // per camera
 
+  // For the health check (output thread): when each camera last delivered a
+  // frame and the trigger source a trigger (steady clock, 0 = never), and
+  // each camera's latest grab error since its last frame.
+  std::vector<std::atomic<std::int64_t>> camera_seen;
+  std::atomic<std::int64_t> trigger_seen{0};
+  std::mutex health_mutex;
+  std::vector<std::string> camera_errors;  // guarded by health_mutex
+  std::string trigger_error;               // guarded by health_mutex
+  Clock::time_point next_health_check;     // output thread
+
   RequestControl control;  // last: its links point at the members above
 
   CameraGate gate{camera_ids.size()};  // parks the camera threads (software trigger)
@@ -157,7 +176,20 @@ struct ScanEngine::Impl {
   void outputLoop(Heartbeat& hb);
   void controlLoop(Heartbeat& hb);
   void applyPendingSettings();
+  void checkHealth();
+  std::string degradedCause();
 };
+
+namespace {
+std::int64_t steadyNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+}
+std::string secondsText(double s) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.1f", s);
+  return text;
+}
+}  // namespace
 
 void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
   auto& camera = *devices.cameras[index];
@@ -168,11 +200,24 @@ void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
     try {
       frame = camera.grab(100ms);
     } catch (const std::exception& e) {
-      control.reportError("camera '" + camera.id() + "': " + e.what());
+      const std::string message = "camera '" + camera.id() + "': " + e.what();
+      {
+        std::lock_guard lock(health_mutex);
+        camera_errors[index] = e.what();
+      }
+      control.reportError(message, "camera:" + camera.id());
       std::this_thread::sleep_for(100ms);
       continue;
     }
     if (frame) {
+      camera_seen[index] = steadyNowNs();
+      bool had_error = false;
+      {
+        std::lock_guard lock(health_mutex);
+        had_error = !camera_errors[index].empty();
+        camera_errors[index].clear();
+      }
+      if (had_error) control.clearError("camera:" + camera.id());
       statistics.framesReceived(1);
       last_frame_ns[index] = frame->stamp_ns;
       events.push({control.generation(), FrameEvent{index, std::move(*frame)}});
@@ -187,9 +232,23 @@ void ScanEngine::Impl::triggerLoop(Heartbeat& hb) {
     try {
       trigger = devices.trigger->next(100ms);
     } catch (const std::exception& e) {
-      control.reportError(std::string("trigger source: ") + e.what());
+      {
+        std::lock_guard lock(health_mutex);
+        trigger_error = e.what();
+      }
+      control.reportError(std::string("trigger source: ") + e.what(), "trigger");
       std::this_thread::sleep_for(100ms);
       continue;
+    }
+    if (trigger) {
+      trigger_seen = steadyNowNs();
+      bool had_error = false;
+      {
+        std::lock_guard lock(health_mutex);
+        had_error = !trigger_error.empty();
+        trigger_error.clear();
+      }
+      if (had_error) control.clearError("trigger");
     }
     if (trigger) events.push({control.generation(), TriggerEvent{trigger->stamp_ns}});
   }
@@ -277,6 +336,7 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
   while (running) {
     hb.beat();
     std::optional<ResultItem> item = results.pop(50ms);
+    checkHealth();
     if (!item) {
       control.checkDeadline();
       continue;
@@ -284,6 +344,7 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
     const std::optional<std::uint64_t> index = control.countScan(item->generation);
     if (!index) continue;  // from a stopped request
     statistics.scanPublished(item->generation);
+    next_health_check = Clock::time_point{};  // a scan may end a degraded state
     for (ScanResult& r : item->results) {
       r.scan_index = *index;
       try {
@@ -294,6 +355,52 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
     }
     control.finishIfComplete(item->generation);
   }
+}
+
+// Every 100 ms (and after each scan): is the running scan degraded?
+void ScanEngine::Impl::checkHealth() {
+  const auto now = Clock::now();
+  if (now < next_health_check) return;
+  next_health_check = now + 100ms;
+  control.setDegraded(degradedCause());
+}
+
+// Why the running scan is degraded ("" = it is not): with the trigger board,
+// a camera without frames or a trigger source without triggers for
+// runtime.stall_timeout_s; in either mode, no scan published for that long
+// plus a sequence's time (since the start or the last scan).
+std::string ScanEngine::Impl::degradedCause() {
+  const RequestControl::Health h = control.health();
+  if (!h.scanning) return "";
+  const double stall_s = config.runtime.stall_timeout_s;
+  const std::int64_t since_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(h.since.time_since_epoch()).count();
+  const std::int64_t now_ns = steadyNowNs();
+  auto silentFor = [&](std::int64_t seen_ns) { return (now_ns - std::max(seen_ns, since_ns)) * 1e-9; };
+  std::string cause;
+  auto add = [&](const std::string& text) { cause += (cause.empty() ? "" : "; ") + text; };
+  if (h.trigger == TriggerMode::kHardware) {
+    std::lock_guard lock(health_mutex);
+    for (std::size_t i = 0; i < camera_ids.size(); ++i) {
+      const double silent = silentFor(camera_seen[i].load());
+      if (silent >= stall_s)
+        add("camera '" + camera_ids[i] + "': no frame for " + secondsText(silent) + " s" +
+            (camera_errors[i].empty() ? "" : " (" + camera_errors[i] + ")"));
+    }
+    const double silent = silentFor(trigger_seen.load());
+    if (silent >= stall_s)
+      add("trigger source: no trigger for " + secondsText(silent) + " s" +
+          (trigger_error.empty() ? "" : " (" + trigger_error + ")"));
+  }
+  const std::optional<Clock::time_point> last = statistics.lastScan(control.generation());
+  const double no_scan_s = std::chrono::duration<double>(
+                               Clock::now() - std::max(last.value_or(h.since), h.since)).count();
+  if (no_scan_s >= stall_s + h.sequence_s) {
+    const std::uint64_t incomplete = last ? statistics.incompleteSinceLastScan() : 0;
+    add("no scan published for " + secondsText(no_scan_s) + " s" +
+        (incomplete > 0 ? " (" + std::to_string(incomplete) + " sequences incomplete)" : ""));
+  }
+  return cause;
 }
 
 // Starts delayed requests and carries out pattern switches at their time
@@ -406,13 +513,18 @@ void ScanEngine::applyRuntimeSettings(const DaemonConfig& settings) {
   impl_->settings_pending = true;
 }
 
-void ScanEngine::reportError(const std::string& message) { impl_->control.reportError(message); }
+void ScanEngine::reportError(const std::string& message, const std::string& source) {
+  impl_->control.reportError(message, source);
+}
+void ScanEngine::clearError(const std::string& source) { impl_->control.clearError(source); }
 
 EngineStatus ScanEngine::status() const {
   Impl& d = *impl_;
   EngineStatus s;
   d.control.fillStatus(s);
-  s.scan_rate_hz = s.state == ScanState::kScanning ? d.statistics.scanRateHz(d.control.generation()) : 0.0;
+  s.scan_rate_hz = s.state == ScanState::kScanning || s.state == ScanState::kDegraded
+                       ? d.statistics.scanRateHz(d.control.generation(), d.config.runtime.stall_timeout_s)
+                       : 0.0;
   s.frames_overflow = d.events.dropped();
   s.frames_unmatched = d.statistics.framesUnmatched() + d.software.staleFrames();
   s.frames_dropped = s.frames_overflow + s.frames_unmatched;
@@ -421,8 +533,16 @@ EngineStatus ScanEngine::status() const {
   s.sets_dropped = s.sets_overflow + s.sets_not_recorded;
   s.sets_incomplete = d.statistics.setsIncomplete();
   s.sets_recorded = d.recorder.written();
-  const std::string recorder_error = d.recorder.lastError();
-  if (!recorder_error.empty()) s.last_error = recorder_error;
+  s.sets_over_quota = d.recorder.overQuota();
+  if (!s.recording.empty() && !d.recorder.active()) s.recording.clear();  // stopped by itself
+  const Recorder::Error recorder_error = d.recorder.lastError();
+  s.errors_reported += recorder_error.count;
+  const double hold_ns = d.config.runtime.last_error_hold_s * 1e9;
+  const bool aged = hold_ns > 0 && static_cast<double>(pipeline::systemClockNs() - recorder_error.stamp_ns) > hold_ns;
+  if (!recorder_error.message.empty() && !aged && recorder_error.stamp_ns >= s.last_error_ns) {
+    s.last_error = recorder_error.message;
+    s.last_error_ns = recorder_error.stamp_ns;
+  }
   s.motion_compensation = d.control.options()->motion_compensation.value_or(d.motion_enabled.load());
   s.frame_rate_hz = d.statistics.frameRateHz();
   return s;

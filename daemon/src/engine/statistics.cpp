@@ -28,12 +28,26 @@ void EngineStatistics::scanPublished(std::uint64_t generation) {
   }
   recent_.push_back(Clock::now());
   if (recent_.size() > 10) recent_.pop_front();
+  incomplete_at_scan_ = setsIncomplete();
 }
 
-double EngineStatistics::scanRateHz(std::uint64_t generation) const {
+double EngineStatistics::scanRateHz(std::uint64_t generation, double stall_s) const {
   std::lock_guard lock(mutex_);
   if (generation != scan_generation_ || recent_.size() < 2) return 0;
-  return (recent_.size() - 1) / std::chrono::duration<double>(recent_.back() - recent_.front()).count();
+  const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
+  const double intervals = static_cast<double>(recent_.size() - 1);
+  const double span_s = seconds(recent_.back() - recent_.front());
+  const double since_last_s = seconds(Clock::now() - recent_.back());
+  if (!(span_s > 0)) return 0;
+  if (since_last_s >= stall_s) return 0;
+  if (since_last_s > 1.5 * span_s / intervals) return intervals / (span_s + since_last_s);
+  return intervals / span_s;
+}
+
+std::optional<EngineStatistics::Clock::time_point> EngineStatistics::lastScan(std::uint64_t generation) const {
+  std::lock_guard lock(mutex_);
+  if (generation != scan_generation_ || recent_.empty()) return std::nullopt;
+  return recent_.back();
 }
 
 double EngineStatistics::frameRateHz() {

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <deque>
 #include <mutex>
+#include <optional>
 
 namespace sl::daemon {
 
@@ -33,8 +34,14 @@ class EngineStatistics {
   // A scan of request `generation` was published (output thread).
   void scanPublished(std::uint64_t generation);
   // Scans per second over the last (up to) 10 scans of `generation`: stable,
-  // and quick to follow a switch; 0 before two scans of it.
-  double scanRateHz(std::uint64_t generation) const;
+  // and quick to follow a switch; 0 before two scans of it. When no scan came
+  // for longer than 1.5 mean intervals, the time since the last one counts
+  // too (the rate falls), and after `stall_s` without a scan it is 0.
+  double scanRateHz(std::uint64_t generation, double stall_s) const;
+  // When the last scan of `generation` was published (nullopt: none yet) and
+  // how many sequences were incomplete since then.
+  std::optional<Clock::time_point> lastScan(std::uint64_t generation) const;
+  std::uint64_t incompleteSinceLastScan() const { return setsIncomplete() - incomplete_at_scan_.load(); }
   // Frames per second over windows of at least a second (status() is polled
   // often; the window moves on when asked after a second).
   double frameRateHz();
@@ -43,6 +50,7 @@ class EngineStatistics {
   std::atomic<std::uint64_t> frames_received_{0};
   std::atomic<std::uint64_t> unmatched_trigger_{0}, unmatched_software_{0};
   std::atomic<std::uint64_t> incomplete_trigger_{0}, incomplete_software_{0};
+  std::atomic<std::uint64_t> incomplete_at_scan_{0};  // setsIncomplete() at the last scan
 
   mutable std::mutex mutex_;
   std::uint64_t scan_generation_ = 0;      // guarded by mutex_

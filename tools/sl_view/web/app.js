@@ -27,7 +27,7 @@ function readCloud(buf) {
   const bigendian = c.u8() !== 0, pointStep = c.u32(), rowStep = c.u32(), data = c.bytes();
   return { stamp, frame, height, width, fields, bigendian, pointStep, rowStep, data };
 }
-const kStates = ['idle', 'scanning', 'error', 'waiting'];
+const kStates = ['idle', 'scanning', 'error', 'waiting', 'degraded'];
 function readStatus(buf) {
   const c = new Cdr(buf), s = {};
   s.stamp = { sec: c.i32(), nanosec: c.u32() }; s.state = kStates[c.u32()] ?? '?'; s.pattern = c.str();

@@ -50,7 +50,11 @@ struct StatusInfo {
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
   // Requests since start-up (see sl_msgs/Status.idl).
   std::uint64_t requests_received = 0, requests_answered = 0, requests_rate_limited = 0,
-                requests_invalid = 0, replies_timed_out = 0;
+                requests_invalid = 0, replies_timed_out = 0, requests_malformed = 0;
+  std::string degraded_reason;        // kDegraded: the cause
+  pipeline::TimestampNs last_error_ns = 0;  // when last_error was reported
+  std::uint64_t errors_reported = 0;
+  std::uint64_t sets_over_quota = 0;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

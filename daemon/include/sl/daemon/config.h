@@ -77,6 +77,18 @@ struct RuntimeConfig {
   // under systemd, else against the config file's folder).
   std::string recording_root = "recordings";
   TriggerMode trigger = TriggerMode::kHardware;  // default of start requests
+  // While scanning, a camera without frames, a trigger source without
+  // triggers or a request without a published scan for this long makes the
+  // status `degraded` with the cause (scan rate 0); it recovers by itself.
+  double stall_timeout_s = 2.0;
+  // last_error is dropped from the status this long after it was reported
+  // (0 = kept until cleared by a recovery, a good reload or a new start).
+  double last_error_hold_s = 300.0;
+  // Recording quota (0 = no limit): bytes and image sets per recording, and
+  // the free space a recording leaves on its file system.
+  std::uint64_t recording_max_mb = 0;
+  std::uint64_t recording_max_sets = 0;
+  std::uint64_t recording_min_free_mb = 1024;
 };
 
 // Which sensor the daemon runs (`sensor:`).

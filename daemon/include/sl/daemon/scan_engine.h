@@ -36,7 +36,10 @@
 namespace sl::daemon {
 
 // kWaiting: a start request was accepted and waits for its start time.
-enum class ScanState { kIdle, kScanning, kError, kWaiting };
+// kDegraded: scanning, but a device or the request stalled
+// (EngineStatus::degraded_reason; runtime.stall_timeout_s); it returns to
+// kScanning by itself when the cause goes away.
+enum class ScanState { kIdle, kScanning, kError, kWaiting, kDegraded };
 const char* toString(ScanState s);
 
 // Outcome of a control request; `code` mirrors the DDS reply codes.
@@ -81,7 +84,14 @@ struct EngineStatus {
   std::uint64_t sets_not_recorded = 0;  // the recorder fell behind
   std::string recording;              // recording in progress ("" = none)
   std::uint64_t sets_recorded = 0;    // since start-up
+  std::uint64_t sets_over_quota = 0;  // not recorded: the recording had reached its quota
+  std::string degraded_reason;        // kDegraded: what stalled, since when
+  // The most recent error and when it was reported (system clock); cleared
+  // when its cause recovers (a device delivers again, a reload succeeds), at
+  // a new start, or runtime.last_error_hold_s after it was reported.
   std::string last_error;
+  pipeline::TimestampNs last_error_ns = 0;
+  std::uint64_t errors_reported = 0;  // every error reported since start-up
   // The current (or last) request's options as applied.
   TriggerMode trigger = TriggerMode::kHardware;
   std::vector<std::string> cameras;   // triangulating the current pattern
@@ -155,8 +165,11 @@ class ScanEngine {
   // Uses the run-time settings of `settings` (decoder, triangulator, motion
   // compensation) from the next image set on; its other parts are ignored.
   void applyRuntimeSettings(const DaemonConfig& settings);
-  // Puts a message into the status topic's last_error.
-  void reportError(const std::string& message);
+  // Puts a message into the status topic's last_error. `source` names what
+  // it came from, so that clearError(source) removes it once that recovered
+  // (e.g. "reload").
+  void reportError(const std::string& message, const std::string& source = "");
+  void clearError(const std::string& source);
 
   EngineStatus status() const;
   // True while every thread has made progress within the last `max_age`
