@@ -170,6 +170,22 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   parseTopicQos(qos.optionalMap("projector_maps"), d.maps_qos);
   parseTopicQos(qos.optionalMap("image_sets"), d.image_sets_qos);
   qos.done();
+  const YamlMap requests = m.optionalMap("requests");
+  RequestLimits& r = d.requests;
+  auto whole = [&](const char* key, std::size_t fallback, std::size_t lo, std::size_t hi) {
+    const int v = requests.get<int>(key, static_cast<int>(fallback));
+    if (v < static_cast<int>(lo) || v > static_cast<int>(hi))
+      requests.fail(key, "must be in " + std::to_string(lo) + ".." + std::to_string(hi));
+    return static_cast<std::size_t>(v);
+  };
+  r.max_string = whole("max_string", r.max_string, 16, 65536);
+  r.max_cameras = whole("max_cameras", r.max_cameras, 1, 256);
+  r.max_clients = whole("max_clients", r.max_clients, 1, 65536);
+  r.rate_hz = requests.get<double>("rate_hz", r.rate_hz);
+  if (!(r.rate_hz >= 0.1 && r.rate_hz <= 10000)) requests.fail("rate_hz", "must be in [0.1, 10000] requests/s");
+  r.burst = requests.get<double>("burst", r.burst);
+  if (!(r.burst >= 1 && r.burst <= 100000)) requests.fail("burst", "must be in [1, 100000] requests");
+  requests.done();
   m.done();
 }
 

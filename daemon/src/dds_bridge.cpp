@@ -4,10 +4,13 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <string_view>
 #include <string>
 #include <vector>
 
+#include <dds/ddsrt/log.h>
 #include <opencv2/core.hpp>
 
 #include "msg_convert.h"
@@ -105,6 +108,39 @@ dds::Qos writerQos(const TopicQos& q) {
   return qos.keepLast(q.depth).xcdr1();
 }
 
+// Counts the requests Cyclone could not deserialize (an out-of-range enum,
+// a truncated or garbled sample): its receive path drops such a sample
+// before any reader sees it and only logs a warning ("deserialization
+// <topic>/<type> failed"), so the count comes from its log sink, which is
+// process-wide (the last bridge created owns it). Every other message goes
+// to stderr as with Cyclone's default sink; of the dropped requests' lines
+// the first 10 and then every 1000th are printed, so a flood of garbage
+// cannot flood the log.
+class MalformedSampleCounter {
+ public:
+  explicit MalformedSampleCounter(std::string type_name) : type_name_(std::move(type_name)) {
+    dds_set_log_sink(&MalformedSampleCounter::sink, this);
+  }
+  ~MalformedSampleCounter() { dds_set_log_sink(nullptr, nullptr); }
+  MalformedSampleCounter(const MalformedSampleCounter&) = delete;
+  MalformedSampleCounter& operator=(const MalformedSampleCounter&) = delete;
+  std::uint64_t count() const { return count_.load(); }
+
+ private:
+  static void sink(void* self, const dds_log_data_t* data) {
+    auto* me = static_cast<MalformedSampleCounter*>(self);
+    const std::string_view text(data->message, data->size);
+    if (text.find("deserialization") != std::string_view::npos &&
+        text.find(me->type_name_) != std::string_view::npos) {
+      const std::uint64_t n = ++me->count_;
+      if (n > 10 && n % 1000 != 0) return;
+    }
+    std::fwrite(data->message, 1, data->size, stderr);
+  }
+  const std::string type_name_;
+  std::atomic<std::uint64_t> count_{0};
+};
+
 }  // namespace
 
 TopicNames TopicNames::forNamespace(const std::string& ns) {
@@ -162,6 +198,7 @@ struct DdsBridge::Impl {
   const FrameIds frame_ids;
   const pipeline::PinholeModel camera;  // of the first camera, for camera_info
   const TopicNames names;
+  MalformedSampleCounter malformed{sl_msgs_msg_CommandRequest_desc.m_typename};  // before any DDS entity
   dds::Participant participant;
   dds::Topic<PointCloud2> points_topic;
   dds::Topic<Maps> maps_topic;
@@ -190,9 +227,8 @@ struct DdsBridge::Impl {
   // Requests: size checks, rate limits, repeated ids, counters (request
   // loop only). Replies that could not be written within the reliable
   // writer's blocking time count separately.
-  RequestGuard guard;
+  RequestGuard guard{config.requests};
   std::uint64_t replies_timed_out = 0;
-  std::uint64_t requests_malformed = 0;
   std::uint64_t rate_limited_logged = 0;
 
   // Publish-thread scratch buffer (metres), reused between clouds.
@@ -408,7 +444,7 @@ void DdsBridge::Impl::publishStatus(const EngineStatus& s,
   msg.degraded_reason = degraded.data();
   msg.last_error_stamp = toTime(s.last_error_ns);
   msg.errors_reported = s.errors_reported;
-  msg.requests_malformed = requests_malformed;
+  msg.requests_malformed = malformed.count();
   msg.sets_over_quota = s.sets_over_quota;
   status_writer.write(msg);
 }

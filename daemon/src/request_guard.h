@@ -14,16 +14,9 @@
 #include <unordered_map>
 
 #include "msg_convert.h"
+#include "sl/daemon/config.h"  // RequestLimits (dds.requests)
 
 namespace sl::daemon {
-
-struct RequestLimits {
-  std::size_t max_string = 256;   // client_id, pattern, recording, each camera id
-  std::size_t max_cameras = 16;   // entries in cameras
-  double rate_hz = 20;            // sustained requests per second per client
-  double burst = 40;              // requests a client may send at once
-  std::size_t max_clients = 256;  // buckets kept; further ids share one
-};
 
 struct RequestCounters {
   std::uint64_t received = 0;      // samples taken from the request reader

@@ -137,6 +137,12 @@ TEST_CASE("config mistakes are reported with file, line and key") {
            "key 'dds.qos.images.depth': must be in 1..64"},
       Case{"status_period_s: 1.0", "status_period_s: 1.0\n  qos: {cloud: {depth: 1}}",
            "unknown key 'dds.qos.cloud'"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  requests: {max_string: 8}",
+           "key 'dds.requests.max_string': must be in 16..65536"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  requests: {rate_hz: 0}",
+           "key 'dds.requests.rate_hz': must be in [0.1, 10000] requests/s"},
+      Case{"status_period_s: 1.0", "status_period_s: 1.0\n  requests: {limit: 3}",
+           "unknown key 'dds.requests.limit'"},
       Case{"patterns:\n", "patterns: []\nunused:\n", "key 'patterns': expected a non-empty list"},
       // Limits checked before anything is allocated or created (issue 17).
       Case{"namespace: sl", "namespace: " + std::string(65600, 'n'),

@@ -735,6 +735,58 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   for (int i = 0; i < 30 && failed.find("reload failed") == std::string::npos; ++i)
     if (const auto s = client.status(1s)) failed = s->last_error;
   CHECK(failed.find("config reload failed") != std::string::npos);
+
+  // A later good reload clears that error (it no longer holds).
+  root["sim"]["seed"] = 1;
+  std::ofstream(path) << root;
+  daemon.signal(SIGHUP);
+  std::optional<sl::daemon::StatusInfo> after;
+  for (int i = 0; i < 30 && (!after || !after->last_error.empty()); ++i) {
+    std::this_thread::sleep_for(100ms);
+    after = client.status(1s);
+  }
+  REQUIRE(after);
+  CHECK(after->last_error.empty());
+  CHECK(after->last_error_ns == 0);
+  CHECK(after->errors_reported >= 2);  // the refused and the failed reload, still counted
+  REQUIRE(daemon.terminate(5s) == 0);
+}
+
+// Requests that Cyclone cannot deserialize (an out-of-range enum from a
+// look-alike type without type information) never reach the daemon's
+// reader; they are counted in requests_malformed, and a good request is
+// still answered.
+TEST_CASE("requests that fail to deserialize are counted, not lost without a trace") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("malformed");
+  YAML::Node root = sl::test::simConfig(ns);
+  root["dds"]["requests"]["max_string"] = 100;  // dds.requests: the limits are the config's
+  const std::string path = sl::test::writeConfigFile(root, ns);
+  sl::test::DaemonProcess daemon(path);
+  REQUIRE(daemon.started());
+  const auto client_owner = connect(ns);
+  sl::daemon::SensorClient& client = *client_owner;
+  const auto before = client.status(5s);
+  REQUIRE(before);
+  CHECK(before->requests_malformed == 0);
+  const std::string writer = std::string(SL_BINARY_DIR) + "/tests/malformed_writer " + ns + " 7";
+  REQUIRE(std::system(writer.c_str()) == 0);
+  std::optional<sl::daemon::StatusInfo> s;
+  for (int i = 0; i < 50 && (!s || s->requests_malformed < 7); ++i) {
+    std::this_thread::sleep_for(100ms);
+    s = client.status(1s);
+  }
+  REQUIRE(s);
+  CHECK(s->requests_malformed == 7);
+  CHECK(s->requests_received == before->requests_received);  // none was taken
+  const auto reply = client.request(Command::kListPatterns, "", 0, 5s);
+  REQUIRE(reply);
+  CHECK(reply->accepted);
+  REQUIRE(client.clientId().size() <= 100);
+  const auto refused = client.request(Command::kSetPattern, std::string(101, 'p'), 0, 5s);
+  REQUIRE(refused);
+  CHECK(refused->code == sl::daemon::CommandResult::Code::kInvalidOption);
+  CHECK(refused->reason.find("pattern is 101 bytes, more than 100") != std::string::npos);
   REQUIRE(daemon.terminate(5s) == 0);
 }
 

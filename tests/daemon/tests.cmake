@@ -7,7 +7,22 @@ target_link_libraries(test_dds PRIVATE sl_dds sl_idl)
 # End to end: sl_sensord in a child process on the simulated sensor.
 sl_add_test(test_e2e daemon/test_e2e.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
-add_dependencies(test_e2e sl_sensord)
+add_dependencies(test_e2e sl_sensord malformed_writer)
+
+# A client whose requests the daemon cannot deserialize (test_e2e): a
+# look-alike CommandRequest without type information, enums as int32.
+set(_lookalike_dir ${CMAKE_CURRENT_BINARY_DIR}/lookalike)
+find_program(SL_IDLC idlc REQUIRED)  # Debian's cyclonedds-tools (as idlc_generate uses)
+add_custom_command(
+  OUTPUT ${_lookalike_dir}/CommandRequest.c ${_lookalike_dir}/CommandRequest.h
+  COMMAND ${CMAKE_COMMAND} -E make_directory ${_lookalike_dir}
+  COMMAND ${SL_IDLC} -t -o ${_lookalike_dir}
+          ${CMAKE_CURRENT_SOURCE_DIR}/daemon/lookalike/CommandRequest.idl
+  DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/daemon/lookalike/CommandRequest.idl
+  VERBATIM)
+add_executable(malformed_writer daemon/lookalike/malformed_writer.c ${_lookalike_dir}/CommandRequest.c)
+target_include_directories(malformed_writer PRIVATE ${_lookalike_dir})
+target_link_libraries(malformed_writer PRIVATE CycloneDDS::ddsc)
 
 # ScanEngine without DDS: health (feeds the systemd watchdog), requests,
 # software trigger; its stages without threads (start validation, set

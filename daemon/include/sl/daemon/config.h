@@ -31,6 +31,17 @@ struct TopicQos {
   double max_blocking_s = 0.2;  // reliable: a write blocked longer is dropped (counted)
 };
 
+// What the daemon accepts of a request (`dds.requests`): longer strings or
+// camera lists are refused with INVALID_OPTION; beyond its rate a client's
+// requests are not answered but counted (requests_rate_limited).
+struct RequestLimits {
+  std::size_t max_string = 256;   // client_id, pattern, recording, each camera id
+  std::size_t max_cameras = 16;   // entries in cameras
+  double rate_hz = 20;            // sustained requests per second per client
+  double burst = 40;              // requests a client may send at once
+  std::size_t max_clients = 256;  // buckets kept; further ids share one
+};
+
 struct DdsConfig {
   int domain_id = 0;
   std::string ns = "sl";              // topics are rt/<ns>/points, rq/<ns>/commandRequest, ...
@@ -48,6 +59,7 @@ struct DdsConfig {
   TopicQos images_qos{true, 2, 0.2};
   TopicQos maps_qos{true, 2, 0.2};
   TopicQos image_sets_qos{true, 2, 0.2};
+  RequestLimits requests;
 };
 
 // Linear-motion compensation (paper section 2.4.2), off by default.
