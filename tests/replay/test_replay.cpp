@@ -202,3 +202,31 @@ TEST_CASE("a replayed set of another size or depth than the first is refused, na
   projector->stop();
   std::filesystem::remove_all(dir);
 }
+
+// fuzz_recording found OpenCV 4.6's FileStorage YAML parser looping for ever
+// on this meta.yml; the recording's files are now read with yaml-cpp, which
+// refuses it at once (a hang here fails the test by ctest's timeout).
+TEST_CASE("a meta.yml that hangs OpenCV's YAML parser is refused at once, naming the file") {
+  const std::string dir = tempDir("opencv_loop");
+  sl::drivers::createRecording(dir, "");
+  sl::drivers::writeRecordedSet(dir, 1, makeSet(1, "p", 3, 8));
+  const auto set = std::filesystem::path(dir) / "set_000001";
+  const std::string meta = (set / "meta.yml").string();
+  for (const std::string text : {"%YAML:1.0:\n  - a: b\n: --\n", "%YAML:1.0\n---\n  - a: b\n: --\n"}) {
+    std::ofstream(meta, std::ios::binary | std::ios::trunc) << text;
+    const auto start = std::chrono::steady_clock::now();
+    CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()), Catch::Contains(meta + ": "));
+    CHECK(std::chrono::steady_clock::now() - start < 10s);
+  }
+  // Other malformed values are named too.
+  sl::drivers::writeRecordedSet(dir, 1, makeSet(1, "p", 3, 8));
+  std::ifstream in(meta);
+  std::string text((std::istreambuf_iterator<char>(in)), {});
+  in.close();
+  const auto at = text.find("bit_depth: 8");
+  REQUIRE(at != std::string::npos);
+  std::ofstream(meta, std::ios::trunc) << text.substr(0, at) + "bit_depth: [8]" + text.substr(at + 12);
+  CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()),
+                    Catch::Contains("'bit_depth' must be a single value"));
+  std::filesystem::remove_all(dir);
+}

@@ -10,6 +10,7 @@
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <yaml-cpp/yaml.h>
 
 namespace sl::drivers {
 
@@ -37,6 +38,44 @@ std::vector<std::string> toStrings(const std::vector<pipeline::TimestampNs>& sta
   std::vector<std::string> out;
   for (auto s : stamps) out.push_back(std::to_string(s));
   return out;
+}
+
+// Reads a .yml file written by cv::FileStorage with yaml-cpp: OpenCV 4.6's
+// own YAML parser loops for ever on some malformed files (fuzz_recording:
+// a 24-byte "%YAML:1.0" file with a nested list item), so no file of a
+// recording ever reaches it. Our files are small plain maps, lists and
+// strings, which both read alike; OpenCV's "%YAML:1.0" first line is not
+// YAML 1.2 and is skipped. Throws std::runtime_error naming the file.
+YAML::Node loadOpenCvYaml(const std::string& path) {
+  constexpr std::uintmax_t kMaxBytes = 1 << 20;  // a meta.yml is < 1 KB per camera
+  std::error_code error;
+  const std::uintmax_t bytes = fs::file_size(path, error);
+  if (error) throw std::runtime_error(path + ": cannot read: " + error.message());
+  if (bytes > kMaxBytes)
+    throw std::runtime_error(path + ": " + std::to_string(bytes) + " bytes, more than a recording's " +
+                             std::to_string(kMaxBytes));
+  std::ifstream in(path, std::ios::binary);
+  std::string text(static_cast<std::size_t>(bytes), '\0');
+  if (!in.read(text.data(), static_cast<std::streamsize>(text.size())))
+    throw std::runtime_error(path + ": cannot read");
+  if (text.find('\0') != std::string::npos)
+    throw std::runtime_error(path + ": contains a NUL byte, not a recording's YAML file");
+  if (text.rfind("%YAML:", 0) == 0) {
+    const std::size_t end = text.find('\n');
+    text.erase(0, end == std::string::npos ? text.size() : end + 1);
+  }
+  try {
+    return YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(path + ": malformed: " + e.what());
+  }
+}
+
+// A scalar of `node` (missing: ""); throws naming the file and key.
+std::string scalarOf(const YAML::Node& node, const std::string& path, const char* key) {
+  if (!node || node.IsNull()) return "";
+  if (!node.IsScalar()) throw std::runtime_error(path + ": '" + key + "' must be a single value");
+  return node.Scalar();
 }
 
 }  // namespace
@@ -91,12 +130,13 @@ std::vector<std::string> listRecordedSets(const std::string& dir) {
   const fs::path info = fs::path(dir) / "recording.yml";
   if (!fs::exists(info))
     throw std::runtime_error(dir + ": not a recording (no recording.yml)");
-  cv::FileStorage in;
+  std::string format;
   try {
-    in.open(info.string(), cv::FileStorage::READ);
-  } catch (const cv::Exception&) {
+    const YAML::Node in = loadOpenCvYaml(info.string());
+    if (in.IsMap()) format = scalarOf(in["format"], info.string(), "format");
+  } catch (const std::runtime_error&) {
   }
-  if (!in.isOpened() || static_cast<std::string>(in["format"]) != kFormat)
+  if (format != kFormat)
     throw std::runtime_error(dir + ": not a recording (no readable recording.yml with format " +
                              kFormat + ")");
   std::vector<std::string> sets;
@@ -117,15 +157,16 @@ pipeline::ImageSet readSet(const std::string& set_dir, const std::string& meta, 
 pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images) {
   const std::string meta = (fs::path(set_dir) / "meta.yml").string();
   if (!fs::exists(meta)) throw std::runtime_error(meta + ": missing");
-  // OpenCV's FileStorage throws cv::Exception, and on some malformed files
-  // std::length_error or bad_alloc (found by fuzz_recording): all become
-  // the one error type naming the file.
+  // yaml-cpp throws YAML::Exception (and OpenCV's decoders cv::Exception):
+  // all become the one error type naming the file.
   try {
     return readSet(set_dir, meta, load_images);
   } catch (const std::runtime_error&) {
     throw;
   } catch (const cv::Exception& e) {
     throw std::runtime_error(meta + ": malformed: " + e.msg);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(meta + ": malformed: " + e.what());
   } catch (const std::exception& e) {
     throw std::runtime_error(meta + ": malformed (" + e.what() + ")");
   }
@@ -134,37 +175,39 @@ pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images)
 namespace {
 
 pipeline::ImageSet readSet(const std::string& set_dir, const std::string& meta, bool load_images) {
-  {  // OpenCV 4.6's parsers mishandle NUL bytes; a meta.yml never has one.
-    std::ifstream text(meta, std::ios::binary);
-    char buffer[4096];
-    while (text.read(buffer, sizeof buffer) || text.gcount() > 0)
-      if (std::memchr(buffer, 0, static_cast<std::size_t>(text.gcount())))
-        throw std::runtime_error(meta + ": contains a NUL byte, not a meta.yml");
-  }
-  cv::FileStorage in;
-  in.open(meta, cv::FileStorage::READ);
-  if (!in.isOpened()) throw std::runtime_error(meta + ": cannot read");
-  auto int64 = [&](const cv::FileNode& node, const char* what) {
+  const YAML::Node in = loadOpenCvYaml(meta);
+  if (!in.IsMap()) throw std::runtime_error(meta + ": not a map of sequence_id, pattern, cameras");
+  auto text = [&](const YAML::Node& node, const char* what) { return scalarOf(node, meta, what); };
+  auto int64 = [&](const YAML::Node& node, const char* what) {
+    const std::string value = text(node, what);
+    std::size_t used = 0;
     try {
-      return static_cast<std::int64_t>(std::stoll(static_cast<std::string>(node)));
+      const long long v = std::stoll(value, &used);
+      if (used == value.size()) return static_cast<std::int64_t>(v);
     } catch (const std::exception&) {
-      throw std::runtime_error(meta + ": '" + what + "' is not an integer");
     }
+    throw std::runtime_error(meta + ": '" + what + "' is not an integer");
+  };
+  auto int32 = [&](const YAML::Node& node, const char* what) {
+    const std::int64_t v = node && !node.IsNull() ? int64(node, what) : 0;
+    if (v < -(1ll << 31) || v >= (1ll << 31)) throw std::runtime_error(meta + ": '" + what + "' is out of range");
+    return static_cast<int>(v);
   };
   pipeline::ImageSet set;
   set.sequence_id = static_cast<std::uint64_t>(int64(in["sequence_id"], "sequence_id"));
-  set.pattern_name = static_cast<std::string>(in["pattern"]);
+  set.pattern_name = text(in["pattern"], "pattern");
   set.trigger_stamp_ns = int64(in["trigger_stamp_ns"], "trigger_stamp_ns");
-  const cv::FileNode cameras = in["cameras"];
-  if (!cameras.isSeq() || cameras.size() == 0)
+  const YAML::Node cameras = in["cameras"];
+  if (!cameras.IsSequence() || cameras.size() == 0)
     throw std::runtime_error(meta + ": 'cameras' must be a non-empty list");
-  for (const auto& node : cameras) {
+  for (const YAML::Node& node : cameras) {
+    if (!node.IsMap()) throw std::runtime_error(meta + ": a 'cameras' entry must be a map");
     pipeline::CameraImages camera;
-    camera.camera_id = static_cast<std::string>(node["id"]);
-    camera.bit_depth = static_cast<int>(node["bit_depth"]);
-    const int frame_count = static_cast<int>(node["frame_count"]);
-    const cv::FileNode stamps = node["stamps_ns"];
-    if (camera.camera_id.empty() || frame_count <= 0 || !stamps.isSeq() ||
+    camera.camera_id = text(node["id"], "id");
+    camera.bit_depth = int32(node["bit_depth"], "bit_depth");
+    const int frame_count = int32(node["frame_count"], "frame_count");
+    const YAML::Node stamps = node["stamps_ns"];
+    if (camera.camera_id.empty() || frame_count <= 0 || !stamps.IsSequence() ||
         static_cast<int>(stamps.size()) != frame_count)
       throw std::runtime_error(meta + ": camera entry needs id, frame_count and as many stamps_ns");
     // The id names the frame files: a plain name, so that no frame is read
@@ -180,7 +223,7 @@ pipeline::ImageSet readSet(const std::string& set_dir, const std::string& meta, 
     if (camera.bit_depth < 1 || camera.bit_depth > 16)
       throw std::runtime_error(meta + ": bit_depth " + std::to_string(camera.bit_depth) +
                                " is not 1..16");
-    for (const auto& s : stamps) camera.stamps_ns.push_back(int64(s, "stamps_ns"));
+    for (const YAML::Node& s : stamps) camera.stamps_ns.push_back(int64(s, "stamps_ns"));
     for (int i = 0; load_images && i < frame_count; ++i) {
       const std::string path = (fs::path(set_dir) / frameName(camera.camera_id, i)).string();
       cv::Mat image;
