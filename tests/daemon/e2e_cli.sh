@@ -5,21 +5,13 @@
 # user meets first: a bad config and no daemon.
 # usage: e2e_cli.sh SOURCE_DIR BINARY_DIR
 set -euo pipefail
-src=$1
-bin=$2
-export CYCLONEDDS_URI=file://$src/config/cyclonedds-loopback.xml
-work=$(mktemp -d)
-daemon_pid=""
-cleanup() {
-  [ -n "$daemon_pid" ] && kill -9 "$daemon_pid" 2>/dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
-fail() { echo "FAIL: $*" >&2; exit 1; }
+# shellcheck source=../support/daemon.sh
+source "$1/tests/support/daemon.sh"
+sl_enter_netns "$0" "$@"
+sl_init "$1" "$2"
 
 ns="cli_$$"
-sed "s/^  namespace: sl$/  namespace: $ns/" "$src/config/sim.yaml" > "$work/sim.yaml"
-grep -q "namespace: $ns" "$work/sim.yaml" || fail "could not set the namespace"
+sl_sim_config "$ns" "$work/sim.yaml"
 
 # 1. A bad config: exit code 2, one line naming file, line and key.
 sed "s/camera_fps: 30 /camera_fps: thirty /" "$work/sim.yaml" > "$work/bad.yaml"
@@ -47,6 +39,7 @@ echo "ok: no daemon -> $msg"
 # job of a script starts with SIGINT ignored.)
 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/early.log" 2>&1 &
 early=$!
+sl_track "$early"
 sleep 1  # past exec and loading (slow under load), within the 1 s probe or opening the devices
 kill -TERM "$early"
 t0=$(date +%s%N)
@@ -69,11 +62,11 @@ for bad in "--domain -1 status" "--domain 231 status" "--timeout 1e300 status" \
 done
 
 # 3. The daemon, the C listener and slctl.
-"$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
-daemon_pid=$!
+sl_start_daemon "$work/sim.yaml" "$work/daemon.log"
 "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 3 --timeout 30 \
   > "$work/listener.log" 2>&1 &
 listener_pid=$!
+sl_track "$listener_pid"
 "$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 3 --out "$work/scans" | tee "$work/slctl.log"
 [ "$(grep -c '^scan [123]/3: 1440x1080' "$work/slctl.log")" -eq 3 ] || fail "slctl did not report 3 scans"
 for i in 1 2 3; do
@@ -160,8 +153,9 @@ echo "ok: second daemon -> $msg"
 sed "s/^  namespace: $ns$/  namespace: ${ns}_b/" "$work/sim.yaml" > "$work/sim_b.yaml"
 "$bin/daemon/sl_sensord" --config "$work/sim_b.yaml" > "$work/daemon_b.log" 2>&1 &
 pid_b=$!
+sl_track "$pid_b"
 "$bin/tools/slctl" --ns "${ns}_b" --timeout 20 patterns > /dev/null || fail "daemon with its own namespace"
-kill -TERM "$pid_b"; wait "$pid_b" || fail "daemon b exit code $?"
+sl_stop_daemon "$pid_b"
 echo "ok: a daemon with its own namespace runs beside the first"
 
 # Requests: an oversized string is refused with INVALID_OPTION and not echoed;
@@ -181,9 +175,5 @@ grep -Eq "^requests: *[0-9]+ \(answered [0-9]+, rate-limited 0, invalid 1, reply
   "$work/status.log" || fail "request counters: $(grep requests "$work/status.log")"
 echo "ok: oversized request refused, $(grep '^requests' "$work/status.log")"
 
-kill -TERM "$daemon_pid"
-for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
-kill -0 "$daemon_pid" 2>/dev/null && fail "daemon still running 2 s after SIGTERM"
-wait "$daemon_pid" || fail "daemon exit code $?"
-daemon_pid=""
+sl_stop_daemon
 echo "1 passed, 0 failed"

@@ -5,22 +5,15 @@
 # operator certified by another CA, and a participant without security.
 # usage: security.sh SOURCE_DIR BINARY_DIR
 set -euo pipefail
-src=$1
-bin=$2
-work=$(mktemp -d)
-daemon_pid=""
-cleanup() {
-  [ -n "$daemon_pid" ] && kill -9 "$daemon_pid" 2>/dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
-fail() { echo "FAIL: $*" >&2; [ -f "$work/daemon.log" ] && tail -20 "$work/daemon.log" >&2; exit 1; }
+# shellcheck source=../support/daemon.sh
+source "$1/tests/support/daemon.sh"
+sl_enter_netns "$0" "$@"
+sl_init "$1" "$2"
 
 ns="sec_$$"
 bash "$src/scripts/dds-security.sh" "$work/sec" --ns "$ns" >/dev/null
 bash "$src/scripts/dds-security.sh" "$work/rogue" --ns "$ns" >/dev/null
-sed "s/^  namespace: sl$/  namespace: $ns/" "$src/config/sim.yaml" > "$work/sim.yaml"
-grep -q "namespace: $ns" "$work/sim.yaml" || fail "could not set the namespace"
+sl_sim_config "$ns" "$work/sim.yaml"
 
 plain=file://$src/config/cyclonedds-loopback.xml
 secure=$plain,file://$src/config/cyclonedds-security.xml
@@ -38,13 +31,7 @@ start_daemon() {  # governance
   export SL_DDS_GOVERNANCE=$1
   # Not through as(): $! must be the daemon itself, not a subshell.
   SL_DDS_SECURITY_DIR=$work/sec SL_DDS_IDENTITY=sensor CYCLONEDDS_URI=$secure \
-    "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
-  daemon_pid=$!
-}
-stop_daemon() {
-  kill -TERM "$daemon_pid"
-  wait "$daemon_pid" || fail "daemon exit status $?"
-  daemon_pid=""
+    sl_start_daemon "$work/sim.yaml" "$work/daemon.log"
 }
 expect() {  # rc-expected message-pattern what -- command...
   local want=$1 pattern=$2 what=$3 rc=0 msg
@@ -72,20 +59,23 @@ expect 0 "idle" "status still idle (through security)" -- \
 unsecured "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 30 \
   > "$work/open_listener.log" 2>&1 &
 listener=$!
+sl_track "$listener"
 expect 0 "scan 1/1" "operator scans" -- \
   as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 1 --out "$work/scan1"
 wait "$listener" || fail "open data: plain listener got no cloud: $(cat "$work/open_listener.log")"
 echo "ok: governance_control: a plain subscriber reads clouds"
-stop_daemon
+sl_stop_daemon "" 10
 
 # --- governance_all: every topic protected ---
 start_daemon governance_all
 unsecured "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 8 \
   > "$work/closed_listener.log" 2>&1 &
 closed=$!
+sl_track "$closed"
 as viewer -- "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 30 \
   > "$work/viewer_listener.log" 2>&1 &
 viewer=$!
+sl_track "$viewer"
 expect 0 "scan 1/1" "operator scans with data encrypted" -- \
   as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 30 scan --count 1 --out "$work/scan2"
 wait "$viewer" || fail "viewer got no cloud: $(cat "$work/viewer_listener.log")"
@@ -94,5 +84,5 @@ if wait "$closed"; then fail "governance_all: a plain subscriber received a clou
 echo "ok: governance_all: a plain subscriber receives nothing"
 expect 3 "no sl_sensord answered" "governance_all: participant without security" -- \
   unsecured "$bin/tools/slctl" --ns "$ns" --timeout 3 status
-stop_daemon
+sl_stop_daemon "" 10
 echo "security: all checks passed"

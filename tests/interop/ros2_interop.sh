@@ -9,22 +9,11 @@
 # All traffic stays on 127.0.0.1, unicast only. Every wait is bounded.
 # usage: ros2_interop.sh SOURCE_DIR BINARY_DIR
 set -euo pipefail
-src=$1
-bin=$2
-export CYCLONEDDS_URI=file://$src/config/cyclonedds-loopback.xml
+# shellcheck source=../support/daemon.sh
+source "$1/tests/support/daemon.sh"
+sl_enter_netns "$0" "$@"
+sl_init "$1" "$2"
 export FASTRTPS_DEFAULT_PROFILES_FILE=$src/config/fastdds-loopback.xml
-work=$(mktemp -d)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill -9 "$p" 2>/dev/null || true; done
-  rm -rf "$work"
-}
-trap cleanup EXIT
-fail() {
-  echo "FAIL: $*" >&2
-  for f in "$work"/*.log; do [ -f "$f" ] && { echo "--- $(basename "$f")"; tail -n 20 "$f"; } >&2; done
-  exit 1
-}
 start=$SECONDS
 clouds=3
 
@@ -60,13 +49,10 @@ else
 fi
 
 ns="interop_$$_$RANDOM"
-sed "s/^  namespace: sl$/  namespace: $ns/" "$src/config/sim.yaml" > "$work/sim.yaml"
-grep -q "namespace: $ns" "$work/sim.yaml" || fail "could not set the namespace"
+sl_sim_config "$ns" "$work/sim.yaml"
 topic="rt/$ns/points"
 
-"$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
-pids+=($!)
-daemon_pid=$!
+sl_start_daemon "$work/sim.yaml" "$work/daemon.log"
 "$bin/tests/interop/fastdds_points_subscriber" --topic "$topic" --count $clouds --timeout 45 \
   > "$work/fastdds.log" 2> "$work/fastdds.err" &
 pids+=($!)
@@ -156,8 +142,6 @@ done < "$work/fastdds.clouds"
 echo "Fast DDS received all $fastdds_count clouds, each identical to the Cyclone copy:"
 cat "$work/fastdds.clouds"
 
-kill -TERM "$daemon_pid"
-for _ in $(seq 1 40); do kill -0 "$daemon_pid" 2>/dev/null || break; sleep 0.05; done
-kill -0 "$daemon_pid" 2>/dev/null && fail "daemon still running 2 s after SIGTERM"
+sl_stop_daemon
 echo "ok: finished in $((SECONDS - start)) s"
 echo "1 passed, 0 failed"
