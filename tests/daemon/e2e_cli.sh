@@ -169,7 +169,7 @@ set -e
 echo "$msg" | grep -q "rejected (invalid option): pattern is 100000 bytes, more than 256" \
   || fail "oversized pattern message: ${msg:0:300}"
 [ "${#msg}" -lt 400 ] || fail "oversized pattern echoed: ${#msg} bytes"
-grep -q "$big" "$work/daemon.log" && fail "oversized pattern in the log"
+grep -qF "$big" "$work/daemon.log" && fail "oversized pattern in the log"
 "$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
 grep -Eq "^requests: *[0-9]+ \(answered [0-9]+, rate-limited 0, invalid 1, reply timed out 0\)" \
   "$work/status.log" || fail "request counters: $(grep requests "$work/status.log")"
