@@ -480,6 +480,7 @@ TEST_CASE("clouds in metres are the clouds in millimetres scaled, with the same 
   }
   CHECK(valid > mm.cloud->points.size() / 2);
   CHECK(mismatched == 0);
+}
 
 namespace {
 
