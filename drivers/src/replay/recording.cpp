@@ -161,12 +161,12 @@ pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images)
   // all become the one error type naming the file.
   try {
     return readSet(set_dir, meta, load_images);
+  } catch (const YAML::Exception& e) {  // a std::runtime_error: before the rethrow below
+    throw std::runtime_error(meta + ": malformed: " + e.what());
   } catch (const std::runtime_error&) {
     throw;
   } catch (const cv::Exception& e) {
     throw std::runtime_error(meta + ": malformed: " + e.msg);
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(meta + ": malformed: " + e.what());
   } catch (const std::exception& e) {
     throw std::runtime_error(meta + ": malformed (" + e.what() + ")");
   }
