@@ -30,15 +30,29 @@ using namespace std::chrono_literals;
 
 namespace {
 
-// A camera whose grab() hangs (ignores its timeout) once `hang` is set, until
-// stop(): a driver stuck in a system call.
-class HangingCamera : public sl::drivers::Camera {
+// A camera that forwards everything to `inner`: the fault-injecting test
+// cameras below override what they break.
+class ForwardingCamera : public sl::drivers::Camera {
  public:
-  explicit HangingCamera(std::shared_ptr<sl::drivers::Camera> inner) : inner_(std::move(inner)) {}
+  explicit ForwardingCamera(std::shared_ptr<sl::drivers::Camera> inner) : inner_(std::move(inner)) {}
   std::string id() const override { return inner_->id(); }
   int width() const override { return inner_->width(); }
   int height() const override { return inner_->height(); }
   void start() override { inner_->start(); }
+  void stop() override { inner_->stop(); }
+  std::optional<sl::pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
+    return inner_->grab(timeout);
+  }
+
+ protected:
+  std::shared_ptr<sl::drivers::Camera> inner_;
+};
+
+// A camera whose grab() hangs (ignores its timeout) once `hang` is set, until
+// stop(): a driver stuck in a system call.
+class HangingCamera : public ForwardingCamera {
+ public:
+  using ForwardingCamera::ForwardingCamera;
   void stop() override {
     {
       std::lock_guard lock(mutex_);
@@ -58,7 +72,6 @@ class HangingCamera : public sl::drivers::Camera {
   std::atomic<bool> hang{false};
 
  private:
-  std::shared_ptr<sl::drivers::Camera> inner_;
   std::mutex mutex_;
   std::condition_variable cv_;
   bool stopped_ = false;
@@ -486,14 +499,9 @@ namespace {
 
 // A camera that can be made to deliver nothing (a device gone quiet) or to
 // fail every grab (a device gone), and then to recover.
-class FaultyCamera : public sl::drivers::Camera {
+class FaultyCamera : public ForwardingCamera {
  public:
-  explicit FaultyCamera(std::shared_ptr<sl::drivers::Camera> inner) : inner_(std::move(inner)) {}
-  std::string id() const override { return inner_->id(); }
-  int width() const override { return inner_->width(); }
-  int height() const override { return inner_->height(); }
-  void start() override { inner_->start(); }
-  void stop() override { inner_->stop(); }
+  using ForwardingCamera::ForwardingCamera;
   std::optional<sl::pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
     if (fail) {
       std::this_thread::sleep_for(10ms);
@@ -506,9 +514,6 @@ class FaultyCamera : public sl::drivers::Camera {
     return inner_->grab(timeout);
   }
   std::atomic<bool> silent{false}, fail{false};
-
- private:
-  std::shared_ptr<sl::drivers::Camera> inner_;
 };
 
 // A trigger source that can be made to deliver no triggers.
