@@ -12,6 +12,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <yaml-cpp/yaml.h>
 
+#include "replay/mcap_image_sets.h"
+
 namespace sl::drivers {
 
 namespace fs = std::filesystem;
@@ -253,5 +255,55 @@ pipeline::ImageSet readSet(const std::string& set_dir, const std::string& meta, 
 }
 
 }  // namespace
+
+namespace {
+
+class FolderRecording : public RecordingReader {
+ public:
+  explicit FolderRecording(const std::string& dir) {
+    for (const std::string& folder : listRecordedSets(dir)) {
+      folders_.push_back(folder);
+      infos_.push_back(readRecordedSet(folder, /*load_images=*/false));
+    }
+    if (infos_.empty()) throw std::runtime_error(dir + ": the recording holds no image sets");
+  }
+  std::size_t size() const override { return infos_.size(); }
+  const pipeline::ImageSet& info(std::size_t i) const override { return infos_.at(i); }
+  pipeline::ImageSet load(std::size_t i) const override { return readRecordedSet(folders_.at(i)); }
+  std::string where(std::size_t i) const override { return folders_.at(i); }
+  std::string whereFrame(std::size_t i, const std::string& camera, std::size_t frame) const override {
+    return (fs::path(folders_.at(i)) / frameName(camera, frame)).string();
+  }
+
+ private:
+  std::vector<std::string> folders_;
+  std::vector<pipeline::ImageSet> infos_;
+};
+
+class McapRecording : public RecordingReader {
+ public:
+  explicit McapRecording(const std::string& path) : sets_(path) {}
+  std::size_t size() const override { return sets_.size(); }
+  const pipeline::ImageSet& info(std::size_t i) const override { return sets_.info(i); }
+  pipeline::ImageSet load(std::size_t i) const override { return sets_.load(i); }
+  std::string where(std::size_t i) const override { return sets_.where(i); }
+  std::string whereFrame(std::size_t i, const std::string& camera, std::size_t frame) const override {
+    return sets_.where(i) + ": camera '" + camera + "' image " + std::to_string(frame);
+  }
+
+ private:
+  McapImageSets sets_;
+};
+
+}  // namespace
+
+std::unique_ptr<RecordingReader> RecordingReader::open(const std::string& path) {
+  std::error_code error;
+  const fs::file_status status = fs::status(path, error);
+  if (error || !fs::exists(status))
+    throw std::runtime_error(path + ": not a recording (no such folder or MCAP file)");
+  if (fs::is_directory(status)) return std::make_unique<FolderRecording>(path);
+  return std::make_unique<McapRecording>(path);
+}
 
 }  // namespace sl::drivers

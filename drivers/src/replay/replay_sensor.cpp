@@ -21,7 +21,7 @@ constexpr TimestampNs kStartDelayNs = 20'000'000;
 
 // What the schedule needs of a set without loading its images.
 struct SetInfo {
-  std::string folder;
+  std::size_t index = 0;  // in the recording
   std::string pattern;
   TimestampNs trigger_ns = 0;
   std::vector<std::vector<TimestampNs>> offsets_ns;  // per camera, per frame: stamp - trigger
@@ -30,10 +30,11 @@ struct SetInfo {
 
 class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> {
  public:
-  explicit Replay(const ReplayConfig& config) : config_(config) {
-    for (const std::string& folder : listRecordedSets(config.dir)) {
-      const pipeline::ImageSet set = readRecordedSet(folder, /*load_images=*/false);
-      SetInfo info{folder, set.pattern_name, set.trigger_stamp_ns, {}, {}};
+  explicit Replay(const ReplayConfig& config)
+      : config_(config), recording_(RecordingReader::open(config.dir)) {
+    for (std::size_t index = 0; index < recording_->size(); ++index) {
+      const pipeline::ImageSet& set = recording_->info(index);
+      SetInfo info{index, set.pattern_name, set.trigger_stamp_ns, {}, {}};
       for (const auto& camera : set.cameras) {
         std::vector<TimestampNs> offsets;
         for (TimestampNs s : camera.stamps_ns) offsets.push_back(s - set.trigger_stamp_ns);
@@ -42,7 +43,7 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
         if (sets_.empty()) camera_ids_.push_back(camera.camera_id);
       }
       if (info.offsets_ns.size() != camera_ids_.size())
-        throw std::runtime_error(folder + ": camera count differs from the first set's");
+        throw std::runtime_error(recording_->where(index) + ": camera count differs from the first set's");
       if (std::find(patterns_.begin(), patterns_.end(), info.pattern) == patterns_.end())
         patterns_.push_back(info.pattern);
       sets_.push_back(std::move(info));
@@ -123,11 +124,11 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
           const TimestampNs stamp = t0_ns_ + TimestampNs(k) * period_ns_ + info.offsets_ns[c][i];
           if (pipeline::systemClockNs() >= stamp) {
             ++camera_next_[c];
-            const std::string folder = info.folder;
+            const std::size_t set_index = info.index;
             const int bit_depth = info.bit_depths[c];
             lock.unlock();
             pipeline::Frame frame;
-            frame.image = loadFrame(folder, c, i);
+            frame.image = loadFrame(set_index, c, i);
             // A frame of another size or depth than the recording's first set
             // would be dropped later without a name: refused here, naming
             // the file (the engine reports it; the set counts as incomplete).
@@ -135,8 +136,8 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
                                               frame.image.rows != camera_sizes_[c].height ||
                                               frame.image.depth() != camera_depths_[c]))
               throw std::runtime_error(
-                  folder + "/" + camera_ids_[c] + "_" + (i < 10 ? "0" : "") + std::to_string(i) +
-                  ".png: " + std::to_string(frame.image.cols) + "x" +
+                  recording_->whereFrame(set_index, camera_ids_[c], i) + ": " +
+                  std::to_string(frame.image.cols) + "x" +
                   std::to_string(frame.image.rows) +
                   (frame.image.depth() == CV_16U ? " 16-bit" : " 8-bit") + " frame, the recording's camera '" +
                   camera_ids_[c] + "' is " + std::to_string(camera_sizes_[c].width) + "x" +
@@ -210,14 +211,14 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
   // One frame of a set, from the cache or after reading the whole set (the
   // cameras read the same set). The cache keeps the most recently used sets
   // within config_.cache_bytes, and always the one just read.
-  cv::Mat loadFrame(const std::string& folder, std::size_t camera, std::size_t i) {
+  cv::Mat loadFrame(std::size_t set_index, std::size_t camera, std::size_t i) {
     std::lock_guard lock(cache_mutex_);
     auto it = std::find_if(cache_.begin(), cache_.end(),
-                           [&](const CachedSet& c) { return c.folder == folder; });
+                           [&](const CachedSet& c) { return c.index == set_index; });
     if (it != cache_.end()) {
       cache_.splice(cache_.begin(), cache_, it);
     } else {
-      CachedSet entry{folder, readRecordedSet(folder), 0};
+      CachedSet entry{set_index, recording_->load(set_index), 0};
       for (const auto& c : entry.set.cameras)
         for (const cv::Mat& f : c.frames) entry.bytes += f.total() * f.elemSize();
       cache_bytes_ += entry.bytes;
@@ -231,6 +232,7 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
   }
 
   const ReplayConfig config_;
+  const std::unique_ptr<const RecordingReader> recording_;
   std::vector<SetInfo> sets_;
   std::vector<std::string> camera_ids_;
   std::vector<std::string> patterns_;
@@ -249,7 +251,7 @@ class Replay : public ReplaySensor, public std::enable_shared_from_this<Replay> 
   std::uint64_t trigger_epoch_ = 0;             // guarded by mutex_
 
   struct CachedSet {
-    std::string folder;
+    std::size_t index;
     pipeline::ImageSet set;
     std::size_t bytes = 0;
   };
@@ -303,7 +305,7 @@ class ReplayTrigger : public TriggerSource {
 };
 
 std::vector<std::shared_ptr<Camera>> Replay::cameras() {
-  const pipeline::ImageSet first = readRecordedSet(sets_.front().folder);
+  const pipeline::ImageSet first = recording_->load(sets_.front().index);
   std::vector<std::shared_ptr<Camera>> out;
   for (std::size_t c = 0; c < camera_ids_.size(); ++c) {
     const cv::Mat& image = first.cameras[c].frames.front();

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -37,5 +38,31 @@ std::vector<std::string> listRecordedSets(const std::string& dir);
 // stay empty, stamps are filled). Throws std::runtime_error naming the file
 // on a missing or unreadable frame or a malformed meta.yml.
 pipeline::ImageSet readRecordedSet(const std::string& set_dir, bool load_images = true);
+
+// A recording opened for playing back: a recording folder (above), or an
+// MCAP file written by `sl_view record` with the daemon's image sets
+// (rt/<ns>/image_sets, sl_msgs/msg/ImageSet) in it. Both give the same
+// ImageSets for the same sets. Immutable after open(); load() is
+// thread-safe.
+class RecordingReader {
+ public:
+  // A folder is read as a recording folder, a file as MCAP. Reads every
+  // set's metadata (not its images). Throws std::runtime_error naming the
+  // path if it is not a recording, holds no image sets, or is corrupt.
+  static std::unique_ptr<RecordingReader> open(const std::string& path);
+  virtual ~RecordingReader() = default;
+
+  virtual std::size_t size() const = 0;  // sets, in recording order
+  // Set i's metadata (frames empty; stamps, ids and depths filled).
+  virtual const pipeline::ImageSet& info(std::size_t i) const = 0;
+  // Set i with its frames. Throws std::runtime_error naming where() on a
+  // missing or unreadable frame.
+  virtual pipeline::ImageSet load(std::size_t i) const = 0;
+  // Where set i is, for messages: its folder, or "<file>: image set k (message n)".
+  virtual std::string where(std::size_t i) const = 0;
+  // Where frame `frame` of camera `camera` of set i is: its PNG file, or
+  // "<file>: image set k (message n): camera 'c' image f".
+  virtual std::string whereFrame(std::size_t i, const std::string& camera, std::size_t frame) const = 0;
+};
 
 }  // namespace sl::drivers

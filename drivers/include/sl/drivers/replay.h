@@ -1,4 +1,5 @@
-// The replay sensor: plays a recording (sl/drivers/recording.h) back through
+// The replay sensor: plays a recording (sl/drivers/recording.h: a recording
+// folder or an MCAP file of the daemon's image sets) back through
 // the Camera / Projector / TriggerSource interfaces, so the daemon processes
 // recorded image sets exactly as it processed them live.
 #pragma once
@@ -15,7 +16,7 @@
 namespace sl::drivers {
 
 struct ReplayConfig {
-  std::string dir;   // the recording folder
+  std::string dir;   // the recording: a folder, or an MCAP file with image sets (recording.h)
   bool loop = true;  // wrap around at the end of the recording (else stop there)
   // Decoded sets kept in memory (least recently used dropped first), so that
   // a looping replay decodes each image once instead of on every pass. At
@@ -31,7 +32,7 @@ struct ReplayConfig {
 // t0 + k * period (t0 = start + 20 ms, period = the recording's trigger
 // interval for that pattern); each frame keeps its recorded offset from its
 // trigger, so grouping by trigger time sees the same timing as live. Images
-// are loaded from disk, a set at a time, when first grabbed, and decoded sets
+// are loaded from the recording, a set at a time, when first grabbed, and decoded sets
 // stay in a cache bounded by ReplayConfig::cache_bytes.
 class ReplaySensor {
  public:
