@@ -241,29 +241,31 @@ void parseSoftwareTrigger(const YamlMap& m, SoftwareTriggerConfig& s) {
   m.done();
 }
 
-// `replay:` {dir, loop}. Returns the recording's camera frame rate (from the
-// first set's frame stamps), which the synchroniser's windows need.
+// `replay:` {dir or file, loop, cache_mb}: a recording folder (dir) or an
+// MCAP file of the daemon's image sets (file). Returns the recording's
+// camera frame rate (from the first set's frame stamps), which the
+// synchroniser's windows need.
 double parseReplay(const YamlMap& m, const std::filesystem::path& base_dir,
                    drivers::ReplayConfig& replay) {
-  std::filesystem::path dir(m.get<std::string>("dir"));
+  const bool has_dir = m.has("dir"), has_file = m.has("file");
+  if (has_dir == has_file)
+    m.fail(has_dir ? "file" : "dir", "give the recording as dir (a folder) or file (an MCAP file), one of them");
+  const std::string key = has_dir ? "dir" : "file";
+  std::filesystem::path dir(m.get<std::string>(key));
   if (dir.is_relative()) dir = base_dir / dir;
   replay.dir = dir.lexically_normal().string();
   replay.loop = m.get<bool>("loop", replay.loop);
   replay.cache_bytes = static_cast<std::size_t>(
       nonNegative(m, "cache_mb", double(replay.cache_bytes >> 20)) * double(1 << 20));
   m.done();
-  std::vector<std::string> sets;
-  try {
-    sets = drivers::listRecordedSets(replay.dir);
-  } catch (const std::exception& e) {
-    m.fail("dir", e.what());
-  }
-  if (sets.empty()) m.fail("dir", "the recording '" + replay.dir + "' holds no image sets");
+  if (std::filesystem::exists(replay.dir) && std::filesystem::is_directory(replay.dir) != has_dir)
+    m.fail(key, "'" + replay.dir + "' is " + (has_dir ? "not a folder (an MCAP file is given as file:)"
+                                                      : "a folder (a recording folder is given as dir:)"));
   pipeline::ImageSet first;
   try {
-    first = drivers::readRecordedSet(sets.front(), /*load_images=*/false);
+    first = drivers::RecordingReader::open(replay.dir)->info(0);
   } catch (const std::exception& e) {
-    m.fail("dir", e.what());
+    m.fail(key, e.what());
   }
   const auto& stamps = first.cameras.front().stamps_ns;
   if (stamps.size() < 2) return 30.0;
