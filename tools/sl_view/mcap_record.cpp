@@ -33,9 +33,19 @@ namespace {
 // depth and shading images and camera_info.
 using ScanKey = std::pair<std::uint64_t, std::string>;
 
+// Topics with one message per scan, stamped as the scan's cloud. An image
+// set's stamp is the cloud's (the sequence's trigger time), its frame_id
+// empty; the daemon publishes it after the cloud, so a recording that ends
+// with the N-th cloud waits for it as for the images.
 bool isScanTopic(const std::string& type_name) {
   return type_name == "sensor_msgs/msg/PointCloud2" || type_name == "sensor_msgs/msg/Image" ||
-         type_name == "sensor_msgs/msg/CameraInfo";
+         type_name == "sensor_msgs/msg/CameraInfo" || type_name == "sl_msgs/msg/ImageSet";
+}
+
+// Whether topic t holds scan k's message among the keys `held`.
+bool holds(const TopicInfo& t, const std::set<ScanKey>& held, const ScanKey& k) {
+  if (t.type_name == "sl_msgs/msg/ImageSet") return held.count({k.first, ""}) > 0;
+  return held.count(k) > 0;
 }
 
 ScanKey scanKey(const RawSample& s, const std::string& topic) {
@@ -248,8 +258,8 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   }
 
   // A scan's cloud, depth and shading images and camera_info share the
-  // cloud's header stamp and frame, and the daemon publishes the images
-  // after the cloud: a recording that ends (the N-th cloud, --seconds,
+  // cloud's header stamp and frame (its image set the stamp), and the daemon
+  // publishes them after the cloud: a recording that ends (the N-th cloud, --seconds,
   // Ctrl-C, the daemon idle) waits up to kTailWait for the latest recorded
   // cloud's other messages, and leaves out the next scan's. At the end, each
   // scan topic is checked against the clouds: a message missing is named and
@@ -264,7 +274,8 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   constexpr auto kTailWait = std::chrono::seconds(3);
   const auto tailComplete = [&] {
     for (const std::size_t i : scan_topics)
-      if (!keys_of[i].count(*last_cloud) && expects(raw.topics()[i], keys_of[i], *last_cloud))
+      if (!holds(raw.topics()[i], keys_of[i], *last_cloud) &&
+          expects(raw.topics()[i], keys_of[i], *last_cloud))
         return false;
     return true;
   };
@@ -366,7 +377,7 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   for (const std::size_t i : scan_topics) {
     std::size_t missing = 0;
     for (const auto& k : cloud_keys)
-      if (!keys_of[i].count(k) && expects(raw.topics()[i], keys_of[i], k)) ++missing;
+      if (!holds(raw.topics()[i], keys_of[i], k) && expects(raw.topics()[i], keys_of[i], k)) ++missing;
     if (missing == 0) continue;
     std::fprintf(stderr, "sl_view record: %s: %zu of the %zu scans recorded have no message\n",
                  raw.topics()[i].ros_name.c_str(), missing, cloud_keys.size());
