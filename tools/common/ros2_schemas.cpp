@@ -45,7 +45,7 @@ const std::map<std::string, std::string>& fieldLists() {
        "builtin_interfaces/Time start_at\nfloat64 frame_rate_hz\n"},
       {"sl_msgs/ImageSet",
        "std_msgs/Header header\nstring pattern\nuint64 sequence_id\nuint32 camera_count\n"
-       "sensor_msgs/Image[] images\n"},
+       "string[] camera_ids\nuint8[] bit_depths\nsensor_msgs/Image[] images\n"},
       {"sl_msgs/ProjectorMaps",
        "std_msgs/Header header\nstring pattern\nuint64 scan_index\nuint32 height\n"
        "uint32 width\nfloat32[] up\nfloat32[] vp\nfloat32[] modulation\nuint8[] status\n"},
