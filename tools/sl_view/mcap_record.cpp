@@ -284,6 +284,13 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   long clouds = 0;
   std::uint64_t bytes = 0;
   std::uint64_t dropped_after = 0;  // samples of scans after the last one recorded
+  // Images, camera_info and image sets taken before the first cloud are held
+  // back until it comes: those of its scan (a 25 MB cloud can arrive after
+  // its scan's small images) or later are written then, those of an earlier
+  // scan, whose cloud the file does not have (the cloud writer matched this
+  // recorder after the image writers did), are left out, so every scan in
+  // the file is whole.
+  std::vector<std::pair<ScanKey, std::shared_ptr<const RawSample>>> before_first_cloud;
   // With --scan: the daemon going back to idle ends the recording too (a
   // scan it could not complete never comes); 0.5 s later, for the last
   // images.
@@ -312,6 +319,18 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
         last_cloud = *cloud_keys.rbegin();
       }
     }
+    // Writes a sample (false if the queue refused it).
+    const auto record = [&](const std::shared_ptr<const RawSample>& s, const std::optional<ScanKey>& key) {
+      const std::size_t size = s->size();
+      if (!queue.push(channel_of[s->topic], sequence[s->topic] + 1, s)) {
+        ++not_written[s->topic];
+        return false;
+      }
+      ++sequence[s->topic];
+      bytes += size;
+      if (key) keys_of[s->topic].insert(*key);
+      return true;
+    };
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const RawSample> s) {
       const TopicInfo& t = raw.topics()[s->topic];
       std::optional<ScanKey> key;
@@ -320,18 +339,19 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
         ++dropped_after;  // the next scan's: not part of this recording
         return;
       }
-      const std::size_t size = s->size();
-      if (!queue.push(channel_of[s->topic], sequence[s->topic] + 1, s)) {
-        ++not_written[s->topic];
+      if (key && s->topic != points_topic && cloud_keys.empty()) {
+        before_first_cloud.emplace_back(*key, s);
         return;
       }
-      ++sequence[s->topic];
-      bytes += size;
-      if (key) keys_of[s->topic].insert(*key);
+      if (!record(s, key)) return;
       if (s->topic == points_topic) {
         cloud_keys.insert(*key);
         if (count > 0 && ++clouds >= count) last_cloud = key;
         else if (count == 0) ++clouds;
+        for (const auto& [held_key, held] : before_first_cloud)
+          if (held_key.first >= key->first && (!last_cloud || held_key <= *last_cloud))
+            record(held, held_key);
+        before_first_cloud.clear();
       }
       if (s->topic == status_topic) {
         tools::CdrReader status(s->data(), s->size(), "status sample");
