@@ -6,6 +6,9 @@
 #
 #   bash scripts/bench-delivery.sh [BUILD_DIR]        (default: build; a Release build)
 #
+# SL_BENCH_KEEP_LOGS=DIR copies the run's scratch files (daemon, RouDi and
+# subscriber logs) to DIR at the end (a path outside /tmp: as root the run has
+# a private /tmp).
 # Scenarios (SL_BENCH_SECONDS scales the windows, default 30):
 #   5hz      camera 30 fps (6-frame 3+3 sequences: 5 scans/s), one subscriber
 #   max      camera 180 fps (30 scans/s), one subscriber, 30 s
@@ -81,6 +84,9 @@ cleanup() {
     done
     kill -KILL "$roudi_pid" 2> /dev/null || true
   fi
+  if [ -n "${SL_BENCH_KEEP_LOGS:-}" ]; then
+    mkdir -p "$SL_BENCH_KEEP_LOGS" && cp -r "$work"/. "$SL_BENCH_KEEP_LOGS"/ 2> /dev/null || true
+  fi
   rm -rf "$work"
 }
 trap cleanup EXIT
@@ -125,6 +131,13 @@ fi
 scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz stalled sets max 3subs fastdds}
 wanted() { case " $scenarios " in *" $1 "*) return 0 ;; esac; return 1; }
 
+# slctl always talks over the loopback config (which the shm config extends):
+# its small requests gain nothing from shared memory, and short-lived
+# processes registering with RouDi one after another is what made Debian's
+# iox-roudi 2.0 abort (it tried to shut down an slctl that had already exited:
+# POSH__ROUDI_PROCESS_SHUTDOWN_FAILED).
+ctl=(env "CYCLONEDDS_URI=file://$src/config/cyclonedds-loopback.xml" "$slctl")
+
 # --- statistics ---
 # stats FILE PERIOD_NS OFFSET_NS -> "clouds_per_s=.. lost=.. p50_ms=.. p99_ms=.. max_ms=.."
 # from "rx STAMP TAKE" lines; latency = TAKE - (STAMP + OFFSET).
@@ -167,7 +180,7 @@ start_daemon() {  # FPS [extra sed expression]
   "$daemon" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
   daemon_pid=$!
   pids+=("$daemon_pid")
-  timeout 30 "$slctl" --ns "$ns" --timeout 20 status > /dev/null 2>&1 ||
+  timeout 30 "${ctl[@]}" --ns "$ns" --timeout 20 status > /dev/null 2>&1 ||
     { echo "bench-delivery: the daemon did not answer:" >&2; cat "$work/daemon.log" >&2; exit 1; }
   grep -m 3 'warning' "$work/daemon.log" | sed 's/^/  daemon: /' || true
 }
@@ -200,7 +213,7 @@ scenario() {
   reset_rss
   local load
   load=$(cut -d' ' -f1-3 /proc/loadavg)
-  timeout 20 "$slctl" --ns "$ns" start > /dev/null || { echo "bench-delivery: slctl start failed" >&2; cat "$work/daemon.log" >&2; exit 1; }
+  timeout 20 "${ctl[@]}" --ns "$ns" start > /dev/null || { echo "bench-delivery: slctl start failed" >&2; cat "$work/daemon.log" >&2; exit 1; }
   if [ "$stall" = 1 ]; then
     sleep 5
     # The subscriber itself, not only the timeout(1) that runs it.
@@ -213,8 +226,8 @@ scenario() {
   local rss
   rss=$(rss_mb)
   local status
-  status=$(timeout 20 "$slctl" --ns "$ns" status 2>&1 | tr '\n' ' ' | tr -s ' ')
-  timeout 20 "$slctl" --ns "$ns" stop > /dev/null 2>&1 || true
+  status=$(timeout 20 "${ctl[@]}" --ns "$ns" status 2>&1 | tr '\n' ' ' | tr -s ' ')
+  timeout 20 "${ctl[@]}" --ns "$ns" stop > /dev/null 2>&1 || true
   sleep 1
   # The figures: subscriber 1 (stalled), else the worst of the subscribers
   # (lowest rate, most lost, highest latencies).
@@ -313,10 +326,10 @@ elif [ -x "$fastdds" ]; then
   for _ in $(seq 1 100); do grep -q '^ready' "$work/fastdds.log" && break; sleep 0.1; done
   sleep 1
   reset_rss
-  timeout 20 "$slctl" --ns "$ns" start > /dev/null
+  timeout 20 "${ctl[@]}" --ns "$ns" start > /dev/null
   wait "$fpid" || echo "  fastdds: $(tail -n 2 "$work/fastdds.err")"
   rss=$(rss_mb)
-  timeout 20 "$slctl" --ns "$ns" stop > /dev/null 2>&1 || true
+  timeout 20 "${ctl[@]}" --ns "$ns" stop > /dev/null 2>&1 || true
   stop_daemon
   line=$(stats "$work/fastdds.log" 200000000 166666667)
   echo "  fastdds-5hz/loopback: $line"
