@@ -12,7 +12,10 @@
 # Scenarios (SL_BENCH_SECONDS scales the windows, default 30):
 #   5hz      camera 30 fps (6-frame 3+3 sequences: 5 scans/s), one subscriber
 #   max      camera 180 fps (30 scans/s), one subscriber, 30 s
-#   3subs    camera 180 fps, three subscribers (the figures: the worst of the three)
+#   3subs    three subscribers (the figures: the worst of the three) at
+#            SL_BENCH_3SUBS_FPS (default 90 fps = 15 scans/s: the rate the
+#            issue asks each of three subscribers to get without loss; at
+#            180 fps three full-cloud readers need more CPU than 2 cores have)
 #   5hz-sets as 5hz with dds.publish_image_sets on (loopback only): what
 #            publishing the raw image sets costs the clouds
 #   stalled  camera 30 fps, two subscribers, the second SIGSTOPped for 30 s
@@ -46,6 +49,7 @@ set -euo pipefail
 src=$(cd "$(dirname "$0")/.." && pwd)
 build=$(cd "${1:-$src/build}" && pwd)
 secs=${SL_BENCH_SECONDS:-30}
+subs3_fps=${SL_BENCH_3SUBS_FPS:-90}
 
 if [ "${SL_BENCH_INSIDE:-0}" != 1 ] && [ "$(id -u)" = 0 ] && unshare -n -m true 2> /dev/null; then
   exec env SL_BENCH_INSIDE=1 unshare -n -m --propagation private bash "$0" "$build"
@@ -303,10 +307,14 @@ for entry in "${configs[@]}"; do
     scenario 5hz-sets "$cfg" 30 1 "$((secs * 2 / 3))"
     stop_daemon
   fi
-  if wanted max || wanted 3subs; then
+  if wanted max; then
     start_daemon 180
-    ! wanted max || scenario max "$cfg" 180 1 "$secs"
-    ! wanted 3subs || scenario 3subs "$cfg" 180 3 "$((secs * 2 / 3))"
+    scenario max "$cfg" 180 1 "$secs"
+    stop_daemon
+  fi
+  if wanted 3subs; then
+    start_daemon "$subs3_fps"
+    scenario 3subs "$cfg" "$subs3_fps" 3 "$((secs * 2 / 3))"
     stop_daemon
   fi
 done
