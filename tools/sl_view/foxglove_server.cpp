@@ -347,6 +347,13 @@ struct FoxgloveServer::Impl {
         j["subscriptions"] = Json::UInt64(c.subscriptions);
         v["clients"].append(j);
       }
+      if (options.dds_stats) {
+        Json::CharReaderBuilder builder;
+        std::string errors;
+        std::istringstream in(options.dds_stats());
+        Json::Value dds;
+        if (Json::parseFromStream(builder, in, &dds, &errors)) v["dds"] = dds;
+      }
       con->set_status(websocketpp::http::status_code::ok);
       con->append_header("Content-Type", "application/json");
       con->append_header("Cache-Control", "no-store");

@@ -28,6 +28,9 @@ struct ServerOptions {
   // {"/three/", node_modules/three}. Longest prefix wins.
   std::vector<std::pair<std::string, std::string>> static_dirs;
   std::string name = "sl_view";
+  // Extra counters for GET /stats, as the text of a JSON value put under
+  // "dds" (called on the server thread; must be thread-safe). Optional.
+  std::function<std::string()> dds_stats;
 };
 
 struct ChannelInfo {

@@ -213,6 +213,14 @@ std::uint64_t RawTopics::samplesLost(std::size_t i) const {
   return status.total_count;
 }
 
+std::uint64_t RawTopics::samplesRejected(std::size_t i) const {
+  if (!impl_->readers.at(i)) return 0;
+  dds_sample_rejected_status_t status;
+  dds::check(dds_get_sample_rejected_status(impl_->readers[i]->handle(), &status),
+             "dds_get_sample_rejected_status");
+  return status.total_count;
+}
+
 std::uint32_t RawTopics::incompatibleWriters(std::size_t i, std::int32_t* last_policy) const {
   if (!impl_->readers.at(i)) return 0;
   dds_requested_incompatible_qos_status_t status;

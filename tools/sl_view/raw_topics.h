@@ -58,19 +58,20 @@ struct RawTopicsOptions {
   std::string ns = "sl";
   // Clouds and images (status is always reliable + transient-local, so the
   // latest one arrives on start-up):
-  // - best-effort, keep-last 1 (default; the viewer profile): the daemon's
-  //   writers never wait for this reader (no acknowledgements, no repairs),
-  //   so a viewer starved of CPU or stopped cannot slow the sensor; it
-  //   matches the daemon's reliable writers (a best-effort reader may read a
-  //   reliable writer). A cloud is lost when a fragment is: its 25 MB burst
-  //   must fit the socket receive buffer (config/cyclonedds-*.xml ask for
-  //   8 MiB or more; Linux grants at most net.core.rmem_max). Lost samples
-  //   are counted (samplesLost()).
-  // - reliable, keep-last `depth` (the recorder): lost fragments are
-  //   repaired; acknowledged by Cyclone's receive thread, but a process
-  //   short of CPU acknowledges late and the daemon's reliable writers wait
-  //   for it (up to their max_blocking_s).
-  bool best_effort = true;
+  // - reliable, keep-last `depth` (default; the live view with depth 1, the
+  //   recorder with 8): lost fragments are repaired, so a 25 MB cloud
+  //   arrives whatever the socket receive buffer. A reader that stops (a
+  //   stopped or CPU-starved sl_view) does not block the daemon: its
+  //   writers' keep-last histories drop the oldest unacknowledged cloud for
+  //   that reader only (view_starved: no DDS write timed out, the scan rate
+  //   held). What it costs the daemon is the repairs it sends.
+  // - best-effort, keep-last `depth` (--best-effort): never repaired nor
+  //   waited for; a cloud is lost when one fragment is, i.e. when its burst
+  //   overflows the socket receive buffer (Linux grants at most
+  //   net.core.rmem_max: with 4 MiB, no 25 MB cloud and a third of the
+  //   clouds read for the 1.6 MB preview were lost at load 14, README).
+  // Clouds missed either way are counted by sl_view (GET /stats "dds").
+  bool best_effort = false;
   int depth = 1;  // keep-last depth of the cloud and image readers
   std::vector<std::string> only;  // ROS names to subscribe; empty = all
   // Lazy: only the status reader exists at first; setActive() creates and
@@ -95,8 +96,12 @@ class RawTopics {
   bool active(std::size_t i) const;
   // Writers matched on topic i (0 until discovery or while inactive).
   std::uint32_t matchedWriters(std::size_t i) const;
-  // Samples Cyclone reported lost (best-effort fragments missing) per topic.
+  // Samples Cyclone reported lost (best-effort fragments missing) per topic,
+  // by the current reader (0 while inactive).
   std::uint64_t samplesLost(std::size_t i) const;
+  // Samples Cyclone rejected for want of room in the reader's history (its
+  // sample-rejected status; 0 while inactive).
+  std::uint64_t samplesRejected(std::size_t i) const;
   // Writers on topic i that did not match for incompatible QoS (0 while
   // inactive), and the last policy that did not match (DDS_*_QOS_POLICY_ID).
   std::uint32_t incompatibleWriters(std::size_t i, std::int32_t* last_policy = nullptr) const;

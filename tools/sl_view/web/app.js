@@ -159,6 +159,15 @@ function showStatus() {
     ['last error', s.last_error ? `<span class="bad">${esc(s.last_error)}</span>` : '-'],
   ];
   if (bridgeStats) rows.push(['viewer drops', `${bridgeStats.dropped} of ${bridgeStats.published + 0} (bridge, all viewers)`]);
+  const dds = bridgeStats && bridgeStats.dds;
+  if (dds && dds.topics) {
+    // What sl_view's DDS readers missed: clouds the daemon published while
+    // they were read but never taken (overwritten in the keep-last history,
+    // or lost with a fragment), and Cyclone's own lost / rejected counts.
+    const lost = dds.topics.reduce((n, t) => n + t.lost, 0), rejected = dds.topics.reduce((n, t) => n + t.rejected, 0);
+    rows.push(['DDS readers', `${dds.reliable ? 'reliable' : 'best-effort'}; clouds missed ${dds.clouds_missed} of ${dds.clouds_published_while_read}` +
+      ` published while viewed; samples lost ${lost}, rejected ${rejected}`]);
+  }
   document.getElementById('status').innerHTML =
     rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join('');
   const sel = document.getElementById('pattern');
