@@ -299,6 +299,105 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   std::optional<std::chrono::steady_clock::time_point> idle_since;
   WriteQueue queue(writer, buffer_mb << 20);
   std::vector<std::uint64_t> not_written(raw.topics().size(), 0);
+  // Writes a sample (false if the queue refused it).
+  const auto record = [&](const std::shared_ptr<const RawSample>& s, const std::optional<ScanKey>& key) {
+    const std::size_t size = s->size();
+    if (!queue.push(channel_of[s->topic], sequence[s->topic] + 1, s)) {
+      ++not_written[s->topic];
+      return false;
+    }
+    ++sequence[s->topic];
+    bytes += size;
+    if (key) keys_of[s->topic].insert(*key);
+    return true;
+  };
+  // A sample taken: written, or left out (the next scan's, or held until
+  // the first cloud).
+  const std::function<void(std::shared_ptr<const RawSample>)> handle =
+      [&](std::shared_ptr<const RawSample> s) {
+    const TopicInfo& t = raw.topics()[s->topic];
+    std::optional<ScanKey> key;
+    if (s->topic == points_topic || isScanTopic(t.type_name)) key = scanKey(*s, t.dds_name);
+    if (last_cloud && key && *key > *last_cloud) {
+      ++dropped_after;  // the next scan's: not part of this recording
+      return;
+    }
+    if (key && s->topic != points_topic && cloud_keys.empty()) {
+      before_first_cloud.emplace_back(*key, s);
+      return;
+    }
+    if (!record(s, key)) return;
+    if (s->topic == points_topic) {
+      cloud_keys.insert(*key);
+      if (count > 0 && ++clouds >= count) last_cloud = key;
+      else if (count == 0) ++clouds;
+      for (const auto& [held_key, held] : before_first_cloud)
+        if (held_key.first >= key->first && (!last_cloud || held_key <= *last_cloud))
+          record(held, held_key);
+      before_first_cloud.clear();
+    }
+    if (s->topic == status_topic) {
+      tools::CdrReader status(s->data(), s->size(), "status sample");
+      status.i32();  // stamp
+      status.u32();
+      const std::uint32_t state = status.u32();  // sl_msgs State: 0 idle, 1 scanning
+      status.string();                           // pattern
+      status.u64();                              // scans_done
+      status.u64();                              // scans_requested
+      status.f64();                              // scan_rate_hz
+      for (int k = 0; k < 6; ++k) status.u64();  // frames_dropped .. sets_overflow
+      writes_timed_out = status.u64();
+      if (!writes_timed_out_at_start) writes_timed_out_at_start = writes_timed_out;
+      if (scan > 0) {
+        if (state == 1 || state == 3 || state == 4) scanning_seen = true;
+        if (state == 0 && scanning_seen && !idle_since) idle_since = std::chrono::steady_clock::now();
+      }
+    }
+  };
+
+  // Warm-up (--scan 0, i.e. scanning continuously, with topics besides the
+  // cloud): the daemon's writers
+  // learn of this recorder's readers each by its own discovery message, and
+  // under load one can lag the scan request, so that the first scan lacks
+  // its images (or its cloud). Samples are held, by scan, until a scan is
+  // whole; the scans before it are left out and not counted. After
+  // kWarmupScans clouds without a whole scan, everything held is written
+  // as it came and a missing message is named at the end as before.
+  bool warming = scan == 0 && !scan_topics.empty();
+  constexpr std::size_t kWarmupScans = 2;
+  std::map<std::uint64_t, std::vector<std::shared_ptr<const RawSample>>> warmup;  // by stamp
+  std::size_t warmup_left_out = 0;  // scans with a cloud
+  const auto endWarmUp = [&](std::uint64_t first_stamp) {
+    warming = false;
+    for (auto& [stamp, samples] : warmup) {
+      if (stamp < first_stamp) {
+        warmup_left_out += std::any_of(samples.begin(), samples.end(),
+                                       [&](const auto& x) { return x->topic == points_topic; });
+        continue;
+      }
+      std::stable_partition(samples.begin(), samples.end(),
+                            [&](const auto& x) { return x->topic == points_topic; });
+      for (auto& x : samples) handle(std::move(x));
+    }
+    warmup.clear();
+  };
+  const auto warmUp = [&](std::shared_ptr<const RawSample> s) {
+    const TopicInfo& t = raw.topics()[s->topic];
+    if (s->topic != points_topic && !isScanTopic(t.type_name)) return handle(std::move(s));
+    warmup[scanKey(*s, t.dds_name).first].push_back(std::move(s));
+    std::size_t clouds_held = 0;
+    for (const auto& [stamp, samples] : warmup) {
+      std::set<std::size_t> present;
+      for (const auto& x : samples) present.insert(x->topic);
+      if (!present.count(points_topic)) continue;
+      ++clouds_held;
+      if (std::all_of(scan_topics.begin(), scan_topics.end(),
+                      [&](std::size_t i) { return present.count(i) > 0; }))
+        return endWarmUp(stamp);
+    }
+    if (clouds_held > kWarmupScans) endWarmUp(0);
+  };
+
   while (!queue.failed()) {
     const auto now = std::chrono::steady_clock::now();
     if (last_cloud) {
@@ -314,62 +413,15 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
                   << " clouds\n";
         end = true;
       }
+      if (end && warming) endWarmUp(0);
       if (end) {
         if (cloud_keys.empty()) break;
         last_cloud = *cloud_keys.rbegin();
       }
     }
-    // Writes a sample (false if the queue refused it).
-    const auto record = [&](const std::shared_ptr<const RawSample>& s, const std::optional<ScanKey>& key) {
-      const std::size_t size = s->size();
-      if (!queue.push(channel_of[s->topic], sequence[s->topic] + 1, s)) {
-        ++not_written[s->topic];
-        return false;
-      }
-      ++sequence[s->topic];
-      bytes += size;
-      if (key) keys_of[s->topic].insert(*key);
-      return true;
-    };
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const RawSample> s) {
-      const TopicInfo& t = raw.topics()[s->topic];
-      std::optional<ScanKey> key;
-      if (s->topic == points_topic || isScanTopic(t.type_name)) key = scanKey(*s, t.dds_name);
-      if (last_cloud && key && *key > *last_cloud) {
-        ++dropped_after;  // the next scan's: not part of this recording
-        return;
-      }
-      if (key && s->topic != points_topic && cloud_keys.empty()) {
-        before_first_cloud.emplace_back(*key, s);
-        return;
-      }
-      if (!record(s, key)) return;
-      if (s->topic == points_topic) {
-        cloud_keys.insert(*key);
-        if (count > 0 && ++clouds >= count) last_cloud = key;
-        else if (count == 0) ++clouds;
-        for (const auto& [held_key, held] : before_first_cloud)
-          if (held_key.first >= key->first && (!last_cloud || held_key <= *last_cloud))
-            record(held, held_key);
-        before_first_cloud.clear();
-      }
-      if (s->topic == status_topic) {
-        tools::CdrReader status(s->data(), s->size(), "status sample");
-        status.i32();  // stamp
-        status.u32();
-        const std::uint32_t state = status.u32();  // sl_msgs State: 0 idle, 1 scanning
-        status.string();                           // pattern
-        status.u64();                              // scans_done
-        status.u64();                              // scans_requested
-        status.f64();                              // scan_rate_hz
-        for (int k = 0; k < 6; ++k) status.u64();  // frames_dropped .. sets_overflow
-        writes_timed_out = status.u64();
-        if (!writes_timed_out_at_start) writes_timed_out_at_start = writes_timed_out;
-        if (scan > 0) {
-          if (state == 1 || state == 3 || state == 4) scanning_seen = true;
-          if (state == 0 && scanning_seen && !idle_since) idle_since = std::chrono::steady_clock::now();
-        }
-      }
+      if (warming) warmUp(std::move(s));
+      else handle(std::move(s));
     });
   }
   if (scan == 0) {
@@ -380,6 +432,10 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   }
   queue.finish();
   writer.close();
+  if (warmup_left_out > 0)
+    std::printf("sl_view record: %zu scan(s) at the start left out: a message missing (a daemon "
+                "writer had not yet discovered this recorder)\n",
+                warmup_left_out);
   std::printf("sl_view record: %llu messages (%ld clouds, %.1f MB of CDR) -> %s\n",
               static_cast<unsigned long long>(writer.messageCount()), clouds, bytes / 1e6,
               path.c_str());
