@@ -6,6 +6,8 @@
 #   browser  the web page in headless Chromium starts a scan and shows a
 #            cloud of the expected size (screenshot kept as an artefact)
 #   stalled  a viewer that stops reading does not slow the sensor
+#   sets     image sets recorded as MCAP, decoded by Foxglove's deserializer
+#            with the file's sl_msgs/msg/ImageSet schema
 #   starved  sl_view itself stopped does not slow the sensor (its default
 #            reliable readers), and the clouds it missed meanwhile are counted
 # usage: view_test.sh MODE SOURCE_DIR BINARY_DIR
@@ -40,6 +42,10 @@ sed -e "s/^  namespace: sl$/  namespace: $ns/" \
     "$src/config/sim.yaml" > "$work/sim.yaml"
 grep -q "namespace: $ns" "$work/sim.yaml" && grep -q "publish_images: true" "$work/sim.yaml" ||
   fail "could not set the namespace / publish_images in a copy of config/sim.yaml"
+if [ "$mode" = sets ]; then
+  sed -i "s/^  publish_images: true$/  publish_images: true\n  publish_image_sets: true/" "$work/sim.yaml"
+  grep -q "publish_image_sets: true" "$work/sim.yaml" || fail "could not set publish_image_sets"
+fi
 
 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
 pids+=($!)
@@ -92,6 +98,14 @@ browser)
 stalled)
   node "$node_dir/test/stalled_check.mjs" --ws "ws://127.0.0.1:$port" \
     --stats "http://127.0.0.1:$port/stats" --ns "$ns" --scans 8 --queue 2 || fail "stalled viewer check"
+  ;;
+sets)
+  "$bin/tools/sl_view/sl_view" record "$work/sets.mcap" --ns "$ns" --scan 2 \
+    --topics "/$ns/points,/$ns/image_sets" > "$work/record.log" 2>&1 || fail "sl_view record"
+  cat "$work/record.log"
+  # sim.yaml: camera sim_top, 1440 x 1080, 8 bits, 3+3 pattern (6 frames).
+  node "$node_dir/test/image_sets_check.mjs" --mcap "$work/sets.mcap" --ns "$ns" --camera sim_top \
+    --frames 6 --width 1440 --height 1080 --count 2 || fail "image sets check"
   ;;
 starved)
   # sl_view itself stopped (a process starved of CPU) while a viewer
