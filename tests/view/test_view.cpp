@@ -4,6 +4,9 @@
 // we choose), and the DDS readers' QoS against the daemon's writers.
 #include <catch2/catch.hpp>
 
+#include <fstream>
+#include <sstream>
+
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -131,6 +134,50 @@ TEST_CASE("ros2Schema: the standard fields and their dependencies; unknown types
   CHECK(pc.definition.find("MSG: sensor_msgs/PointField\n") != std::string::npos);
   CHECK(sl::tools::ros2Schema("sensor_msgs/msg/CameraInfo").definition.find("float64[9] k\n") != std::string::npos);
   CHECK_THROWS_WITH(sl::tools::ros2Schema("sensor_msgs/msg/Nope"), Catch::Contains("sensor_msgs/msg/Nope"));
+}
+
+// The project's own types: the ROS 2 schema Foxglove and rosbag2 decode
+// with must list the IDL's members, in order (a member the schema lacks
+// misplaces every field after it: the ImageSet schema lacked camera_ids and
+// bit_depths until view_image_sets caught it; Status lacked the request
+// counters).
+namespace {
+std::vector<std::string> idlMembers(const std::string& type) {
+  std::ifstream in(std::string(SL_SOURCE_DIR) + "/idl/sl_msgs/msg/" + type + ".idl");
+  std::string text, line;
+  while (std::getline(in, line)) text += line.substr(0, line.find("//")) + "\n";
+  const auto begin = text.find("struct " + type + " {");
+  REQUIRE(begin != std::string::npos);
+  const auto end = text.find("};", begin);
+  std::vector<std::string> names;
+  std::stringstream members(text.substr(text.find('{', begin) + 1, end - text.find('{', begin) - 1));
+  for (std::string m; std::getline(members, m, ';');) {
+    m.erase(m.find_last_not_of(" \n\t") + 1);
+    if (m.find_first_not_of(" \n\t") == std::string::npos) continue;
+    std::string name = m.substr(m.find_last_of(" \n\t") + 1);
+    names.push_back(name.substr(0, name.find('[')));
+  }
+  return names;
+}
+std::vector<std::string> schemaFields(const std::string& type) {
+  const std::string& definition = sl::tools::ros2Schema("sl_msgs/msg/" + type).definition;
+  std::stringstream lines(definition.substr(0, definition.find("=====")));
+  std::vector<std::string> names;
+  for (std::string l; std::getline(lines, l);) {
+    if (l.empty() || l.find('=') != std::string::npos) continue;  // constants
+    names.push_back(l.substr(l.find(' ') + 1));
+  }
+  return names;
+}
+}  // namespace
+
+TEST_CASE("ros2Schema: the project's types list the IDL's members in order") {
+  for (const std::string type : {"ImageSet", "Status", "ProjectorMaps"}) {
+    INFO(type);
+    const auto idl = idlMembers(type);
+    CHECK(idl.size() > 5);
+    CHECK(schemaFields(type) == idl);
+  }
 }
 
 TEST_CASE("McapWriter: magic at both ends, the footer points at the summary, errors name the file") {

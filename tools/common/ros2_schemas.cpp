@@ -42,7 +42,10 @@ const std::map<std::string, std::string>& fieldLists() {
        "uint64 frames_unmatched\nuint64 sets_overflow\nuint64 writes_timed_out\n"
        "uint64 sets_not_recorded\nstring recording\nuint64 sets_recorded\nstring last_error\n"
        "string[] patterns\nuint32 trigger\nstring[] cameras\nbool motion_compensation\n"
-       "builtin_interfaces/Time start_at\nfloat64 frame_rate_hz\n"},
+       "builtin_interfaces/Time start_at\nfloat64 frame_rate_hz\nuint64 requests_received\n"
+       "uint64 requests_answered\nuint64 requests_rate_limited\nuint64 requests_invalid\n"
+       "uint64 replies_timed_out\nstring degraded_reason\nbuiltin_interfaces/Time last_error_stamp\n"
+       "uint64 errors_reported\nuint64 requests_malformed\nuint64 sets_over_quota\n"},
       {"sl_msgs/ImageSet",
        "std_msgs/Header header\nstring pattern\nuint64 sequence_id\nuint32 camera_count\n"
        "string[] camera_ids\nuint8[] bit_depths\nsensor_msgs/Image[] images\n"},
