@@ -65,21 +65,6 @@ pipeline::PointCloud toPointCloud(const PointCloud2& msg) {
 
 }  // namespace
 
-const char* toString(CommandResult::Code code) {
-  switch (code) {
-    case CommandResult::Code::kOk: return "ok";
-    case CommandResult::Code::kUnknownPattern: return "unknown pattern";
-    case CommandResult::Code::kBusy: return "busy";
-    case CommandResult::Code::kInvalidCount: return "invalid count";
-    case CommandResult::Code::kInvalidCommand: return "invalid command";
-    case CommandResult::Code::kDeviceError: return "device error";
-    case CommandResult::Code::kNotRunning: return "not running";
-    case CommandResult::Code::kInvalidOption: return "invalid option";
-    case CommandResult::Code::kUnsupported: return "unsupported";
-  }
-  return "?";
-}
-
 struct SensorClient::Impl {
   explicit Impl(const ClientOptions& options)
       : options(options),

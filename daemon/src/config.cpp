@@ -400,10 +400,6 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
 
 }  // namespace
 
-const char* toString(TriggerMode mode) {
-  return mode == TriggerMode::kSoftware ? "software" : "hardware";
-}
-
 const char* toString(SensorKind kind) {
   switch (kind) {
     case SensorKind::kSim: return "sim";

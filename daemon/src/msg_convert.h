@@ -12,7 +12,7 @@
 #include "sensor_msgs/msg/CameraInfo.h"
 #include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/scan_engine.h"
+#include "sl/daemon/commands.h"
 #include "sl_msgs/msg/CommandReply.h"
 #include "sl_msgs/msg/CommandRequest.h"
 #include "sl_msgs/msg/ImageSet.h"

@@ -25,17 +25,6 @@ namespace sl::daemon {
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
-const char* toString(ScanState s) {
-  switch (s) {
-    case ScanState::kIdle: return "idle";
-    case ScanState::kScanning: return "scanning";
-    case ScanState::kError: return "error";
-    case ScanState::kWaiting: return "waiting";
-    case ScanState::kDegraded: return "degraded";
-  }
-  return "?";
-}
-
 namespace {
 
 // What the camera and trigger threads hand to the grouping thread, tagged

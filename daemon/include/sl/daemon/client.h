@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "sl/daemon/scan_engine.h"
+#include "sl/daemon/commands.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::daemon {
@@ -94,7 +94,5 @@ class SensorClient {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
-
-const char* toString(CommandResult::Code code);
 
 }  // namespace sl::daemon

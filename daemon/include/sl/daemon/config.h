@@ -9,6 +9,7 @@
 
 #include "sl/daemon/aravis_config.h"
 #include "sl/daemon/cloud_layout.h"
+#include "sl/daemon/commands.h"  // TriggerMode
 #include "sl/daemon/config_error.h"
 #include "sl/daemon/hardware_config.h"
 #include "sl/drivers/replay.h"
@@ -67,13 +68,6 @@ struct MotionConfig {
   bool enabled = false;
   pipeline::MotionCompensationOptions options;
 };
-
-// How image sets are acquired. kHardware: the projector runs whole sequences
-// and the images are grouped by trigger time (trigger board or projector).
-// kSoftware: the daemon shows pattern i, waits, grabs one image per camera
-// (setups without a trigger board; slower).
-enum class TriggerMode { kHardware, kSoftware };
-const char* toString(TriggerMode mode);
 
 // Software-trigger timing (`software_trigger:`).
 struct SoftwareTriggerConfig {
