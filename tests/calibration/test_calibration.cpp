@@ -20,6 +20,7 @@
 #include "sl/daemon/calibration_io.h"
 #include "sl/daemon/pattern_config.h"
 #include "sl/drivers/sim.h"
+#include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/calibration.h"
 #include "sl/pipeline/decoder.h"
 #include "sl_process/process.h"
@@ -170,15 +171,8 @@ namespace {
 
 double radians(double degrees) { return degrees * std::numbers::pi / 180.0; }
 
-// The simulated rig of config/sim.yaml with a distorting camera lens.
-sl::pipeline::CameraProjectorCalibration simulatedRig() {
-  sl::pipeline::CameraProjectorCalibration rig;
-  rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
-  rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
-  rig.R = Eigen::AngleAxisd(radians(15.25), Eigen::Vector3d::UnitY()).toRotationMatrix();
-  rig.t = -rig.R * Eigen::Vector3d(150, 0, 0);
-  return rig;
-}
+// The simulated rig of config/sim.yaml, with a distorting camera lens.
+sl::pipeline::CameraProjectorCalibration simulatedRig() { return sl::drivers::simRig(); }
 
 struct BoardPose {
   double tilt_x_deg, tilt_y_deg, spin_deg;  // R = Rx * Ry * Rz of the board

@@ -17,6 +17,7 @@
 #include "sl/daemon/config.h"
 #include "sl/daemon/pattern_config.h"
 #include "sl/drivers/sim.h"
+#include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/projector_images.h"
 
@@ -27,13 +28,10 @@ using pipeline::PatternSpec;
 
 namespace {
 
-// The rig of config/sim.yaml: 1440 x 1080 camera, 1824 x 1140 projector.
+// The rig of config/sim.yaml (drivers::simRig()).
 drivers::SimConfig simConfig(std::vector<PatternSpec> patterns) {
   drivers::SimConfig c;
-  c.rig.camera = {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0.0}};
-  c.rig.projector = {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0.0, 0.0, 0.0}};
-  c.rig.R = Eigen::AngleAxisd(15.25 * std::numbers::pi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  c.rig.t = {-144.71, 0, 39.46};
+  c.rig = drivers::simRig();
   drivers::SimPlane plane;
   plane.point = {0, 0, 600};
   plane.normal = {0.1, 0.2, -1};

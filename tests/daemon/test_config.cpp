@@ -12,6 +12,7 @@
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds_environment.h"
 #include "sl/daemon/log.h"
+#include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/projector_response.h"
 #include "support/config_text.h"
 
@@ -62,6 +63,23 @@ TEST_CASE("the shipped sim config loads with the documented values") {
   // The projector sits 150 mm to the side of the camera: centre C = -R^T t.
   CHECK((-config.calibration.R.transpose() * config.calibration.t).norm() ==
         Approx(150.0).margin(0.05));
+}
+
+TEST_CASE("the shipped sim config's rig is drivers::simRig(), the one the tests and sl_eval use") {
+  const auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const sl::pipeline::CameraProjectorCalibration rig = sl::drivers::simRig();
+  for (const auto& [in_file, in_code] : {std::pair{config.sim.rig.camera, rig.camera},
+                                         std::pair{config.sim.rig.projector, rig.projector}}) {
+    CHECK(in_file.width == in_code.width);
+    CHECK(in_file.height == in_code.height);
+    CHECK(in_file.fx == in_code.fx);
+    CHECK(in_file.fy == in_code.fy);
+    CHECK(in_file.cx == in_code.cx);
+    CHECK(in_file.cy == in_code.cy);
+    CHECK(in_file.distortion == in_code.distortion);
+  }
+  CHECK(config.sim.rig.R.isApprox(rig.R, 1e-9));
+  CHECK((config.sim.rig.t - rig.t).norm() < 0.01);  // mm; the file rounds to 10 um
 }
 
 TEST_CASE("the shipped sim config's camera noise model is SimConfig's default (sl_eval uses it)") {

@@ -9,22 +9,15 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/codec.h"
 
 namespace sl::eval {
 
-pipeline::PinholeModel simCamera() {
-  return {1440, 1080, 2400, 2400, 719.5, 539.5, {-0.08, 0.12, 0.0005, -0.0003, 0}};
-}
-
-pipeline::PinholeModel simProjector() {
-  return {1824, 1140, 2200, 2200, 911.5, 569.5, {0.02, -0.01, 0, 0, 0}};
-}
-
 pipeline::CameraProjectorCalibration rig(const Eigen::Vector3d& projector_center, double cross_mm) {
   pipeline::CameraProjectorCalibration r;
-  r.camera = simCamera();
-  r.projector = simProjector();
+  r.camera = drivers::simCameraModel();
+  r.projector = drivers::simProjectorModel();
   // Rotate the projector's z axis onto the direction towards (0, 0, cross).
   const Eigen::Vector3d axis = (Eigen::Vector3d(0, 0, cross_mm) - projector_center).normalized();
   r.R = Eigen::Quaterniond::FromTwoVectors(axis, Eigen::Vector3d::UnitZ()).toRotationMatrix();

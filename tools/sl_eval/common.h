@@ -25,11 +25,8 @@ constexpr double kFps = 30.0;
 // High-frequency periods of the 3+3 patterns, as in config/sim.yaml.
 constexpr int kFringes = 40;
 
-// The simulated camera and projector of config/sim.yaml.
-pipeline::PinholeModel simCamera();
-pipeline::PinholeModel simProjector();
-
-// Projector at projector_center (camera frame, mm), turned so the optical
+// The camera and projector of config/sim.yaml (drivers::simRig()), with the
+// projector at projector_center (camera frame, mm), turned so the optical
 // axes cross at (0, 0, cross_mm).
 pipeline::CameraProjectorCalibration rig(const Eigen::Vector3d& projector_center, double cross_mm);
 
