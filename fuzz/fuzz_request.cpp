@@ -48,7 +48,8 @@ struct Daemon {
     bridge = std::make_unique<DdsBridge>(config.dds, devices.cameras.front()->id(),
                                          config.calibration.camera);
     engine = std::make_unique<ScanEngine>(config, std::move(devices),
-                                          [this](const ScanResult& r) { bridge->publish(r); });
+                                          [this](const ScanResult& r) { bridge->publish(r); },
+                                          bridge->resultContents());
     server = std::thread([this] { bridge->serve(*engine); });
     const TopicNames names = TopicNames::forNamespace(config.dds.ns);
     request_topic = std::make_unique<sl::dds::Topic<msg::Request>>(

@@ -102,7 +102,7 @@ int run(const std::string& config_path, const sigset_t& signals) {
   DdsBridge bridge(config.dds, devices.cameras.front()->id(), config.calibration.camera);
   ScanEngine engine(config, std::move(devices),
                     [&bridge](const ScanResult& result) { bridge.publish(result); },
-                    sl::daemon::CloudUnit::kMetres);
+                    bridge.resultContents());
   std::thread server([&] { bridge.serve(engine); });
 
   const TopicNames topics = TopicNames::forNamespace(config.dds.ns);

@@ -87,7 +87,7 @@ TEST_CASE("the engine reports unhealthy while a device thread is stuck, and stil
   std::atomic<int> clouds{0}, with_maps{0};
   {
     sl::daemon::ScanEngine engine(config, devices, [&](const sl::daemon::ScanResult& r) {
-      with_maps += r.maps != nullptr;  // publish_projector_maps is off in sim.yaml
+      with_maps += r.maps != nullptr;  // maps only when ResultContents asks for them
       ++clouds;
     });
     std::this_thread::sleep_for(300ms);
@@ -237,7 +237,6 @@ TEST_CASE("an intensity camera the sensor lacks stops the daemon at start-up") {
 // mixes them (a horizontal scan decodes no rows, a 'both' scan does).
 TEST_CASE("software trigger: a switch waits for the sequence in progress, never mixing patterns") {
   auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
-  config.dds.publish_projector_maps = true;  // the results then carry the maps this test reads
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   struct Seen {
     std::string pattern;
@@ -258,7 +257,8 @@ TEST_CASE("software trigger: a switch waits for the sequence in progress, never 
                cv::countNonZero(r.maps->vp == r.maps->vp) / n, r.cloud->stamp_ns};
         std::lock_guard lock(mutex);
         seen.push_back(s);
-      });
+      },
+      sl::daemon::ResultContents{sl::daemon::CloudUnit::kMillimetres, true});  // with the maps this test reads
   StartRequest r;
   r.pattern = "3+3_horizontal";
   r.count = 0;
@@ -467,7 +467,7 @@ TEST_CASE("clouds in metres are the clouds in millimetres scaled, with the same 
           if (!first) first = r;
           cv.notify_all();
         },
-        unit);
+        sl::daemon::ResultContents{unit});
     REQUIRE(engine.start("3+3_horizontal", 1).accepted());
     std::unique_lock lock(mutex);
     REQUIRE(cv.wait_for(lock, sl::test::scaledBound(20s), [&] { return first.has_value(); }));

@@ -33,6 +33,11 @@ target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
 # The engine's stages are private to the daemon (daemon/src/engine/).
 target_include_directories(test_engine PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
 
+# The DDS edge without DDS: message builders, request dispatch, frame ids.
+sl_add_test(test_messages daemon/test_messages.cpp)
+target_link_libraries(test_messages PRIVATE sl_daemon sl_idl)
+target_include_directories(test_messages PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
+
 # Config loading and its error messages.
 sl_add_test(test_config daemon/test_config.cpp sim/test_sim_config.cpp)
 target_link_libraries(test_config PRIVATE sl_daemon opencv_imgcodecs)

@@ -71,7 +71,7 @@ std::vector<std::string> idsOf(const EngineDevices& devices) {
 }  // namespace
 
 struct ScanEngine::Impl {
-  Impl(const DaemonConfig& config, EngineDevices devices, OutputCallback output, CloudUnit unit)
+  Impl(const DaemonConfig& config, EngineDevices devices, OutputCallback output, ResultContents contents)
       : config(config),
         devices(std::move(devices)),
         output(std::move(output)),
@@ -80,7 +80,9 @@ struct ScanEngine::Impl {
         schedule(kScheduleQueueCapacity, Overflow::kWaitForRoom),
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
-        processing_config(processingConfigOf(config, camera_ids, unit == CloudUnit::kMetres ? 1000.0 : 1.0)),
+        processing_config(processingConfigOf(config, camera_ids,
+                                             contents.cloud_unit == CloudUnit::kMetres ? 1000.0 : 1.0,
+                                             contents.projector_maps)),
         processor(processing_config),
         motion_enabled(processing_config.motion_enabled),
         software(this->devices.cameras, this->devices.projector, config.software_trigger),
@@ -444,8 +446,8 @@ void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
 }
 
 ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output,
-                       CloudUnit unit)
-    : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output), unit)) {
+                       ResultContents contents)
+    : impl_(std::make_unique<Impl>(config, std::move(devices), std::move(output), contents)) {
   Impl& d = *impl_;
   const std::size_t k = d.devices.cameras.size();
   d.heartbeats = std::vector<Heartbeat>(k + 5);

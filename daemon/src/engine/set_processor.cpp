@@ -9,7 +9,7 @@
 namespace sl::daemon {
 
 ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids,
-                                    double cloud_unit_mm) {
+                                    double cloud_unit_mm, bool keep_maps) {
   ProcessingConfig p;
   p.cloud_unit_mm = cloud_unit_mm;
   p.patterns = config.patterns;
@@ -26,7 +26,7 @@ ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vecto
   p.intensity_camera = config.pattern_intensity_camera;
   p.motion_enabled = config.motion.enabled;
   p.motion = config.motion.options;
-  p.keep_maps = config.dds.publish_projector_maps;
+  p.keep_maps = keep_maps;
   return p;
 }
 

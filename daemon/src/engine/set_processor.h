@@ -40,10 +40,10 @@ struct ProcessingConfig {
 
 // From the daemon's config for the sensor's cameras (`camera_ids`, in
 // synchroniser order): the first uses `calibration`, the others their entry
-// of `calibrations:` (if any); maps are kept when the DDS edge publishes them
-// (dds.publish_projector_maps); clouds in `cloud_unit_mm`.
+// of `calibrations:` (if any); clouds in `cloud_unit_mm`; maps kept when
+// `keep_maps` (the DDS edge publishes them). No DDS settings are read.
 ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids,
-                                    double cloud_unit_mm = 1.0);
+                                    double cloud_unit_mm = 1.0, bool keep_maps = false);
 
 // One camera's result of one set.
 struct CameraScan {

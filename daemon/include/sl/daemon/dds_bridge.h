@@ -1,6 +1,8 @@
-// The daemon's DDS edge: converts pipeline results to DDS samples and DDS
-// requests to ScanEngine calls. The only place where the pipeline's value
-// types meet the IDL types.
+// The daemon's DDS edge: owns the DDS entities and decides what is published
+// (which topics exist, frame ids, camera_info) and what the engine's results
+// must carry for it. The samples are built by ros_messages.h, requests
+// carried out by request_dispatch.h (both private to daemon/, without DDS
+// entities). Only daemon/ meets the IDL types.
 //
 // Topics (ns = DdsConfig::ns, default "sl"):
 //   rt/<ns>/points          sensor_msgs/PointCloud2 (ROS 2 wire format, XCDR1)
@@ -29,11 +31,13 @@ struct TopicNames {
 };
 
 // ROS frame ids of the clouds and images: dds.frame_id for the first camera,
-// "<camera id>_optical_frame" for the others.
+// "<camera id>_optical_frame" for the others. camera_info is published for
+// the first camera only (the bridge has its model).
 struct FrameIds {
   std::string first_camera_id;
   std::string first_frame_id;
   std::string of(const std::string& camera_id) const;
+  bool isFirst(const std::string& camera_id) const;
 };
 
 // Thread-safe in the way the daemon uses it: publish() from the engine's
@@ -47,6 +51,12 @@ class DdsBridge {
   DdsBridge(const DdsConfig& config, const std::string& camera_id, const pipeline::PinholeModel& camera);
   ~DdsBridge();
 
+  // What the engine's results must carry for the configured topics: clouds
+  // in metres, projector maps when dds.publish_projector_maps.
+  ResultContents resultContents() const;
+  // Writes the result's cloud and, as configured, its image set, projector
+  // maps, depth/shading images and camera_info. Writes that time out are
+  // counted (status writes_timed_out).
   void publish(const ScanResult& result);
 
   // Answers requests and publishes status (on change and every

@@ -76,13 +76,13 @@ struct ScanResult {
   std::string pattern;
   std::string camera_id;         // the triangulating camera (also cloud->frame_id)
   int bit_depth = 8;             // of that camera's images (cloud intensities are its DN)
-  // Null unless dds.publish_projector_maps: the processing then never writes
-  // the maps out (pipeline::ScanProcessor::Keep::kCloud).
+  // Null unless ResultContents::projector_maps: the processing then never
+  // writes the maps out (pipeline::ScanProcessor::Keep::kCloud).
   std::shared_ptr<const pipeline::ProjectorMaps> maps;
   std::shared_ptr<const pipeline::PointCloud> cloud;  // the camera's optical frame, in cloud_unit_m
-  double cloud_unit_m = 1e-3;  // metres per unit of the cloud's x, y, z (ScanEngine's CloudUnit)
+  double cloud_unit_m = 1e-3;  // metres per unit of the cloud's x, y, z (ResultContents::cloud_unit)
   // The image set the scan came from, as acquired (before motion
-  // compensation): published on rt/<ns>/image_sets when enabled.
+  // compensation).
   std::shared_ptr<const pipeline::ImageSet> images;
 };
 
@@ -94,14 +94,21 @@ struct EngineDevices {
   std::shared_ptr<drivers::TriggerSource> trigger;
 };
 
-// Thread-safe: start/stop/selectPattern/status may be called from any thread.
-// The output callback runs on the engine's output thread, one result at a
-// time; it must not call back into the engine's control methods.
 // Length unit of ScanResult::cloud: millimetres (the pipeline's, the
 // default) or metres (ROS's: the clouds are triangulated in metres, so the
 // DDS bridge writes them out without a pass over the points).
 enum class CloudUnit { kMillimetres, kMetres };
 
+// What the results carry, as their consumer (the DDS edge:
+// DdsBridge::resultContents()) needs them.
+struct ResultContents {
+  CloudUnit cloud_unit = CloudUnit::kMillimetres;
+  bool projector_maps = false;  // ScanResult::maps (they cost memory traffic)
+};
+
+// Thread-safe: start/stop/selectPattern/status may be called from any thread.
+// The output callback runs on the engine's output thread, one result at a
+// time; it must not call back into the engine's control methods.
 class ScanEngine {
  public:
   using OutputCallback = std::function<void(const ScanResult&)>;
@@ -109,7 +116,7 @@ class ScanEngine {
   // Throws std::runtime_error when a pattern names a camera the devices lack
   // or one without a calibration.
   ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output,
-             CloudUnit unit = CloudUnit::kMillimetres);
+             ResultContents contents = {});
   ~ScanEngine();  // stops the projector and joins every thread
   ScanEngine(const ScanEngine&) = delete;
   ScanEngine& operator=(const ScanEngine&) = delete;

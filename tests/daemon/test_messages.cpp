@@ -1,0 +1,430 @@
+// The DDS edge without DDS: the samples built from pipeline and engine values
+// (daemon/src/ros_messages.h), request dispatch against a fake sensor
+// (daemon/src/request_dispatch.h) and the frame-id decisions (FrameIds).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "request_dispatch.h"
+#include "ros_messages.h"
+#include "sl/daemon/dds_bridge.h"
+
+using namespace sl::daemon;
+using Code = CommandResult::Code;
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr sl::pipeline::TimestampNs kStamp = 1'700'000'001'250'000'000;
+
+std::string str(const char* s) { return s ? s : "<null>"; }
+
+template <typename Seq>
+std::vector<std::string> strings(const Seq& seq) {
+  std::vector<std::string> out;
+  for (std::uint32_t i = 0; i < seq._length; ++i) out.push_back(seq._buffer[i]);
+  return out;
+}
+
+// A 3 x 2 cloud in mm; pixel (1, 0) invalid.
+sl::pipeline::PointCloud smallCloud() {
+  sl::pipeline::PointCloud c;
+  c.width = 3;
+  c.height = 2;
+  c.stamp_ns = kStamp;
+  for (int i = 0; i < 6; ++i) c.points.push_back({10.f * i, -5.f * i, 500.f + i, 100.f * i});
+  c.points[1] = {kNaN, kNaN, kNaN, kNaN};
+  return c;
+}
+
+}  // namespace
+
+TEST_CASE("cloud message: x, y, z, intensity float32, 16 bytes a point, metres, the given frame") {
+  const sl::pipeline::PointCloud cloud = smallCloud();
+  std::vector<float> buffer;
+  const PackedCloud packed = packCloud(cloud, 1e-3, CloudLayout{}, buffer);
+  const msg::CloudMessage message(packed, cloud.stamp_ns, "cam_optical");
+  const msg::PointCloud2& m = message.sample();
+  CHECK(str(m.header.frame_id) == "cam_optical");
+  CHECK(m.header.stamp.sec == 1'700'000'001);
+  CHECK(m.header.stamp.nanosec == 250'000'000u);
+  CHECK(m.width == 3);
+  CHECK(m.height == 2);
+  REQUIRE(m.fields._length == 4);
+  const char* names[4] = {"x", "y", "z", "intensity"};
+  for (std::uint32_t i = 0; i < 4; ++i) {
+    CHECK(str(m.fields._buffer[i].name) == names[i]);
+    CHECK(m.fields._buffer[i].offset == 4 * i);
+    CHECK(m.fields._buffer[i].datatype == msg::kFloat32);
+    CHECK(m.fields._buffer[i].count == 1);
+  }
+  CHECK(m.point_step == 16);
+  CHECK(m.row_step == 48);
+  CHECK_FALSE(m.is_bigendian);
+  CHECK_FALSE(m.is_dense);  // organized, may hold NaN points
+  REQUIRE(m.data._length == 6 * 16);
+  CHECK_FALSE(m.data._release);  // borrowed: the writer must not free it
+  float p[4];
+  std::memcpy(p, m.data._buffer + 5 * 16, sizeof p);
+  CHECK(p[0] == Approx(0.050f));
+  CHECK(p[1] == Approx(-0.025f));
+  CHECK(p[2] == Approx(0.505f));
+  CHECK(p[3] == 500.f);  // intensity in camera DN, not scaled
+  std::memcpy(p, m.data._buffer + 1 * 16, sizeof p);
+  CHECK(std::isnan(p[2]));
+}
+
+TEST_CASE("depth and shading images: 32FC1 metres with NaN, mono8 scaled from the bit depth") {
+  sl::pipeline::PointCloud cloud = smallCloud();
+  cloud.points[2].intensity = 4095.f;  // the 12-bit maximum
+  cloud.points[3].intensity = 5000.f;  // beyond it: clamped
+  const msg::ScanImages images(cloud, 1e-3, 12, "cam_optical");
+  const msg::Image& depth = images.depth();
+  const msg::Image& shading = images.shading();
+  CHECK(str(depth.encoding) == "32FC1");
+  CHECK(str(shading.encoding) == "mono8");
+  for (const msg::Image* image : {&depth, &shading}) {
+    CHECK(str(image->header.frame_id) == "cam_optical");
+    CHECK(image->header.stamp.sec == 1'700'000'001);
+    CHECK(image->width == 3);
+    CHECK(image->height == 2);
+    CHECK(image->is_bigendian == 0);
+  }
+  CHECK(depth.step == 12);
+  CHECK(shading.step == 3);
+  REQUIRE(depth.data._length == 24);
+  REQUIRE(shading.data._length == 6);
+  std::vector<float> z(6);
+  std::memcpy(z.data(), depth.data._buffer, 24);
+  CHECK(z[0] == Approx(0.500f));
+  CHECK(std::isnan(z[1]));
+  CHECK(z[5] == Approx(0.505f));
+  const std::uint8_t* a = shading.data._buffer;
+  CHECK(a[0] == 0);
+  CHECK(a[1] == 0);    // invalid
+  CHECK(a[2] == 255);  // 4095 of 12 bits
+  CHECK(a[3] == 255);  // clamped
+  CHECK(a[4] == static_cast<int>(400.f * 255.f / 4095.f + 0.5f));
+  // 8-bit cameras: intensities are already 8 bit.
+  const msg::ScanImages eight(cloud, 1e-3, 8, "f");
+  CHECK(eight.shading().data._buffer[4] == 255);  // 400 DN clamped
+  CHECK(eight.shading().data._buffer[0] == 0);
+}
+
+TEST_CASE("camera_info: plumb_bob, K and P from the intrinsics, R the identity") {
+  sl::pipeline::PinholeModel camera;
+  camera.width = 1440;
+  camera.height = 1080;
+  camera.fx = 2400;
+  camera.fy = 2410;
+  camera.cx = 719.5;
+  camera.cy = 539.5;
+  camera.distortion = {-0.08, 0.12, 0.0005, -0.0003, 0};
+  const msg::CameraInfoMessage message(camera, kStamp, "sl_camera_optical_frame");
+  const msg::CameraInfo& m = message.sample();
+  CHECK(str(m.header.frame_id) == "sl_camera_optical_frame");
+  CHECK(m.header.stamp.nanosec == 250'000'000u);
+  CHECK(m.width == 1440);
+  CHECK(m.height == 1080);
+  CHECK(str(m.distortion_model) == "plumb_bob");
+  REQUIRE(m.d._length == 5);
+  CHECK(m.d._buffer[0] == -0.08);
+  CHECK(m.d._buffer[3] == -0.0003);
+  const double k[9] = {2400, 0, 719.5, 0, 2410, 539.5, 0, 0, 1};
+  const double r[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  const double p[12] = {2400, 0, 719.5, 0, 0, 2410, 539.5, 0, 0, 0, 1, 0};
+  for (int i = 0; i < 9; ++i) CHECK(m.k[i] == k[i]);
+  for (int i = 0; i < 9; ++i) CHECK(m.r[i] == r[i]);
+  for (int i = 0; i < 12; ++i) CHECK(m.p[i] == p[i]);
+}
+
+TEST_CASE("projector maps: missing maps are NaN, non-continuous maps are copied row by row") {
+  sl::pipeline::ProjectorMaps maps;
+  maps.stamp_ns = kStamp;
+  cv::Mat wide(3, 5, CV_32FC1);
+  for (int v = 0; v < 3; ++v)
+    for (int u = 0; u < 5; ++u) wide.at<float>(v, u) = float(10 * v + u);
+  maps.up = wide(cv::Rect(1, 0, 4, 3));  // not continuous
+  REQUIRE_FALSE(maps.up.isContinuous());
+  maps.vp = cv::Mat(3, 4, CV_32FC1, cv::Scalar(7.5f));
+  maps.status = cv::Mat(3, 4, CV_8UC1, cv::Scalar(0));
+  maps.status.at<std::uint8_t>(2, 3) = 4;
+  const msg::MapsMessage message(maps, "3+3_horizontal", 12, "sl_camera_optical_frame");
+  const msg::Maps& m = message.sample();
+  CHECK(str(m.pattern) == "3+3_horizontal");
+  CHECK(m.scan_index == 12);
+  CHECK(str(m.header.frame_id) == "sl_camera_optical_frame");
+  CHECK(m.width == 4);
+  CHECK(m.height == 3);
+  REQUIRE(m.up._length == 12);
+  CHECK(m.up._buffer[0] == 1.f);
+  CHECK(m.up._buffer[4] == 11.f);  // row 1 starts at column 1 of the wide map
+  CHECK(m.up._buffer[11] == 24.f);
+  CHECK(m.vp._buffer[5] == 7.5f);
+  REQUIRE(m.modulation._length == 12);
+  CHECK(std::isnan(m.modulation._buffer[0]));  // not computed: NaN
+  CHECK(m.status._buffer[11] == 4);
+}
+
+TEST_CASE("image set: camera-major images stamped by exposure, in each camera's optical frame") {
+  sl::pipeline::ImageSet set;
+  set.sequence_id = 42;
+  set.pattern_name = "3+3_both";
+  set.trigger_stamp_ns = kStamp;
+  sl::pipeline::CameraImages top{"top", {}, {}, 8}, side{"side", {}, {}, 12};
+  for (int f = 0; f < 2; ++f) {
+    top.frames.push_back(cv::Mat(4, 6, CV_8UC1, cv::Scalar(f + 1)));
+    top.stamps_ns.push_back(kStamp + f * 1000);
+  }
+  const cv::Mat wide(4, 8, CV_16UC1, cv::Scalar(300));
+  side.frames.push_back(wide(cv::Rect(2, 0, 6, 4)));  // not continuous: copied
+  side.stamps_ns.push_back(kStamp + 5000);
+  set.cameras = {top, side};
+  const msg::ImageSetMessage message(set, {"sl_camera_optical_frame", "side_optical_frame"});
+  const msg::ImageSetMsg& m = message.sample();
+  CHECK(m.sequence_id == 42);
+  CHECK(str(m.pattern) == "3+3_both");
+  CHECK(m.camera_count == 2);
+  CHECK(strings(m.camera_ids) == std::vector<std::string>{"top", "side"});
+  REQUIRE(m.bit_depths._length == 2);
+  CHECK(m.bit_depths._buffer[0] == 8);
+  CHECK(m.bit_depths._buffer[1] == 12);
+  REQUIRE(m.images._length == 3);
+  const msg::Image& second = m.images._buffer[1];
+  CHECK(str(second.header.frame_id) == "sl_camera_optical_frame");
+  CHECK(second.header.stamp.nanosec == 250'001'000u);
+  CHECK(str(second.encoding) == "mono8");
+  CHECK(second.step == 6);
+  CHECK(second.data._buffer[0] == 2);
+  const msg::Image& third = m.images._buffer[2];
+  CHECK(str(third.header.frame_id) == "side_optical_frame");
+  CHECK(str(third.encoding) == "mono16");
+  CHECK(third.step == 12);
+  REQUIRE(third.data._length == 48);
+  std::uint16_t last = 0;
+  std::memcpy(&last, third.data._buffer + 46, 2);
+  CHECK(last == 300);
+  CHECK_THROWS_AS(msg::ImageSetMessage(set, {"only_one"}), std::invalid_argument);
+}
+
+TEST_CASE("status: the engine's values and the edge's counters; timed-out writes count as dropped sets") {
+  EngineStatus s;
+  s.state = ScanState::kDegraded;
+  s.pattern = "3+3_horizontal";
+  s.scans_done = 7;
+  s.sets_dropped = 2;
+  s.sets_overflow = 2;
+  s.degraded_reason = "camera 'top': no frame for 2.4 s";
+  s.trigger = TriggerMode::kSoftware;
+  s.cameras = {"top", "side"};
+  s.last_error_ns = kStamp;
+  msg::EdgeCounters edge;
+  edge.requests.received = 9;
+  edge.requests.answered = 8;
+  edge.requests.rate_limited = 1;
+  edge.replies_timed_out = 3;
+  edge.requests_malformed = 4;
+  edge.writes_timed_out = 5;
+  const msg::StatusMessage message(s, {"a", "b", "c"}, edge, kStamp + 1);
+  const msg::Status& m = message.sample();
+  CHECK(m.state == sl_msgs_msg_STATE_DEGRADED);
+  CHECK(str(m.pattern) == "3+3_horizontal");
+  CHECK(m.scans_done == 7);
+  CHECK(m.sets_dropped == 2 + 5);
+  CHECK(m.sets_overflow == 2);
+  CHECK(m.writes_timed_out == 5);
+  CHECK(m.trigger == sl_msgs_msg_TRIGGER_SOFTWARE);
+  CHECK(strings(m.cameras) == std::vector<std::string>{"top", "side"});
+  CHECK(strings(m.patterns) == std::vector<std::string>{"a", "b", "c"});
+  CHECK(str(m.degraded_reason) == "camera 'top': no frame for 2.4 s");
+  CHECK(m.requests_received == 9);
+  CHECK(m.requests_answered == 8);
+  CHECK(m.requests_rate_limited == 1);
+  CHECK(m.replies_timed_out == 3);
+  CHECK(m.requests_malformed == 4);
+  CHECK(m.stamp.nanosec == 250'000'001u);
+  CHECK(m.last_error_stamp.sec == 1'700'000'001);
+  CHECK(msg::toState(ScanState::kIdle) == sl_msgs_msg_STATE_IDLE);
+  CHECK(msg::toState(ScanState::kWaiting) == sl_msgs_msg_STATE_WAITING);
+}
+
+TEST_CASE("reply: every result code has its wire value and comes back as itself") {
+  for (const auto& [ours, wire] : msg::kReplyCodes) {
+    const msg::ReplyMessage message("client-1", 77, {ours, "why"}, {"p"}, "");
+    CHECK(message.sample().code == wire);
+    CHECK(message.sample().accepted == (ours == Code::kOk));
+    CHECK(msg::fromReplyCode(message.sample().code) == ours);
+    CHECK(str(message.sample().client_id) == "client-1");
+    CHECK(message.sample().request_id == 77);
+    CHECK(str(message.sample().reason) == "why");
+    CHECK(strings(message.sample().patterns) == std::vector<std::string>{"p"});
+  }
+}
+
+TEST_CASE("frame ids: dds.frame_id for the first camera, <id>_optical_frame for the others") {
+  const FrameIds ids{"top", "sl_camera_optical_frame"};
+  CHECK(ids.of("top") == "sl_camera_optical_frame");
+  CHECK(ids.of("side") == "side_optical_frame");
+  CHECK(ids.isFirst("top"));
+  CHECK_FALSE(ids.isFirst("side"));
+  CHECK_FALSE(ids.isFirst("sl_camera_optical_frame"));  // a camera id, not a frame id
+}
+
+namespace {
+
+// Records what the dispatcher asks of the sensor.
+struct FakeSensor : CommandTarget {
+  std::vector<StartRequest> starts;
+  int stops = 0;
+  std::vector<std::string> selected;
+  CommandResult start(const StartRequest& r) override {
+    starts.push_back(r);
+    return {};
+  }
+  CommandResult stop() override {
+    ++stops;
+    return {Code::kNotRunning, "not scanning"};
+  }
+  CommandResult selectPattern(const std::string& p) override {
+    selected.push_back(p);
+    return {};
+  }
+  std::vector<std::string> patterns() const override { return {"p1", "p2"}; }
+  std::string configText() const override { return "sensor: sim\n"; }
+};
+
+// A request whose strings live in this object.
+struct RequestSample {
+  std::string client = "client-a", pattern, recording;
+  std::vector<std::string> cameras;
+  std::vector<char*> camera_pointers;
+  msg::Request r{};
+  explicit RequestSample(sl_msgs_msg_Command command, std::uint64_t id = 1) {
+    r.command = command;
+    r.request_id = id;
+  }
+  const msg::Request& sample() {
+    r.client_id = client.data();
+    r.pattern = pattern.data();
+    r.recording = recording.data();
+    camera_pointers.clear();
+    for (auto& c : cameras) camera_pointers.push_back(c.data());
+    r.cameras._buffer = camera_pointers.data();
+    r.cameras._length = r.cameras._maximum = static_cast<std::uint32_t>(camera_pointers.size());
+    r.cameras._release = false;
+    return r;
+  }
+};
+
+constexpr std::int64_t kSecond = 1'000'000'000;
+
+}  // namespace
+
+TEST_CASE("dispatch: a start's options reach the sensor; every reply lists the patterns") {
+  FakeSensor sensor;
+  RequestDispatcher dispatcher(RequestLimits{});
+  RequestSample start(sl_msgs_msg_COMMAND_START, 5);
+  start.pattern = "p2";
+  start.recording = "rec";
+  start.cameras = {"top"};
+  start.r.count = 3;
+  start.r.trigger = sl_msgs_msg_TRIGGER_SOFTWARE;
+  start.r.motion_compensation = sl_msgs_msg_MOTION_OFF;
+  start.r.start_at = {1'700'000'000, 5};
+  const auto reply = dispatcher.dispatch(start.sample(), sensor, kSecond);
+  REQUIRE(reply);
+  CHECK(reply->result.accepted());
+  CHECK(reply->client_id == "client-a");
+  CHECK(reply->request_id == 5);
+  CHECK(reply->patterns == std::vector<std::string>{"p1", "p2"});
+  CHECK(reply->detail.empty());
+  REQUIRE(sensor.starts.size() == 1);
+  const StartRequest& s = sensor.starts[0];
+  CHECK(s.pattern == "p2");
+  CHECK(s.recording == "rec");
+  CHECK(s.count == 3);
+  CHECK(s.trigger == TriggerMode::kSoftware);
+  CHECK(s.motion_compensation == false);
+  CHECK(s.start_at_ns == 1'700'000'000'000'000'005);
+  CHECK(s.cameras == std::vector<std::string>{"top"});
+  dispatcher.replied(true);
+  dispatcher.replied(false);
+  CHECK(dispatcher.counters().received == 1);
+  CHECK(dispatcher.counters().answered == 1);
+  CHECK(dispatcher.repliesTimedOut() == 1);
+
+  RequestSample config(sl_msgs_msg_COMMAND_GET_CONFIG, 6);
+  const auto config_reply = dispatcher.dispatch(config.sample(), sensor, kSecond);
+  REQUIRE(config_reply);
+  CHECK(config_reply->detail == "sensor: sim\n");
+  RequestSample select(sl_msgs_msg_COMMAND_SET_PATTERN, 7);
+  select.pattern = "p1";
+  CHECK(dispatcher.dispatch(select.sample(), sensor, kSecond)->result.accepted());
+  CHECK(sensor.selected == std::vector<std::string>{"p1"});
+  RequestSample stop(sl_msgs_msg_COMMAND_STOP, 8);
+  CHECK(dispatcher.dispatch(stop.sample(), sensor, kSecond)->result.code == Code::kNotRunning);
+  CHECK(sensor.stops == 1);
+}
+
+TEST_CASE("dispatch: bad values are refused before the sensor sees them; retries get the first answer") {
+  FakeSensor sensor;
+  RequestLimits limits;
+  limits.max_string = 16;
+  RequestDispatcher dispatcher(limits);
+
+  RequestSample bad_enum(sl_msgs_msg_COMMAND_START, 1);
+  bad_enum.r.trigger = static_cast<sl_msgs_msg_TriggerMode>(9);
+  auto reply = dispatcher.dispatch(bad_enum.sample(), sensor, kSecond);
+  CHECK(reply->result.code == Code::kInvalidOption);
+  CHECK_THAT(reply->result.reason, Catch::Contains("unknown trigger mode 9"));
+
+  RequestSample long_pattern(sl_msgs_msg_COMMAND_SET_PATTERN, 2);
+  long_pattern.pattern = std::string(100, 'x');
+  reply = dispatcher.dispatch(long_pattern.sample(), sensor, kSecond);
+  CHECK(reply->result.code == Code::kInvalidOption);
+  CHECK_THAT(reply->result.reason, Catch::Contains("pattern is 100 bytes"));
+  CHECK(dispatcher.counters().invalid == 1);
+
+  RequestSample unknown(static_cast<sl_msgs_msg_Command>(17), 3);
+  reply = dispatcher.dispatch(unknown.sample(), sensor, kSecond);
+  CHECK(reply->result.code == Code::kInvalidCommand);
+  CHECK_THAT(reply->result.reason, Catch::Contains("unknown command 17"));
+  CHECK(sensor.starts.empty());
+  CHECK(sensor.selected.empty());
+
+  // A retry (same client, same id) of a start: answered again, started once.
+  RequestSample start(sl_msgs_msg_COMMAND_START, 4);
+  CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
+  CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
+  CHECK(sensor.starts.size() == 1);
+  start.client = "client-b";  // another client's request 4 is a new request
+  CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
+  CHECK(sensor.starts.size() == 2);
+}
+
+TEST_CASE("dispatch: over the rate limit a request is counted, not answered and not carried out") {
+  FakeSensor sensor;
+  RequestLimits limits;
+  limits.rate_hz = 1;
+  limits.burst = 3;
+  RequestDispatcher dispatcher(limits);
+  int answered = 0;
+  for (std::uint64_t id = 1; id <= 5; ++id) {
+    RequestSample select(sl_msgs_msg_COMMAND_SET_PATTERN, id);
+    select.pattern = "p1";
+    answered += dispatcher.dispatch(select.sample(), sensor, kSecond).has_value();
+  }
+  CHECK(answered == 3);
+  CHECK(sensor.selected.size() == 3);
+  CHECK(dispatcher.counters().received == 5);
+  CHECK(dispatcher.counters().rate_limited == 2);
+  // A second later one token is back.
+  RequestSample later(sl_msgs_msg_COMMAND_SET_PATTERN, 6);
+  CHECK(dispatcher.dispatch(later.sample(), sensor, 2 * kSecond + kSecond / 100).has_value());
+}
