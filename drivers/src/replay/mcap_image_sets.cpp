@@ -56,7 +56,9 @@ std::uint32_t crc32(std::string_view bytes) {
   return ~crc;
 }
 
-// Little-endian fields of an MCAP record body, bounds-checked; errors name `what`.
+// Little-endian fields of an MCAP record body, bounds-checked; errors name
+// `what`. Holds a view: the bytes must outlive it (fuzz_recording found a
+// record header read into a temporary).
 class Fields {
  public:
   Fields(std::string_view data, std::string what) : data_(data), what_(std::move(what)) {}
@@ -384,7 +386,8 @@ McapImageSets::McapImageSets(const std::string& path) : path_(path) {
     std::string what = path + ": record " + std::to_string(number) + " at byte " + std::to_string(offset);
     if (offset + kRecordHeader > size - 8)
       throw std::runtime_error(what + ": the file ends before its footer (truncated)");
-    Fields header(file.read(offset, kRecordHeader), what);
+    const std::string header_bytes = file.read(offset, kRecordHeader);  // Fields holds a view
+    Fields header(header_bytes, what);
     const auto op = header.le<std::uint8_t>();
     const auto length = header.le<std::uint64_t>();
     what = path + ": record " + std::to_string(number) + " (" + opName(op) + " at byte " +
@@ -409,7 +412,8 @@ McapImageSets::McapImageSets(const std::string& path) : path_(path) {
     } else if (op == kMessage) {
       // Only an image set's message is read whole.
       if (length < kMessagePrefix) throw std::runtime_error(what + ": shorter than a message's fields");
-      Fields prefix(file.read(body_offset, 2), what);
+      const std::string channel_bytes = file.read(body_offset, 2);
+      Fields prefix(channel_bytes, what);
       const auto channel = channels.find(prefix.le<std::uint16_t>());
       if (channel != channels.end() && !channel->second.image_sets) {
         ++message_number;
@@ -455,7 +459,8 @@ pipeline::ImageSet McapImageSets::load(std::size_t i) const {
   const Entry& entry = sets_.at(i);
   File file(path_);
   const std::string what = where(i);
-  Fields header(file.read(entry.record_offset, kRecordHeader), what);
+  const std::string header_bytes = file.read(entry.record_offset, kRecordHeader);
+  Fields header(header_bytes, what);
   const auto op = header.le<std::uint8_t>();
   const auto length = header.le<std::uint64_t>();
   const std::string body = file.read(entry.record_offset + kRecordHeader, length);
