@@ -271,6 +271,11 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.errors_reported = s.errors_reported;
       info.requests_malformed = s.requests_malformed;
       info.sets_over_quota = s.sets_over_quota;
+      info.latency_ms = s.latency_ms;
+      info.latency_max_ms = s.latency_max_ms;
+      info.wait_ms = s.wait_ms;
+      info.processing_ms = s.processing_ms;
+      info.publish_ms = s.publish_ms;
       latest = info;
     }
     if (!latest) std::this_thread::sleep_for(std::chrono::milliseconds(10));

@@ -224,6 +224,11 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.errors_reported = s.errors_reported;
   msg.requests_malformed = edge.requests_malformed;
   msg.sets_over_quota = s.sets_over_quota;
+  msg.latency_ms = s.latency_ms;
+  msg.latency_max_ms = s.latency_max_ms;
+  msg.wait_ms = s.wait_ms;
+  msg.processing_ms = s.processing_ms;
+  msg.publish_ms = s.publish_ms;
 }
 
 ReplyMessage::ReplyMessage(std::string client_id, std::uint64_t request_id, const CommandResult& result,

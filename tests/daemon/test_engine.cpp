@@ -802,3 +802,29 @@ TEST_CASE("software trigger: only the request's cameras are triggered") {
   CHECK(sim->counters().frames_delivered - before == 6);
   CHECK(engine.status().sets_incomplete == 0);
 }
+
+TEST_CASE("the status says where each scan's latency went: waiting, processing, publishing") {
+  auto config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  std::atomic<int> published{0};
+  // Publishing that takes 40 ms: the publish stage must show it, the others not.
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [&](const sl::daemon::ScanResult&) {
+                                  std::this_thread::sleep_for(40ms);
+                                  ++published;
+                                });
+  CHECK(engine.status().latency_ms == 0);  // no scan yet
+  REQUIRE(engine.start("3+3_horizontal", 4).accepted());
+  const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(30s);
+  while (published < 4 && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(20ms);
+  REQUIRE(published == 4);
+  std::this_thread::sleep_for(50ms);  // the stages are stored after the callback returns
+  const sl::daemon::EngineStatus s = engine.status();
+  CHECK(s.publish_ms >= 40.0);
+  CHECK(s.processing_ms > 0.0);
+  CHECK(s.wait_ms > 0.0);  // the last frame is delivered after its exposure starts
+  CHECK(s.latency_ms >= 40.0);
+  CHECK(s.latency_max_ms >= s.latency_ms);
+  // The medians of the stages of the same scans add up to about the total's.
+  CHECK(s.wait_ms + s.processing_ms + s.publish_ms == Approx(s.latency_ms).epsilon(0.5));
+}

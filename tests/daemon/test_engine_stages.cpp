@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 
 #include "engine/set_processor.h"
+#include "engine/stage_latency.h"
 #include "engine/start_validation.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/sim.h"
@@ -178,4 +179,51 @@ TEST_CASE("set processing: a simulated sequence gives a cloud per camera; faults
   out = processor.process(empty, {id}, true);
   CHECK_FALSE(out.ok());
   CHECK(out.error.rfind("motion compensation: ", 0) == 0);
+}
+
+TEST_CASE("stage latency: medians per stage, the total's median and maximum over the last scans") {
+  using sl::daemon::StageLatency;
+  using sl::daemon::StageTimes;
+  StageLatency window;
+  CHECK(window.summary().scans == 0);
+  CHECK(window.summary().total_max_ms == 0);
+  // Stages from a sequence's last exposure at t = 0 (ns).
+  const StageTimes one = sl::daemon::stageTimes(0, 3'000'000, 10'000'000, 25'000'000);
+  CHECK(one.wait_ms == Approx(3.0));
+  CHECK(one.processing_ms == Approx(7.0));
+  CHECK(one.publish_ms == Approx(15.0));
+  CHECK(one.totalMs() == Approx(25.0));
+  // A clock set back between two readings gives 0, not a negative stage.
+  CHECK(sl::daemon::stageTimes(5'000'000, 1'000'000, 2'000'000, 3'000'000).wait_ms == 0.0);
+
+  window.add({1, 2, 3});   // total 6
+  window.add({3, 4, 5});   // total 12
+  window.add({2, 10, 4});  // total 16
+  auto s = window.summary();
+  CHECK(s.scans == 3);
+  CHECK(s.median.wait_ms == Approx(2));
+  CHECK(s.median.processing_ms == Approx(4));
+  CHECK(s.median.publish_ms == Approx(4));
+  CHECK(s.total_median_ms == Approx(12));
+  CHECK(s.total_max_ms == Approx(16));
+  window.add({1, 1, 1});  // total 3; an even count: the mean of the middle two
+  s = window.summary();
+  CHECK(s.total_median_ms == Approx((6.0 + 12.0) / 2));
+  CHECK(s.median.wait_ms == Approx((1.0 + 2.0) / 2));
+
+  // Only the last kWindow scans count: a slow first scan leaves the window.
+  StageLatency slow_start;
+  slow_start.add({100, 100, 100});
+  for (std::size_t i = 0; i < StageLatency::kWindow; ++i) slow_start.add({1, 2, 3});
+  s = slow_start.summary();
+  CHECK(s.scans == StageLatency::kWindow);
+  CHECK(s.total_max_ms == Approx(6));
+
+  // The latest exposure of a set: its last frame of any camera.
+  sl::pipeline::ImageSet set;
+  set.trigger_stamp_ns = 1000;
+  set.cameras.resize(2);
+  set.cameras[0].stamps_ns = {1000, 2000, 3000};
+  set.cameras[1].stamps_ns = {1001, 2001, 3005};
+  CHECK(sl::daemon::lastExposureNs(set) == 3005);
 }

@@ -328,6 +328,12 @@ int printStatus(SensorClient& client, const Args& args) {
   std::printf("motion comp.:     %s\n", s->motion_compensation ? "on" : "off");
   std::printf("scan rate:        %.2f Hz\n", s->scan_rate_hz);
   std::printf("frame rate:       %.1f Hz\n", s->frame_rate_hz);
+  if (s->latency_ms > 0)
+    std::printf("latency:          %.1f ms median, %.1f ms max (last trigger -> published; "
+                "wait %.1f, processing %.1f, publishing %.1f ms)\n",
+                s->latency_ms, s->latency_max_ms, s->wait_ms, s->processing_ms, s->publish_ms);
+  else
+    std::printf("latency:          - (no scan yet)\n");
   auto u = [](std::uint64_t v) { return static_cast<unsigned long long>(v); };
   std::printf("frames dropped:   %llu (queue full %llu, unmatched %llu)\n", u(s->frames_dropped),
               u(s->frames_overflow), u(s->frames_unmatched));

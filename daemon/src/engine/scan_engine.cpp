@@ -47,6 +47,8 @@ struct SetItem {
 struct ResultItem {
   std::uint64_t generation = 0;
   std::vector<ScanResult> results;  // one per triangulating camera, same scan
+  // System clock: the sequence's last exposure, processing start and end.
+  pipeline::TimestampNs exposed_ns = 0, processing_ns = 0, processed_ns = 0;
 };
 
 // Queue sizes and policies. Frames and triggers: enough for a few sequences
@@ -282,6 +284,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     if (settings_pending) applyPendingSettings();
     const std::shared_ptr<const RequestOptions> options = control.options();
     const pipeline::ImageSet& set = *item->set;
+    const pipeline::TimestampNs processing_ns = pipeline::systemClockNs();
     SetOutcome outcome =
         processor.process(set, control.camerasFor(set.pattern_name, *options),
                           options->motion_compensation.value_or(motion_enabled.load()));
@@ -290,7 +293,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
       control.reportError(outcome.error);
       continue;
     }
-    ResultItem result{item->generation, {}};
+    ResultItem result{item->generation, {}, lastExposureNs(set), processing_ns, pipeline::systemClockNs()};
     for (CameraScan& scan : outcome.scans)
       result.results.push_back({0, set.pattern_name, scan.camera_id, scan.bit_depth,
                                 std::move(scan.maps), std::move(scan.cloud),
@@ -344,6 +347,8 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
         control.reportError(std::string("publishing: ") + e.what());
       }
     }
+    statistics.scanStages(stageTimes(item->exposed_ns, item->processing_ns, item->processed_ns,
+                                     pipeline::systemClockNs()));
     control.finishIfComplete(item->generation);
   }
 }
@@ -536,6 +541,12 @@ EngineStatus ScanEngine::status() const {
   }
   s.motion_compensation = d.control.options()->motion_compensation.value_or(d.motion_enabled.load());
   s.frame_rate_hz = d.statistics.frameRateHz();
+  const StageSummary stages = d.statistics.stageSummary();
+  s.latency_ms = stages.total_median_ms;
+  s.latency_max_ms = stages.total_max_ms;
+  s.wait_ms = stages.median.wait_ms;
+  s.processing_ms = stages.median.processing_ms;
+  s.publish_ms = stages.median.publish_ms;
   return s;
 }
 

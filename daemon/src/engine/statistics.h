@@ -10,6 +10,8 @@
 #include <mutex>
 #include <optional>
 
+#include "engine/stage_latency.h"
+
 namespace sl::daemon {
 
 // Thread-safe: counters are atomics written by the thread that owns the
@@ -46,11 +48,17 @@ class EngineStatistics {
   // often; the window moves on when asked after a second).
   double frameRateHz();
 
+  // Where each published scan's latency went (output thread) and its
+  // summary over the last scans (any thread).
+  void scanStages(const StageTimes& scan) { stages_.add(scan); }
+  StageSummary stageSummary() const { return stages_.summary(); }
+
  private:
   std::atomic<std::uint64_t> frames_received_{0};
   std::atomic<std::uint64_t> unmatched_trigger_{0}, unmatched_software_{0};
   std::atomic<std::uint64_t> incomplete_trigger_{0}, incomplete_software_{0};
   std::atomic<std::uint64_t> incomplete_at_scan_{0};  // setsIncomplete() at the last scan
+  StageLatency stages_;
 
   mutable std::mutex mutex_;
   std::uint64_t scan_generation_ = 0;      // guarded by mutex_

@@ -55,6 +55,8 @@ struct StatusInfo {
   pipeline::TimestampNs last_error_ns = 0;  // when last_error was reported
   std::uint64_t errors_reported = 0;
   std::uint64_t sets_over_quota = 0;
+  // [ms] the daemon's latency over its last scans (EngineStatus).
+  double latency_ms = 0, latency_max_ms = 0, wait_ms = 0, processing_ms = 0, publish_ms = 0;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

@@ -66,6 +66,16 @@ struct EngineStatus {
   std::vector<std::string> cameras;   // triangulating the current pattern
   bool motion_compensation = false;
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
+  // Latency inside the daemon over the last (up to 64) published scans, in
+  // ms: from the trigger of a sequence's last pattern to the end of its
+  // publication (median and maximum), and the median of each stage: the
+  // wait for the last image and the grouping, processing, publishing.
+  // All 0 before the first scan.
+  double latency_ms = 0;
+  double latency_max_ms = 0;
+  double wait_ms = 0;
+  double processing_ms = 0;
+  double publish_ms = 0;
 };
 
 // One camera's result of one scan, shared with the output callback (a
