@@ -267,6 +267,8 @@ scenario() {
             else printf "  stalled/%s sub2: no gap of more than 5 s between its takes: it took no cloud after resuming (%s)\n", cfg, (prev ? "or never stopped" : "nor before") }' cfg="$cfg" "$work/sub2.log"
   fi
   echo "  $name/$cfg: load average $load; daemon status: ${status:0:400}"
+  # Where the time went inside the daemon (its status: last 64 scans).
+  echo "  $name/$cfg: daemon $(echo "$status" | grep -o 'latency: [^)]*)' || echo 'latency: not reported')"
   results+=("delivery: $cfg $name $worst rss_mb=$rss")
 }
 
