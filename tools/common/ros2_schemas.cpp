@@ -45,7 +45,9 @@ const std::map<std::string, std::string>& fieldLists() {
        "builtin_interfaces/Time start_at\nfloat64 frame_rate_hz\nuint64 requests_received\n"
        "uint64 requests_answered\nuint64 requests_rate_limited\nuint64 requests_invalid\n"
        "uint64 replies_timed_out\nstring degraded_reason\nbuiltin_interfaces/Time last_error_stamp\n"
-       "uint64 errors_reported\nuint64 requests_malformed\nuint64 sets_over_quota\n"},
+       "uint64 errors_reported\nuint64 requests_malformed\nuint64 sets_over_quota\n"
+       "float64 latency_ms\nfloat64 latency_max_ms\nfloat64 wait_ms\nfloat64 processing_ms\n"
+       "float64 publish_ms\n"},
       {"sl_msgs/ImageSet",
        "std_msgs/Header header\nstring pattern\nuint64 sequence_id\nuint32 camera_count\n"
        "string[] camera_ids\nuint8[] bit_depths\nsensor_msgs/Image[] images\n"},
