@@ -284,13 +284,17 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   long clouds = 0;
   std::uint64_t bytes = 0;
   std::uint64_t dropped_after = 0;  // samples of scans after the last one recorded
-  // Images, camera_info and image sets taken before the first cloud are held
-  // back until it comes: those of its scan (a 25 MB cloud can arrive after
-  // its scan's small images) or later are written then, those of an earlier
-  // scan, whose cloud the file does not have (the cloud writer matched this
-  // recorder after the image writers did), are left out, so every scan in
-  // the file is whole.
-  std::vector<std::pair<ScanKey, std::shared_ptr<const RawSample>>> before_first_cloud;
+  // Images, camera_info and image sets are written once their scan's cloud
+  // is: one taken before its cloud (a 25 MB cloud can arrive after its
+  // scan's small images) is held until the cloud comes. Held ones whose
+  // cloud is overtaken by a later one never get it (the daemon's keep-last
+  // writer dropped it for a recorder that fell behind, or matched the cloud
+  // reader late): they are left out, and counted once the recording has its
+  // first cloud, so every scan in the file is whole.
+  std::map<std::uint64_t, std::vector<std::pair<ScanKey, std::shared_ptr<const RawSample>>>>
+      awaiting_cloud;  // by stamp
+  std::set<std::uint64_t> cloud_stamps;
+  std::size_t scans_without_cloud = 0;
   // With --scan: the daemon going back to idle ends the recording too (a
   // scan it could not complete never comes); 0.5 s later, for the last
   // images.
@@ -322,19 +326,25 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
       ++dropped_after;  // the next scan's: not part of this recording
       return;
     }
-    if (key && s->topic != points_topic && cloud_keys.empty()) {
-      before_first_cloud.emplace_back(*key, s);
+    if (key && s->topic != points_topic && !cloud_stamps.count(key->first)) {
+      awaiting_cloud[key->first].emplace_back(*key, s);
       return;
     }
     if (!record(s, key)) return;
     if (s->topic == points_topic) {
+      const bool first = cloud_stamps.empty();
       cloud_keys.insert(*key);
+      cloud_stamps.insert(key->first);
       if (count > 0 && ++clouds >= count) last_cloud = key;
       else if (count == 0) ++clouds;
-      for (const auto& [held_key, held] : before_first_cloud)
-        if (held_key.first >= key->first && (!last_cloud || held_key <= *last_cloud))
-          record(held, held_key);
-      before_first_cloud.clear();
+      for (auto it = awaiting_cloud.begin(); it != awaiting_cloud.end() && it->first <= key->first;) {
+        if (it->first == key->first) {
+          for (const auto& [held_key, held] : it->second) record(held, held_key);
+        } else if (!first) {
+          ++scans_without_cloud;
+        }
+        it = awaiting_cloud.erase(it);
+      }
     }
     if (s->topic == status_topic) {
       tools::CdrReader status(s->data(), s->size(), "status sample");
@@ -432,6 +442,12 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   }
   queue.finish();
   writer.close();
+  if (!cloud_stamps.empty())
+    for (const auto& [stamp, held] : awaiting_cloud) scans_without_cloud += stamp < *cloud_stamps.rbegin();
+  if (scans_without_cloud > 0)
+    std::printf("sl_view record: %zu scan(s) left out: their cloud did not reach the recorder (the "
+                "daemon's writer dropped it for this reader, behind or late)\n",
+                scans_without_cloud);
   if (warmup_left_out > 0)
     std::printf("sl_view record: %zu scan(s) at the start left out: a message missing (a daemon "
                 "writer had not yet discovered this recorder)\n",
