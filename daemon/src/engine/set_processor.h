@@ -85,6 +85,9 @@ class SetProcessor {
     std::map<std::string, pipeline::Triangulator> triangulators;  // by camera id
   };
   static Stages build(const ProcessingConfig& config);
+  // Processes black frames once per camera, so that the first real scan
+  // does not pay for its buffers' first page faults.
+  void warmUp();
   std::shared_ptr<const pipeline::PointCloud> colouredCopy(const pipeline::ImageSet& set,
                                                            const std::string& camera_id,
                                                            const pipeline::PointCloud& cloud) const;
