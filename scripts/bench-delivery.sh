@@ -50,6 +50,11 @@ src=$(cd "$(dirname "$0")/.." && pwd)
 build=$(cd "${1:-$src/build}" && pwd)
 secs=${SL_BENCH_SECONDS:-30}
 subs3_fps=${SL_BENCH_3SUBS_FPS:-90}
+# SL_BENCH_DAEMON_RT=N runs the daemon (all its threads) at SCHED_FIFO
+# priority N, as the unit's CPUSchedulingPolicy=fifo would; default: as an
+# ordinary process.
+daemon_prefix=()
+if [ -n "${SL_BENCH_DAEMON_RT:-}" ]; then daemon_prefix=(chrt -f "$SL_BENCH_DAEMON_RT"); fi
 # The 5 Hz windows (5hz, 5hz-sets, fastdds-5hz): 60 s = 300 clouds, so that
 # the p99 is the 4th-worst cloud; with 100 clouds (20 s) it was the
 # 2nd-worst, i.e. the subscriber's second cloud, which always pays for its
@@ -190,7 +195,7 @@ start_daemon() {  # FPS [extra sed expression]
       ${extra:+-e "$extra"} "$src/config/sim.yaml" > "$work/sim.yaml"
   grep -q "camera_fps: $fps " "$work/sim.yaml" && grep -q "namespace: $ns" "$work/sim.yaml" ||
     { echo "bench-delivery: could not edit config/sim.yaml" >&2; exit 2; }
-  "$daemon" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
+  "${daemon_prefix[@]}" "$daemon" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
   daemon_pid=$!
   pids+=("$daemon_pid")
   timeout 30 "${ctl[@]}" --ns "$ns" --timeout 20 status > /dev/null 2>&1 ||
@@ -274,6 +279,7 @@ scenario() {
 
 echo "bench-delivery: $(date -u +%FT%TZ), $(nproc) cores, $isolation, load average $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "bench-delivery: net.core.rmem_max=$(cat /proc/sys/net/core/rmem_max) wmem_max=$(cat /proc/sys/net/core/wmem_max)"
+echo "bench-delivery: daemon scheduling: ${daemon_prefix[*]:-ordinary (SCHED_OTHER, nice 0)}"
 
 # --- bare DDS ceiling: sl_dds_bench pub -> sub, no daemon ---
 declare -A ceiling_rate ceiling_p50
