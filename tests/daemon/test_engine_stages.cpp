@@ -1,11 +1,13 @@
 // The scan engine's stages without its threads: start-request validation (a
-// pure function) and set processing (errors as values).
+// pure function), set processing (errors as values) and its reloads, device
+// health.
 #include <catch2/catch.hpp>
 
 #include <cstring>
 
 #include <opencv2/core.hpp>
 
+#include "engine/device_health.h"
 #include "engine/set_processor.h"
 #include "engine/stage_latency.h"
 #include "engine/start_validation.h"
@@ -240,4 +242,51 @@ TEST_CASE("stage latency: medians per stage, the total's median and maximum over
   set.cameras[0].stamps_ns = {1000, 2000, 3000};
   set.cameras[1].stamps_ns = {1001, 2001, 3005};
   CHECK(sl::daemon::lastExposureNs(set) == 3005);
+}
+
+TEST_CASE("reloaded settings reach the processing stage once, the latest of them; bad ones are refused") {
+  sl::daemon::PendingSettings pending;
+  CHECK_FALSE(pending.take());
+  sl::daemon::DaemonConfig first = simConfig(), second = simConfig();
+  first.motion.enabled = false;
+  second.motion.enabled = true;
+  pending.post(first);
+  pending.post(second);
+  const std::optional<sl::daemon::DaemonConfig> taken = pending.take();
+  REQUIRE(taken);
+  CHECK(taken->motion.enabled);
+  CHECK_FALSE(pending.take());
+
+  sl::daemon::SetProcessor processor(sl::daemon::processingConfigOf(simConfig(), {"top"}));
+  const bool configured = processor.motionEnabled();
+  sl::daemon::DaemonConfig toggled = simConfig();
+  toggled.motion.enabled = !configured;
+  CHECK(processor.applyRuntimeSettings(toggled).empty());
+  CHECK(processor.motionEnabled() == !configured);
+  sl::daemon::DaemonConfig broken = simConfig();
+  broken.motion.options.max_shift_px = -1;
+  broken.motion.enabled = configured;
+  CHECK_FALSE(processor.applyRuntimeSettings(broken).empty());
+  CHECK(processor.motionEnabled() == !configured);  // the running settings stay
+}
+
+TEST_CASE("device health: silent devices named with their last error; a delivery ends the error") {
+  constexpr std::int64_t kS = 1'000'000'000;
+  sl::daemon::DeviceHealth health({"top", "side"});
+  // Nothing delivered since the scan began at 10 s.
+  CHECK(health.silentDevices(10 * kS, 11 * kS, 2.0).empty());
+  CHECK(health.silentDevices(10 * kS, 12 * kS + kS / 2, 2.0) ==
+        "camera 'top': no frame for 2.5 s; camera 'side': no frame for 2.5 s; "
+        "trigger source: no trigger for 2.5 s");
+  CHECK_FALSE(health.cameraDelivered(0, 12 * kS));  // no error to clear
+  health.cameraFailed(1, "device unplugged");
+  CHECK_FALSE(health.triggerDelivered(12 * kS));
+  CHECK(health.silentDevices(10 * kS, 13 * kS, 2.0) == "camera 'side': no frame for 3.0 s (device unplugged)");
+  CHECK(health.cameraDelivered(1, 13 * kS));  // ends the error: the caller clears it
+  CHECK_FALSE(health.cameraDelivered(1, 13 * kS));
+  health.triggerFailed("serial port closed");
+  CHECK(health.silentDevices(10 * kS, 15 * kS, 2.0) ==
+        "camera 'top': no frame for 3.0 s; camera 'side': no frame for 2.0 s; "
+        "trigger source: no trigger for 3.0 s (serial port closed)");
+  CHECK(health.triggerDelivered(15 * kS));
 }

@@ -3,12 +3,13 @@
 #include "sl/daemon/scan_engine.h"
 
 #include <algorithm>
-#include <cstdio>
 #include <chrono>
 #include <thread>
 #include <utility>
 #include <variant>
 
+#include "engine/control_loop.h"
+#include "engine/device_health.h"
 #include "engine/request_control.h"
 #include "engine/schedule_events.h"
 #include "engine/set_processor.h"
@@ -89,9 +90,12 @@ struct ScanEngine::Impl {
         motion_enabled(processing_config.motion_enabled),
         software(this->devices.cameras, this->devices.projector, config.software_trigger),
         last_frame_ns(camera_ids.size()),
-        camera_seen(camera_ids.size()),
-        camera_errors(camera_ids.size()),
-        control(config, linksOf(config)) {
+        device_health(camera_ids),
+        control(config, linksOf(config)),
+        control_loop(control, software, gate, statistics,
+                     [this](std::uint64_t generation, std::shared_ptr<const pipeline::ImageSet> set) {
+                       sets.push({generation, std::move(set)});
+                     }) {
     for (auto& camera : this->devices.cameras) camera->start();
   }
 
@@ -134,29 +138,19 @@ struct ScanEngine::Impl {
   SetProcessor processor;                    // processing thread
   std::atomic<bool> motion_enabled;          // as configured or reloaded; for the status
   SoftwareRuns software;                     // control thread
-  // Settings from a config reload, applied by the processing thread before
-  // its next set (the flag avoids taking the mutex per set).
-  std::mutex settings_mutex;
-  std::optional<DaemonConfig> pending_settings;  // guarded by settings_mutex
-  std::atomic<bool> settings_pending{false};
+  PendingSettings pending_settings;           // a config reload -> processing thread
 
   // Written by the grouping / camera threads, read by request control.
   std::atomic<pipeline::TimestampNs> last_trigger_ns{0};
   std::vector<std::atomic<pipeline::TimestampNs>> last_frame_ns;  // per camera
 
-  // For the health check (output thread): when each camera last delivered a
-  // frame and the trigger source a trigger (steady clock, 0 = never), and
-  // each camera's latest grab error since its last frame.
-  std::vector<std::atomic<std::int64_t>> camera_seen;
-  std::atomic<std::int64_t> trigger_seen{0};
-  std::mutex health_mutex;
-  std::vector<std::string> camera_errors;  // guarded by health_mutex
-  std::string trigger_error;               // guarded by health_mutex
-  Clock::time_point next_health_check;     // output thread
-
-  RequestControl control;  // last: its links point at the members above
+  // Device and scan health (camera, trigger threads report; output thread checks).
+  DeviceHealth device_health;
+  Clock::time_point next_health_check;  // output thread
 
   CameraGate gate{camera_ids.size()};  // parks the camera threads (software trigger)
+  RequestControl control;  // after the members its links point at
+  ControlLoop control_loop;  // control thread
 
   std::atomic<bool> running{true};
   std::vector<Heartbeat> heartbeats;  // sized before threads start
@@ -167,22 +161,9 @@ struct ScanEngine::Impl {
   void groupLoop(Heartbeat& hb);
   void processLoop(Heartbeat& hb);
   void outputLoop(Heartbeat& hb);
-  void controlLoop(Heartbeat& hb);
-  void applyPendingSettings();
+  void applySettings(const DaemonConfig& settings);
   void checkHealth();
-  std::string degradedCause();
 };
-
-namespace {
-std::int64_t steadyNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
-}
-std::string secondsText(double s) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.1f", s);
-  return text;
-}
-}  // namespace
 
 void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
   auto& camera = *devices.cameras[index];
@@ -193,24 +174,13 @@ void ScanEngine::Impl::cameraLoop(std::size_t index, Heartbeat& hb) {
     try {
       frame = camera.grab(100ms);
     } catch (const std::exception& e) {
-      const std::string message = "camera '" + camera.id() + "': " + e.what();
-      {
-        std::lock_guard lock(health_mutex);
-        camera_errors[index] = e.what();
-      }
-      control.reportError(message, "camera:" + camera.id());
+      device_health.cameraFailed(index, e.what());
+      control.reportError("camera '" + camera.id() + "': " + e.what(), "camera:" + camera.id());
       std::this_thread::sleep_for(100ms);
       continue;
     }
     if (frame) {
-      camera_seen[index] = steadyNowNs();
-      bool had_error = false;
-      {
-        std::lock_guard lock(health_mutex);
-        had_error = !camera_errors[index].empty();
-        camera_errors[index].clear();
-      }
-      if (had_error) control.clearError("camera:" + camera.id());
+      if (device_health.cameraDelivered(index, steadyNowNs())) control.clearError("camera:" + camera.id());
       statistics.framesReceived(1);
       last_frame_ns[index] = frame->stamp_ns;
       events.push({control.generation(), FrameEvent{index, std::move(*frame)}});
@@ -225,25 +195,14 @@ void ScanEngine::Impl::triggerLoop(Heartbeat& hb) {
     try {
       trigger = devices.trigger->next(100ms);
     } catch (const std::exception& e) {
-      {
-        std::lock_guard lock(health_mutex);
-        trigger_error = e.what();
-      }
+      device_health.triggerFailed(e.what());
       control.reportError(std::string("trigger source: ") + e.what(), "trigger");
       std::this_thread::sleep_for(100ms);
       continue;
     }
-    if (trigger) {
-      trigger_seen = steadyNowNs();
-      bool had_error = false;
-      {
-        std::lock_guard lock(health_mutex);
-        had_error = !trigger_error.empty();
-        trigger_error.clear();
-      }
-      if (had_error) control.clearError("trigger");
-    }
-    if (trigger) events.push({control.generation(), TriggerEvent{trigger->stamp_ns}});
+    if (!trigger) continue;
+    if (device_health.triggerDelivered(steadyNowNs())) control.clearError("trigger");
+    events.push({control.generation(), TriggerEvent{trigger->stamp_ns}});
   }
 }
 
@@ -281,7 +240,7 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     std::optional<SetItem> item = sets.pop(50ms);
     if (!item || item->generation != control.generation()) continue;
     recorder.record(item->set);  // a no-op unless this request records
-    if (settings_pending) applyPendingSettings();
+    if (std::optional<DaemonConfig> settings = pending_settings.take()) applySettings(*settings);
     const std::shared_ptr<const RequestOptions> options = control.options();
     const pipeline::ImageSet& set = *item->set;
     const pipeline::TimestampNs processing_ns = pipeline::systemClockNs();
@@ -302,28 +261,13 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
   }
 }
 
-// Rebuilds the processing stages with the reloaded run-time settings
-// (decoder, triangulator, motion compensation); the rest of the reloaded
-// config is the running one (a change there needs a restart).
-void ScanEngine::Impl::applyPendingSettings() {
-  std::optional<DaemonConfig> settings;
-  {
-    std::lock_guard lock(settings_mutex);
-    settings.swap(pending_settings);
-    settings_pending = false;
-  }
-  if (!settings) return;
-  ProcessingConfig next = processing_config;
-  next.decoder = settings->decoder;
-  next.triangulator = settings->triangulator;
-  next.motion = settings->motion.options;
-  next.motion_enabled = settings->motion.enabled;
-  const std::string error = processor.reconfigure(next);
-  if (!error.empty()) {
-    control.reportError("applying reloaded settings: " + error);
-    return;
-  }
-  motion_enabled = next.motion_enabled;
+// The reloaded run-time settings (decoder, triangulator, motion
+// compensation); the rest of the reloaded config is the running one (a
+// change there needs a restart).
+void ScanEngine::Impl::applySettings(const DaemonConfig& settings) {
+  const std::string error = processor.applyRuntimeSettings(settings);
+  if (!error.empty()) return control.reportError("applying reloaded settings: " + error);
+  motion_enabled = processor.motionEnabled();
 }
 
 void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
@@ -358,96 +302,8 @@ void ScanEngine::Impl::checkHealth() {
   const auto now = Clock::now();
   if (now < next_health_check) return;
   next_health_check = now + 100ms;
-  control.setDegraded(degradedCause());
-}
-
-// Why the running scan is degraded ("" = it is not): with the trigger board,
-// a camera without frames or a trigger source without triggers for
-// runtime.stall_timeout_s; in either mode, no scan published for that long
-// plus a sequence's time (since the start or the last scan).
-std::string ScanEngine::Impl::degradedCause() {
-  const RequestControl::Health h = control.health();
-  if (!h.scanning) return "";
-  const double stall_s = config.runtime.stall_timeout_s;
-  const std::int64_t since_ns =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(h.since.time_since_epoch()).count();
-  const std::int64_t now_ns = steadyNowNs();
-  auto silentFor = [&](std::int64_t seen_ns) { return (now_ns - std::max(seen_ns, since_ns)) * 1e-9; };
-  std::string cause;
-  auto add = [&](const std::string& text) { cause += (cause.empty() ? "" : "; ") + text; };
-  if (h.trigger == TriggerMode::kHardware) {
-    std::lock_guard lock(health_mutex);
-    for (std::size_t i = 0; i < camera_ids.size(); ++i) {
-      const double silent = silentFor(camera_seen[i].load());
-      if (silent >= stall_s)
-        add("camera '" + camera_ids[i] + "': no frame for " + secondsText(silent) + " s" +
-            (camera_errors[i].empty() ? "" : " (" + camera_errors[i] + ")"));
-    }
-    const double silent = silentFor(trigger_seen.load());
-    if (silent >= stall_s)
-      add("trigger source: no trigger for " + secondsText(silent) + " s" +
-          (trigger_error.empty() ? "" : " (" + trigger_error + ")"));
-  }
-  const std::optional<Clock::time_point> last = statistics.lastScan(control.generation());
-  const double no_scan_s = std::chrono::duration<double>(
-                               Clock::now() - std::max(last.value_or(h.since), h.since)).count();
-  if (no_scan_s >= stall_s + h.sequence_s) {
-    const std::uint64_t incomplete = last ? statistics.incompleteSinceLastScan() : 0;
-    add("no scan published for " + secondsText(no_scan_s) + " s" +
-        (incomplete > 0 ? " (" + std::to_string(incomplete) + " sequences incomplete)" : ""));
-  }
-  return cause;
-}
-
-// Starts delayed requests and carries out pattern switches at their time
-// (RequestControl::serviceTimers), and runs software-trigger requests: one
-// sequence per iteration, its pattern read at the sequence boundary (a
-// switch never mixes patterns within a set), grouped by the
-// IndexedSynchroniser.
-void ScanEngine::Impl::controlLoop(Heartbeat& hb) {
-  bool holding = false;  // the camera threads are parked
-  while (running) {
-    hb.beat();
-    if (control.serviceTimers()) continue;
-    const std::optional<RequestControl::SoftwareRun> run = control.softwareRun();
-    if (!run) {
-      if (holding) {
-        software.stop();
-        gate.release();
-        holding = false;
-        continue;
-      }
-      control.waitForChange(100ms);
-      continue;
-    }
-    const std::uint64_t gen = run->generation;
-    if (software.finished(gen, run->scans_requested)) {
-      control.waitForChange(100ms);  // all sets taken; the output thread ends the request
-      continue;
-    }
-    if (!holding) {
-      if (!gate.hold(3s, [&] { hb.beat(); })) {
-        gate.release();
-        control.endRequest(gen, "software trigger: the camera threads did not pause");
-        continue;
-      }
-      holding = true;
-    }
-    SoftwareRuns::Outcome outcome = software.acquire(gen, run->pattern, run->frame_count, run->cameras, [&] {
-      hb.beat();
-      return !running || control.generation() != gen;
-    });
-    statistics.framesReceived(outcome.frames);
-    if (outcome.set) sets.push({gen, std::move(outcome.set)});
-    if (outcome.end_request) {
-      control.endRequest(gen, outcome.fault);
-    } else if (!outcome.fault.empty()) {
-      control.reportError(outcome.fault);
-    }
-    const pipeline::SynchroniserCounters& counts = software.counters();
-    statistics.setSoftwareGrouping({counts.frames_unmatched, counts.triggers_incomplete});
-  }
-  if (holding) gate.release();
+  control.setDegraded(degradedCause(control.health(), device_health, statistics, control.generation(),
+                                    config.runtime.stall_timeout_s));
 }
 
 ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output,
@@ -461,7 +317,7 @@ ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, Output
   d.threads.emplace_back([&d, k] { d.groupLoop(d.heartbeats[k + 1]); });
   d.threads.emplace_back([&d, k] { d.processLoop(d.heartbeats[k + 2]); });
   d.threads.emplace_back([&d, k] { d.outputLoop(d.heartbeats[k + 3]); });
-  d.threads.emplace_back([&d, k] { d.controlLoop(d.heartbeats[k + 4]); });
+  d.threads.emplace_back([&d, k] { d.control_loop.run(d.running, d.heartbeats[k + 4]); });
 }
 
 ScanEngine::~ScanEngine() {
@@ -503,11 +359,7 @@ std::vector<std::string> ScanEngine::patterns() const {
 
 const DaemonConfig& ScanEngine::config() const { return impl_->config; }
 
-void ScanEngine::applyRuntimeSettings(const DaemonConfig& settings) {
-  std::lock_guard lock(impl_->settings_mutex);
-  impl_->pending_settings = settings;
-  impl_->settings_pending = true;
-}
+void ScanEngine::applyRuntimeSettings(const DaemonConfig& settings) { impl_->pending_settings.post(settings); }
 
 void ScanEngine::reportError(const std::string& message, const std::string& source) {
   impl_->control.reportError(message, source);
@@ -525,20 +377,9 @@ EngineStatus ScanEngine::status() const {
   s.frames_unmatched = d.statistics.framesUnmatched() + d.software.staleFrames();
   s.frames_dropped = s.frames_overflow + s.frames_unmatched;
   s.sets_overflow = d.sets.dropped() + d.results.dropped();
-  s.sets_not_recorded = d.recorder.dropped();
-  s.sets_dropped = s.sets_overflow + s.sets_not_recorded;
+  s.sets_dropped = s.sets_overflow;  // + sets_not_recorded below
   s.sets_incomplete = d.statistics.setsIncomplete();
-  s.sets_recorded = d.recorder.written();
-  s.sets_over_quota = d.recorder.overQuota();
-  if (!s.recording.empty() && !d.recorder.active()) s.recording.clear();  // stopped by itself
-  const Recorder::Error recorder_error = d.recorder.lastError();
-  s.errors_reported += recorder_error.count;
-  const double hold_ns = d.config.runtime.last_error_hold_s * 1e9;
-  const bool aged = hold_ns > 0 && static_cast<double>(pipeline::systemClockNs() - recorder_error.stamp_ns) > hold_ns;
-  if (!recorder_error.message.empty() && !aged && recorder_error.stamp_ns >= s.last_error_ns) {
-    s.last_error = recorder_error.message;
-    s.last_error_ns = recorder_error.stamp_ns;
-  }
+  addRecorderStatus(s, d.recorder, d.config.runtime.last_error_hold_s, pipeline::systemClockNs());
   s.motion_compensation = d.control.options()->motion_compensation.value_or(d.motion_enabled.load());
   s.frame_rate_hz = d.statistics.frameRateHz();
   const StageSummary stages = d.statistics.stageSummary();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 #include <opencv2/core.hpp>
 
@@ -49,7 +50,7 @@ ProcessingConfig inCloudUnit(ProcessingConfig config) {
 }  // namespace
 
 SetProcessor::SetProcessor(const ProcessingConfig& config)
-    : config_(inCloudUnit(config)), stages_(build(config_)), motion_(config.motion) {
+    : loaded_(config), config_(inCloudUnit(config)), stages_(build(config_)), motion_(config.motion) {
   warmUp();
 }
 
@@ -96,10 +97,33 @@ std::string SetProcessor::reconfigure(const ProcessingConfig& config) {
     stages_ = std::move(rebuilt);
     motion_ = std::move(motion);
     config_ = std::move(scaled);
+    loaded_ = config;
   } catch (const std::exception& e) {
     return e.what();
   }
   return "";
+}
+
+std::string SetProcessor::applyRuntimeSettings(const DaemonConfig& settings) {
+  ProcessingConfig next = loaded_;
+  next.decoder = settings.decoder;
+  next.triangulator = settings.triangulator;
+  next.motion = settings.motion.options;
+  next.motion_enabled = settings.motion.enabled;
+  return reconfigure(next);
+}
+
+void PendingSettings::post(const DaemonConfig& settings) {
+  std::lock_guard lock(mutex_);
+  settings_ = settings;
+  pending_ = true;
+}
+
+std::optional<DaemonConfig> PendingSettings::take() {
+  if (!pending_) return std::nullopt;
+  std::lock_guard lock(mutex_);
+  pending_ = false;
+  return std::exchange(settings_, std::nullopt);
 }
 
 SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vector<std::string>& cameras,

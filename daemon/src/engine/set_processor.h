@@ -3,8 +3,11 @@
 // thread's stage: synchronous, no DDS settings, errors returned as values.
 #pragma once
 
+#include <atomic>
 #include <map>
 #include <memory>
+#include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -76,6 +79,9 @@ class SetProcessor {
   // Rebuilds the stages from new settings (a config reload). On an error the
   // old stages stay and the error is returned ("" = applied).
   std::string reconfigure(const ProcessingConfig& config);
+  // reconfigure() with the run-time settings of a reloaded config (decoder,
+  // triangulator, motion compensation); the rest of it is ignored.
+  std::string applyRuntimeSettings(const DaemonConfig& settings);
 
   bool motionEnabled() const { return config_.motion_enabled; }
 
@@ -92,10 +98,26 @@ class SetProcessor {
                                                            const std::string& camera_id,
                                                            const pipeline::PointCloud& cloud) const;
 
+  ProcessingConfig loaded_;  // as given (config_ is in the clouds' unit)
   ProcessingConfig config_;
   Stages stages_;
   pipeline::MotionCompensator motion_;
   pipeline::ScanProcessor processor_;
+};
+
+// A reloaded config on its way to the processing thread, which applies it
+// before its next set (SetProcessor::applyRuntimeSettings). Thread-safe.
+class PendingSettings {
+ public:
+  void post(const DaemonConfig& settings);
+  // The settings posted since the last take() (the latest of them), once;
+  // a lock-free check when there are none.
+  std::optional<DaemonConfig> take();
+
+ private:
+  std::mutex mutex_;
+  std::optional<DaemonConfig> settings_;  // guarded by mutex_
+  std::atomic<bool> pending_{false};
 };
 
 }  // namespace sl::daemon

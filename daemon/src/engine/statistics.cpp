@@ -63,4 +63,21 @@ double EngineStatistics::frameRateHz() {
   return frame_rate_hz_;
 }
 
+void addRecorderStatus(EngineStatus& s, const Recorder& recorder, double last_error_hold_s,
+                       pipeline::TimestampNs now_ns) {
+  s.sets_not_recorded = recorder.dropped();
+  s.sets_dropped += s.sets_not_recorded;
+  s.sets_recorded = recorder.written();
+  s.sets_over_quota = recorder.overQuota();
+  if (!s.recording.empty() && !recorder.active()) s.recording.clear();  // stopped by itself
+  const Recorder::Error error = recorder.lastError();
+  s.errors_reported += error.count;
+  const double hold_ns = last_error_hold_s * 1e9;
+  const bool aged = hold_ns > 0 && static_cast<double>(now_ns - error.stamp_ns) > hold_ns;
+  if (!error.message.empty() && !aged && error.stamp_ns >= s.last_error_ns) {
+    s.last_error = error.message;
+    s.last_error_ns = error.stamp_ns;
+  }
+}
+
 }  // namespace sl::daemon

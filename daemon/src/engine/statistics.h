@@ -11,6 +11,8 @@
 #include <optional>
 
 #include "engine/stage_latency.h"
+#include "recorder.h"
+#include "sl/daemon/scan_engine.h"  // EngineStatus
 
 namespace sl::daemon {
 
@@ -67,5 +69,12 @@ class EngineStatistics {
   std::uint64_t window_frames_ = 0;        // guarded by mutex_
   double frame_rate_hz_ = 0;               // guarded by mutex_
 };
+
+// The recorder's part of `status`: its counts (sets_not_recorded also in
+// sets_dropped), the recording cleared once it stopped by itself, and its
+// latest error as last_error when newer than the status's own and not older
+// than `last_error_hold_s` (0 = no limit) at `now_ns` (system clock).
+void addRecorderStatus(EngineStatus& status, const Recorder& recorder, double last_error_hold_s,
+                       pipeline::TimestampNs now_ns);
 
 }  // namespace sl::daemon
