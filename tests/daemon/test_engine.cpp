@@ -23,6 +23,7 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
+#include "sl/drivers/forwarding.h"
 #include "sl/drivers/recording.h"
 #include "sl/drivers/sim.h"
 
@@ -30,23 +31,8 @@ using namespace std::chrono_literals;
 
 namespace {
 
-// A camera that forwards everything to `inner`: the fault-injecting test
-// cameras below override what they break.
-class ForwardingCamera : public sl::drivers::Camera {
- public:
-  explicit ForwardingCamera(std::shared_ptr<sl::drivers::Camera> inner) : inner_(std::move(inner)) {}
-  std::string id() const override { return inner_->id(); }
-  int width() const override { return inner_->width(); }
-  int height() const override { return inner_->height(); }
-  void start() override { inner_->start(); }
-  void stop() override { inner_->stop(); }
-  std::optional<sl::pipeline::Frame> grab(std::chrono::milliseconds timeout) override {
-    return inner_->grab(timeout);
-  }
-
- protected:
-  std::shared_ptr<sl::drivers::Camera> inner_;
-};
+// The fault-injecting test cameras below override what they break.
+using sl::drivers::ForwardingCamera;
 
 // A camera whose grab() hangs (ignores its timeout) once `hang` is set, until
 // stop(): a driver stuck in a system call.

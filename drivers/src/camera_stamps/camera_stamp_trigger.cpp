@@ -86,10 +86,10 @@ std::uint64_t CameraStampTriggerSource::dropped() const {
 
 StampTapCamera::StampTapCamera(std::shared_ptr<Camera> camera,
                                std::shared_ptr<CameraStampTriggerSource> source)
-    : camera_(std::move(camera)), source_(std::move(source)) {}
+    : ForwardingCamera(std::move(camera)), source_(std::move(source)) {}
 
 std::optional<Frame> StampTapCamera::grab(std::chrono::milliseconds timeout) {
-  std::optional<Frame> frame = camera_->grab(timeout);
+  std::optional<Frame> frame = inner_->grab(timeout);
   if (frame) source_->pushFrame(frame->stamp_ns);
   return frame;
 }
@@ -97,10 +97,10 @@ std::optional<Frame> StampTapCamera::grab(std::chrono::milliseconds timeout) {
 SequenceTapProjector::SequenceTapProjector(std::shared_ptr<Projector> projector,
                                            std::shared_ptr<CameraStampTriggerSource> source,
                                            std::map<std::string, Timing> timing)
-    : projector_(std::move(projector)), source_(std::move(source)), timing_(std::move(timing)) {}
+    : ForwardingProjector(std::move(projector)), source_(std::move(source)), timing_(std::move(timing)) {}
 
 void SequenceTapProjector::select(const std::string& name) {
-  projector_->select(name);
+  inner_->select(name);
   const auto it = timing_.find(name);
   if (it == timing_.end())
     throw std::invalid_argument("no frame timing for projector sequence '" + name + "'");
@@ -109,12 +109,12 @@ void SequenceTapProjector::select(const std::string& name) {
 
 void SequenceTapProjector::projectSingle(int index) {
   source_->ignoreFrames();
-  projector_->projectSingle(index);
+  inner_->projectSingle(index);
 }
 
 void SequenceTapProjector::start(int count) {
   source_->reset();
-  projector_->start(count);
+  inner_->start(count);
 }
 
 }  // namespace sl::drivers

@@ -568,7 +568,7 @@ VersavisCounters VersavisTriggerSource::counters() const {
 void VersavisTriggerSource::dropTriggersBefore(std::int64_t host_ns) { drop_before_ns_ = host_ns; }
 
 void VersavisStartTapProjector::start(int count) {
-  projector_->start(count);
+  inner_->start(count);
   // Triggers the board sent before the projector was started (its clock can
   // be ~100 ms ahead of the host's, so their stamps alone cannot tell).
   source_->dropTriggersBefore(realtimeNs());
@@ -577,9 +577,9 @@ void VersavisStartTapProjector::start(int count) {
 VersavisRestampCamera::VersavisRestampCamera(std::shared_ptr<Camera> camera,
                                              std::shared_ptr<VersavisTriggerSource> source,
                                              std::size_t index)
-    : camera_(std::move(camera)), source_(std::move(source)), index_(index) {
+    : ForwardingCamera(std::move(camera)), source_(std::move(source)), index_(index) {
   if (index_ >= source_->cameraCount())
-    throw std::invalid_argument("VersaVIS: camera '" + camera_->id() + "' (index " +
+    throw std::invalid_argument("VersaVIS: camera '" + inner_->id() + "' (index " +
                                 std::to_string(index_) + ") has no board camera channel");
 }
 
@@ -588,7 +588,7 @@ std::optional<Frame> VersavisRestampCamera::grab(std::chrono::milliseconds timeo
   for (;;) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
         deadline - std::chrono::steady_clock::now());
-    std::optional<Frame> frame = camera_->grab(std::max(left, std::chrono::milliseconds(0)));
+    std::optional<Frame> frame = inner_->grab(std::max(left, std::chrono::milliseconds(0)));
     if (!frame) return frame;
     timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);

@@ -14,8 +14,7 @@
 #include <optional>
 #include <string>
 
-#include "sl/drivers/camera.h"
-#include "sl/drivers/projector.h"
+#include "sl/drivers/forwarding.h"
 #include "sl/drivers/trigger_source.h"
 
 namespace sl::drivers {
@@ -88,20 +87,12 @@ class CameraStampTriggerSource : public TriggerSource {
 // Camera decorator: forwards everything (the software trigger too) and feeds
 // each grabbed frame's stamp to the trigger source. Thread-safety as the
 // wrapped camera.
-class StampTapCamera : public Camera {
+class StampTapCamera : public ForwardingCamera {
  public:
   StampTapCamera(std::shared_ptr<Camera> camera, std::shared_ptr<CameraStampTriggerSource> source);
-  std::string id() const override { return camera_->id(); }
-  int width() const override { return camera_->width(); }
-  int height() const override { return camera_->height(); }
-  void start() override { camera_->start(); }
-  void stop() override { camera_->stop(); }
   std::optional<Frame> grab(std::chrono::milliseconds timeout) override;
-  bool hasSoftwareTrigger() const override { return camera_->hasSoftwareTrigger(); }
-  void triggerSoftware() override { camera_->triggerSoftware(); }
 
  private:
-  std::shared_ptr<Camera> camera_;
   std::shared_ptr<CameraStampTriggerSource> source_;
 };
 
@@ -109,7 +100,7 @@ class StampTapCamera : public Camera {
 // of the selected sequence and restarts its numbering on start(); while it
 // holds single patterns (projectSingle, forwarded) the source ignores frames.
 // Thread-safety as the wrapped projector.
-class SequenceTapProjector : public Projector {
+class SequenceTapProjector : public ForwardingProjector {
  public:
   struct Timing {
     int frames = 0;
@@ -118,16 +109,11 @@ class SequenceTapProjector : public Projector {
   SequenceTapProjector(std::shared_ptr<Projector> projector,
                        std::shared_ptr<CameraStampTriggerSource> source,
                        std::map<std::string, Timing> timing);
-  std::string id() const override { return projector_->id(); }
-  std::vector<ProjectorSequence> sequences() const override { return projector_->sequences(); }
   void select(const std::string& name) override;
   void start(int count) override;
-  void stop() override { projector_->stop(); }
-  bool canProjectSingle() const override { return projector_->canProjectSingle(); }
   void projectSingle(int index) override;
 
  private:
-  std::shared_ptr<Projector> projector_;
   std::shared_ptr<CameraStampTriggerSource> source_;
   std::map<std::string, Timing> timing_;
 };

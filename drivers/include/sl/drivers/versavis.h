@@ -38,8 +38,7 @@
 #include <string>
 #include <vector>
 
-#include "sl/drivers/camera.h"
-#include "sl/drivers/projector.h"
+#include "sl/drivers/forwarding.h"
 #include "sl/drivers/trigger_source.h"
 
 namespace sl::drivers {
@@ -299,21 +298,14 @@ class VersavisTriggerSource : public TriggerSource {
 // board stamps are on a clock up to ~100 ms off the host's, so the engine's
 // host-clock start time cannot tell them apart). Thread-safety as the
 // wrapped projector.
-class VersavisStartTapProjector : public Projector {
+class VersavisStartTapProjector : public ForwardingProjector {
  public:
   VersavisStartTapProjector(std::shared_ptr<Projector> projector,
                             std::shared_ptr<VersavisTriggerSource> source)
-      : projector_(std::move(projector)), source_(std::move(source)) {}
-  std::string id() const override { return projector_->id(); }
-  std::vector<ProjectorSequence> sequences() const override { return projector_->sequences(); }
-  void select(const std::string& name) override { projector_->select(name); }
+      : ForwardingProjector(std::move(projector)), source_(std::move(source)) {}
   void start(int count) override;
-  void stop() override { projector_->stop(); }
-  bool canProjectSingle() const override { return projector_->canProjectSingle(); }
-  void projectSingle(int index) override { projector_->projectSingle(index); }
 
  private:
-  std::shared_ptr<Projector> projector_;
   std::shared_ptr<VersavisTriggerSource> source_;
 };
 
@@ -325,21 +317,13 @@ class VersavisStartTapProjector : public Projector {
 // projector times until it is done); frames for which no board time comes
 // are dropped and counted (frames_unstamped). Thread-safety as the wrapped
 // camera.
-class VersavisRestampCamera : public Camera {
+class VersavisRestampCamera : public ForwardingCamera {
  public:
   VersavisRestampCamera(std::shared_ptr<Camera> camera,
                         std::shared_ptr<VersavisTriggerSource> source, std::size_t index);
-  std::string id() const override { return camera_->id(); }
-  int width() const override { return camera_->width(); }
-  int height() const override { return camera_->height(); }
-  void start() override { camera_->start(); }
-  void stop() override { camera_->stop(); }
   std::optional<Frame> grab(std::chrono::milliseconds timeout) override;
-  bool hasSoftwareTrigger() const override { return camera_->hasSoftwareTrigger(); }
-  void triggerSoftware() override { camera_->triggerSoftware(); }
 
  private:
-  std::shared_ptr<Camera> camera_;
   std::shared_ptr<VersavisTriggerSource> source_;
   std::size_t index_;
 };
