@@ -276,6 +276,13 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.wait_ms = s.wait_ms;
       info.processing_ms = s.processing_ms;
       info.publish_ms = s.publish_ms;
+      info.requests_rejected = s.requests_rejected;
+      info.clouds_lost_to_readers = s.clouds_lost_to_readers;
+      for (std::uint32_t k = 0; k < s.points_readers._length; ++k) {
+        const auto& r = s.points_readers._buffer[k];
+        info.points_readers.push_back(
+            {r.guid ? r.guid : "", r.reliable, r.acknowledging, r.clouds_lost});
+      }
       latest = info;
     }
     if (!latest) std::this_thread::sleep_for(std::chrono::milliseconds(10));

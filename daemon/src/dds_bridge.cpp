@@ -6,11 +6,10 @@
 #include <cstdio>
 #include <optional>
 #include <string>
-#include <string_view>
 #include <vector>
 
-#include <dds/ddsrt/log.h>
-
+#include "malformed_samples.h"
+#include "reader_acks.h"
 #include "request_dispatch.h"
 #include "ros_messages.h"
 #include "sl/daemon/cloud_layout.h"
@@ -31,39 +30,6 @@ dds::Qos writerQos(const TopicQos& q) {
     qos.bestEffort();
   return qos.keepLast(q.depth).xcdr1();
 }
-
-// Counts the requests Cyclone could not deserialize (an out-of-range enum,
-// a truncated or garbled sample): its receive path drops such a sample
-// before any reader sees it and only logs a warning ("deserialization
-// <topic>/<type> failed"), so the count comes from its log sink, which is
-// process-wide (the last bridge created owns it). Every other message goes
-// to stderr as with Cyclone's default sink; of the dropped requests' lines
-// the first 10 and then every 1000th are printed, so a flood of garbage
-// cannot flood the log.
-class MalformedSampleCounter {
- public:
-  explicit MalformedSampleCounter(std::string type_name) : type_name_(std::move(type_name)) {
-    dds_set_log_sink(&MalformedSampleCounter::sink, this);
-  }
-  ~MalformedSampleCounter() { dds_set_log_sink(nullptr, nullptr); }
-  MalformedSampleCounter(const MalformedSampleCounter&) = delete;
-  MalformedSampleCounter& operator=(const MalformedSampleCounter&) = delete;
-  std::uint64_t count() const { return count_.load(); }
-
- private:
-  static void sink(void* self, const dds_log_data_t* data) {
-    auto* me = static_cast<MalformedSampleCounter*>(self);
-    const std::string_view text(data->message, data->size);
-    if (text.find("deserialization") != std::string_view::npos &&
-        text.find(me->type_name_) != std::string_view::npos) {
-      const std::uint64_t n = ++me->count_;
-      if (n > 10 && n % 1000 != 0) return;
-    }
-    std::fwrite(data->message, 1, data->size, stderr);
-  }
-  const std::string type_name_;
-  std::atomic<std::uint64_t> count_{0};
-};
 
 // Requests act on the scan engine.
 class EngineCommands : public CommandTarget {
@@ -132,13 +98,14 @@ struct DdsBridge::Impl {
         waitset(participant) {
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);
+    if (config.points_qos.reliable) points_acks.emplace(points_writer.handle(), config.points_qos.depth);
   }
 
   const DdsConfig config;
   const FrameIds frame_ids;
   const pipeline::PinholeModel camera;  // of the first camera, for camera_info
   const TopicNames names;
-  MalformedSampleCounter malformed{sl_msgs_msg_CommandRequest_desc.m_typename};  // before any DDS entity
+  MalformedSampleCounter malformed{names.request, sl_msgs_msg_CommandRequest_desc.m_typename};  // before the reader
   dds::Participant participant;
   dds::Topic<PointCloud2> points_topic;
   dds::Topic<Maps> maps_topic;
@@ -161,11 +128,15 @@ struct DdsBridge::Impl {
   dds::ReadCondition request_condition;
   dds::GuardCondition wake;
   dds::WaitSet waitset;
+  // Which readers of the points topic acknowledge, and the clouds each lost
+  // (reliable points only; destroyed before the writer).
+  std::optional<ReaderAckMonitor> points_acks;
   std::atomic<bool> stopping{false};
   std::atomic<double> status_period_s{config.status_period_s};  // reloadable
   std::atomic<std::uint64_t> writes_timed_out{0};
   // Requests: sizes, rate limits, retries, counters (request loop only).
   RequestDispatcher dispatcher{config.requests};
+  std::uint64_t requests_rejected = 0;  // the request reader's sample-rejected count (status thread)
 
   // Publish-thread scratch buffer (metres), reused between clouds.
   std::vector<float> cloud_buffer;
@@ -173,17 +144,27 @@ struct DdsBridge::Impl {
   // two results; it is published once). Publish thread only.
   pipeline::TimestampNs last_set_stamp_ns = -1;
 
-  EdgeCounters edgeCounters() const;
+  EdgeCounters edgeCounters();
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
   void serveRequests(CommandTarget& target);
 };
 
-EdgeCounters DdsBridge::Impl::edgeCounters() const {
+EdgeCounters DdsBridge::Impl::edgeCounters() {
   EdgeCounters c;
   c.requests = dispatcher.counters();
   c.replies_timed_out = dispatcher.repliesTimedOut();
   c.requests_malformed = malformed.count();
   c.writes_timed_out = writes_timed_out.load();
+  // Samples the full request reader refused (reading the status resets its
+  // change count).
+  dds_sample_rejected_status_t rejected{};
+  if (dds_get_sample_rejected_status(request_reader.handle(), &rejected) == DDS_RETCODE_OK)
+    requests_rejected += rejected.total_count_change;
+  c.requests_rejected = requests_rejected;
+  if (points_acks) {
+    c.clouds_lost_to_readers = points_acks->lost();
+    c.points_readers = points_acks->readers();
+  }
   return c;
 }
 
@@ -229,8 +210,10 @@ void DdsBridge::publish(const ScanResult& result) {
     // points are the message's data; else one pass packs them.
     const PackedCloud packed =
         packCloud(*result.cloud, result.cloud_unit_m, d.config.points_layout, d.cloud_buffer);
-    count(d.points_writer.write(
-        CloudMessage(packed, result.cloud->stamp_ns, d.frame_ids.of(result.camera_id)).sample()));
+    const bool written = d.points_writer.write(
+        CloudMessage(packed, result.cloud->stamp_ns, d.frame_ids.of(result.camera_id)).sample());
+    count(written);
+    if (written && d.points_acks) d.points_acks->written();
   }
   // After the cloud, which then does not wait for the set's serialization;
   // a set triangulated by two cameras gives two results and is sent once.

@@ -28,6 +28,7 @@ using CameraInfo = sensor_msgs_msg_dds__CameraInfo_;
 using Request = sl_msgs_msg_CommandRequest;
 using Reply = sl_msgs_msg_CommandReply;
 using Status = sl_msgs_msg_Status;
+using PointsReader = sl_msgs_msg_PointsReader;
 using Maps = sl_msgs_msg_ProjectorMaps;
 using ImageSetMsg = sl_msgs_msg_ImageSet;
 

@@ -229,6 +229,15 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.wait_ms = s.wait_ms;
   msg.processing_ms = s.processing_ms;
   msg.publish_ms = s.publish_ms;
+  msg.requests_rejected = edge.requests_rejected;
+  msg.clouds_lost_to_readers = edge.clouds_lost_to_readers;
+  for (const MatchedReaderState& r : edge.points_readers) reader_guids_.push_back(r.guid);
+  points_readers_.resize(edge.points_readers.size());
+  for (std::size_t i = 0; i < points_readers_.size(); ++i) {
+    const MatchedReaderState& r = edge.points_readers[i];
+    points_readers_[i] = {reader_guids_[i].data(), r.reliable, r.acknowledging, r.lost};
+  }
+  borrow(msg.points_readers, points_readers_.data(), points_readers_.size());
 }
 
 ReplyMessage::ReplyMessage(std::string client_id, std::uint64_t request_id, const CommandResult& result,

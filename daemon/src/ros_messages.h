@@ -21,6 +21,7 @@
 #include <opencv2/core.hpp>
 
 #include "msg_convert.h"
+#include "reader_acks.h"  // MatchedReaderState
 #include "request_guard.h"  // RequestCounters
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/scan_engine.h"  // EngineStatus
@@ -122,6 +123,9 @@ struct EdgeCounters {
   std::uint64_t replies_timed_out = 0;
   std::uint64_t requests_malformed = 0;
   std::uint64_t writes_timed_out = 0;  // also counted in sets_dropped
+  std::uint64_t requests_rejected = 0;       // refusals of the full request reader
+  std::uint64_t clouds_lost_to_readers = 0;  // clouds at least one points reader lost
+  std::vector<MatchedReaderState> points_readers;
 };
 
 sl_msgs_msg_State toState(ScanState s);
@@ -137,6 +141,8 @@ class StatusMessage : NonMovable {
   std::string pattern_, last_error_, recording_, degraded_;
   std::vector<std::string> cameras_, patterns_;
   std::vector<char*> camera_pointers_, pattern_pointers_;
+  std::vector<std::string> reader_guids_;
+  std::vector<PointsReader> points_readers_;
   Status msg_{};
 };
 

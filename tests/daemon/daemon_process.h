@@ -66,28 +66,30 @@ inline std::string writeTestConfig(const std::string& ns, bool publish_maps = fa
   return writeConfigFile(root, ns);
 }
 
-class DaemonProcess {
+// A child process running `args` (args[0]: the binary's path) in the test's
+// environment; killed if still running when destroyed.
+class ChildProcess {
  public:
-  explicit DaemonProcess(const std::string& config_path) {
-    const std::string binary = std::string(SL_BINARY_DIR) + "/daemon/sl_sensord";
-    std::vector<std::string> args = {binary, "--config", config_path};
+  explicit ChildProcess(std::vector<std::string> args) {
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
-    if (posix_spawn(&pid_, binary.c_str(), nullptr, nullptr, argv.data(), environ) != 0)
+    if (posix_spawn(&pid_, args.at(0).c_str(), nullptr, nullptr, argv.data(), environ) != 0)
       pid_ = -1;
   }
-  ~DaemonProcess() {
+  ~ChildProcess() {
     if (pid_ > 0 && !exit_status_) {
       ::kill(pid_, SIGKILL);
       ::waitpid(pid_, nullptr, 0);
     }
   }
+  ChildProcess(const ChildProcess&) = delete;
+  ChildProcess& operator=(const ChildProcess&) = delete;
   bool started() const { return pid_ > 0; }
   void signal(int number) const { ::kill(pid_, number); }
 
   // Sends SIGTERM and waits up to `timeout`; returns the exit status, or
-  // nullopt if the daemon had to be killed.
+  // nullopt if the process had to be killed.
   std::optional<int> terminate(std::chrono::milliseconds timeout) {
     ::kill(pid_, SIGTERM);
     const auto deadline = std::chrono::steady_clock::now() + timeout;
@@ -105,6 +107,13 @@ class DaemonProcess {
  private:
   pid_t pid_ = -1;
   std::optional<int> exit_status_;
+};
+
+// sl_sensord --config config_path.
+class DaemonProcess : public ChildProcess {
+ public:
+  explicit DaemonProcess(const std::string& config_path)
+      : ChildProcess({std::string(SL_BINARY_DIR) + "/daemon/sl_sensord", "--config", config_path}) {}
 };
 
 }  // namespace sl::test

@@ -26,9 +26,12 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <future>
+#include <optional>
 #include <map>
 #include <thread>
 
@@ -867,6 +870,78 @@ TEST_CASE("requests that fail to deserialize are counted, not lost without a tra
   REQUIRE(refused);
   CHECK(refused->code == sl::daemon::CommandResult::Code::kInvalidOption);
   CHECK(refused->reason.find("pattern is 101 bytes, more than 100") != std::string::npos);
+  REQUIRE(daemon.terminate(5s) == 0);
+}
+
+// A reader that stops acknowledging (here a keep-all reader whose history of
+// one cloud is full and that never takes: Cyclone then refuses further
+// clouds and does not acknowledge them) loses every cloud pushed out of the
+// daemon's keep-last history before it acknowledged it; the status lists
+// each matched reader of the points topic, says which one stopped
+// acknowledging and counts its lost clouds. A reader that reads shows 0.
+// Each subscriber has its own process (tests/daemon/points_subscriber.c).
+TEST_CASE("a points reader that stops acknowledging is listed with its lost clouds") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("unacked");
+  // The small rig of the request fuzzer: 64 x 48 clouds at 5 Hz.
+  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("fuzz/data/request_daemon.yaml"));
+  root["dds"]["namespace"] = ns;
+  sl::test::DaemonProcess daemon(sl::test::writeConfigFile(root, ns));
+  REQUIRE(daemon.started());
+  const auto client_owner = connect(ns, /*points=*/false);
+  sl::daemon::SensorClient& client = *client_owner;
+
+  const std::string subscriber = std::string(SL_BINARY_DIR) + "/tests/points_subscriber";
+  const std::string reading_file = "/tmp/sl_test_" + ns + "_reading",
+                    stuck_file = "/tmp/sl_test_" + ns + "_stuck";
+  std::filesystem::remove(reading_file);
+  std::filesystem::remove(stuck_file);
+  sl::test::ChildProcess reading({subscriber, ns, "read", reading_file});
+  sl::test::ChildProcess stuck({subscriber, ns, "stuck", stuck_file});
+  auto guidIn = [](const std::string& path) {
+    std::string guid;
+    for (int i = 0; i < 200 && guid.empty(); ++i) {
+      std::ifstream(path) >> guid;
+      if (guid.empty()) std::this_thread::sleep_for(50ms);
+    }
+    return guid;
+  };
+  const std::string reading_guid = guidIn(reading_file), stuck_guid = guidIn(stuck_file);
+  REQUIRE_FALSE(reading_guid.empty());
+  REQUIRE_FALSE(stuck_guid.empty());
+
+  REQUIRE(client.request(Command::kStart, "", 0, 5s)->accepted);
+  std::optional<sl::daemon::StatusInfo> s;
+  sl::daemon::PointsReaderInfo of_reading, of_stuck;  // as listed in s
+  bool listed_reading = false, listed_stuck = false;
+  const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(30s);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(200ms);
+    s = client.status(1s);
+    if (!s) continue;
+    listed_reading = listed_stuck = false;
+    for (const auto& r : s->points_readers) {
+      if (r.guid == reading_guid) of_reading = r, listed_reading = true;
+      if (r.guid == stuck_guid) of_stuck = r, listed_stuck = true;
+    }
+    if (listed_stuck && of_stuck.clouds_lost >= 10 && s->scans_done >= 20) break;
+  }
+  REQUIRE(s);
+  REQUIRE(listed_reading);
+  REQUIRE(listed_stuck);
+  CHECK(of_stuck.reliable);
+  CHECK_FALSE(of_stuck.acknowledging);
+  CHECK(of_stuck.clouds_lost >= 10);
+  // It got the first cloud only; all others but the last 4 (the writer's
+  // history, which it may yet get) are lost to it, give or take the one or
+  // two clouds published between the status's counts.
+  CHECK(of_stuck.clouds_lost <= s->scans_done);
+  CHECK(of_stuck.clouds_lost + 1 + 4 + 2 >= s->scans_done);
+  CHECK(of_reading.reliable);
+  CHECK(of_reading.acknowledging);
+  CHECK(of_reading.clouds_lost == 0);
+  CHECK(s->clouds_lost_to_readers >= of_stuck.clouds_lost);
+  REQUIRE(client.request(Command::kStop, "", 0, 5s)->accepted);
   REQUIRE(daemon.terminate(5s) == 0);
 }
 

@@ -5,9 +5,9 @@ sl_add_test(test_dds daemon/test_dds.cpp)
 target_link_libraries(test_dds PRIVATE sl_dds sl_idl)
 
 # End to end: sl_sensord in a child process on the simulated sensor.
-sl_add_test(test_e2e daemon/test_e2e.cpp)
+sl_add_test(test_e2e daemon/test_e2e.cpp daemon/test_bridge.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
-add_dependencies(test_e2e sl_sensord malformed_writer)
+add_dependencies(test_e2e sl_sensord malformed_writer points_subscriber)
 
 # A client whose requests the daemon cannot deserialize (test_e2e): a
 # look-alike CommandRequest without type information, enums as int32.
@@ -23,6 +23,11 @@ add_custom_command(
 add_executable(malformed_writer daemon/lookalike/malformed_writer.c ${_lookalike_dir}/CommandRequest.c)
 target_include_directories(malformed_writer PRIVATE ${_lookalike_dir})
 target_link_libraries(malformed_writer PRIVATE CycloneDDS::ddsc)
+
+# A subscriber of the points topic in its own process (test_e2e): one that
+# reads, one that stops reading.
+add_executable(points_subscriber daemon/points_subscriber.c)
+target_link_libraries(points_subscriber PRIVATE sl_idl CycloneDDS::ddsc)
 
 # ScanEngine without DDS: health (feeds the systemd watchdog), requests,
 # software trigger; its stages without threads (start validation, set

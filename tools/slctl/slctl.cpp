@@ -354,7 +354,15 @@ int printStatus(SensorClient& client, const Args& args) {
   std::printf("requests:         %llu (answered %llu, rate-limited %llu, invalid %llu, reply timed out %llu)\n",
               u(s->requests_received), u(s->requests_answered), u(s->requests_rate_limited),
               u(s->requests_invalid), u(s->replies_timed_out));
-  std::printf("requests malformed: %llu\n", u(s->requests_malformed));
+  std::printf("requests malformed: %llu, refused by the full request reader: %llu\n",
+              u(s->requests_malformed), u(s->requests_rejected));
+  std::printf("clouds lost to readers: %llu\n", u(s->clouds_lost_to_readers));
+  for (const auto& r : s->points_readers)
+    std::printf("  points reader %s: %s, %llu clouds lost\n", r.guid.c_str(),
+                !r.reliable          ? "best effort (losses not visible to the daemon)"
+                : r.acknowledging    ? "acknowledging"
+                                     : "NOT acknowledging",
+                u(r.clouds_lost));
   return 0;
 }
 

@@ -29,6 +29,14 @@ struct CommandReplyInfo {
   std::string detail;  // kGetConfig: the daemon's configuration text
 };
 
+// A matched reader of the points topic (sl_msgs/Status.idl PointsReader).
+struct PointsReaderInfo {
+  std::string guid;
+  bool reliable = true;
+  bool acknowledging = true;
+  std::uint64_t clouds_lost = 0;
+};
+
 struct StatusInfo {
   ScanState state = ScanState::kIdle;
   std::string pattern;
@@ -57,6 +65,9 @@ struct StatusInfo {
   std::uint64_t sets_over_quota = 0;
   // [ms] the daemon's latency over its last scans (EngineStatus).
   double latency_ms = 0, latency_max_ms = 0, wait_ms = 0, processing_ms = 0, publish_ms = 0;
+  std::uint64_t requests_rejected = 0;  // refusals of the full request reader
+  std::uint64_t clouds_lost_to_readers = 0;
+  std::vector<PointsReaderInfo> points_readers;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };
