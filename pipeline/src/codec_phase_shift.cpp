@@ -163,6 +163,12 @@ void twoThreeStepRow(const TwoThreeStepParams& p, const std::uint16_t* const* ro
 namespace {
 
 #define SL_AVX512 __attribute__((target("avx512f,avx512bw,avx512vl")))
+// GCC 12's AVX-512 intrinsics start from an undefined register and trip
+// -W(maybe-)uninitialized when inlined (false positives; in sanitizer builds
+// also in the helpers below, up to the pop after twoThreeStepRowAvx512).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 // Each statement of the kernel below over the kLanes vectors in flight.
 #define SL_EACH_LANE _Pragma("GCC unroll 8") for (int j = 0; j < N; ++j)
 
@@ -305,11 +311,6 @@ SL_AVX512 inline void twoThreeStepBlock(const Avx512Constants& c, const Avx512Ro
 
 }  // namespace
 
-// GCC 12's AVX-512 intrinsics start from an undefined register and trip
-// -W(maybe-)uninitialized when inlined (false positives).
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 SL_AVX512 void twoThreeStepRowAvx512(const TwoThreeStepParams& prm, const std::uint8_t* const* rows,
                                      int width, const TwoThreeStepOutput& out) {
   Avx512Constants c;
