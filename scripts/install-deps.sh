@@ -10,6 +10,7 @@ packages=(
   libeigen3-dev
   libopencv-dev
   libyaml-cpp-dev
+  libexpat1-dev   # well-formedness check of XML calibration files before OpenCV parses them
   catch2
   libbenchmark-dev
   libaravis-dev

@@ -6,13 +6,18 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <memory>
+#include <new>
 #include <numbers>
 #include <optional>
 #include <sstream>
+#include <type_traits>
 #include <utility>
 
 
 #include <Eigen/Geometry>
+#include <expat.h>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 
@@ -125,6 +130,21 @@ CalibrationFile loadOwnYaml(const std::string& path) {
   return file;
 }
 
+// Throws ConfigError "<path>:<line>: malformed XML: <expat's reason>" unless
+// `text` is one well-formed XML document. Expat loads no external entities.
+void checkWellFormedXml(const std::string& path, const std::string& text) {
+  const std::unique_ptr<std::remove_pointer_t<XML_Parser>, decltype(&XML_ParserFree)> parser(
+      XML_ParserCreate(nullptr), &XML_ParserFree);
+  if (!parser) throw std::bad_alloc();
+  if (text.size() > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw ConfigError(path + ": too large for an XML calibration file");
+  if (XML_Parse(parser.get(), text.data(), static_cast<int>(text.size()), XML_TRUE) ==
+      XML_STATUS_OK)
+    return;
+  throw ConfigError(path + ":" + std::to_string(XML_GetCurrentLineNumber(parser.get())) +
+                    ": malformed XML: " + XML_ErrorString(XML_GetErrorCode(parser.get())));
+}
+
 // An OpenCV FileStorage file opened for reading, with typed accessors that
 // throw ConfigError naming the file and the key. `expected` describes the
 // file's format in the message for a missing key.
@@ -132,14 +152,21 @@ class StorageReader {
  public:
   StorageReader(const std::string& path, std::string expected)
       : path_(path), expected_(std::move(expected)) {
-    // OpenCV 4.6's XML parser dereferences null on a NUL byte inside a tag
-    // (found by fuzz_calibration); text files never hold one.
+    // OpenCV 4.6's XML parser dereferences null on malformed XML: a NUL byte
+    // inside a tag, a truncated declaration (`<?xml versiveorsn=`), both found
+    // by fuzz_calibration. Text files never hold a NUL byte, and XML (what
+    // starts with '<') reaches OpenCV only once expat found it well-formed.
     {
       std::ifstream in(path, std::ios::binary);
+      std::string text;
       char buffer[4096];
-      while (in.read(buffer, sizeof buffer) || in.gcount() > 0)
+      while (in.read(buffer, sizeof buffer) || in.gcount() > 0) {
         if (std::memchr(buffer, 0, static_cast<std::size_t>(in.gcount())))
           throw ConfigError(path + ": contains a NUL byte, not a text calibration file");
+        text.append(buffer, static_cast<std::size_t>(in.gcount()));
+      }
+      const std::size_t first = text.find_first_not_of(" \t\r\n");
+      if (first != std::string::npos && text[first] == '<') checkWellFormedXml(path, text);
     }
     try {
       fs_.open(path, cv::FileStorage::READ);

@@ -356,6 +356,18 @@ TEST_CASE("calibration files that cannot be used are one clear error") {
   std::remove(bad.c_str());
 }
 
+// OpenCV 4.6's XML parser crashed (SEGV) on these, found by fuzz_calibration:
+// malformed XML is refused, naming file and line, before OpenCV sees it.
+TEST_CASE("malformed XML calibration files are refused before OpenCV parses them") {
+  const std::string path = "/tmp/sl_test_bad_calibration_" + std::to_string(::getpid()) + ".xml";
+  std::ofstream(path) << "<?xml versiveorsn=";  // the fuzzer's 18 bytes
+  CHECK_THROWS_WITH(sl::daemon::loadCalibration(path),
+                    Catch::StartsWith(path + ":1: malformed XML: "));
+  std::ofstream(path) << "<?xml version=\"1.0\"?>\n<opencv_storage>\n<K type_id=\"opencv-matrix\">\n";
+  CHECK_THROWS_WITH(sl::daemon::loadCalibration(path), Catch::Contains(": malformed XML: "));
+  std::remove(path.c_str());
+}
+
 TEST_CASE("sensor: replay needs a readable recording and a calibration file") {
   std::string text = shippedConfig();
   text.replace(text.find("sensor: sim"), 11, "sensor: replay\nreplay: {dir: /nonexistent/rec}");
