@@ -231,6 +231,9 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   edge.replies_timed_out = 3;
   edge.requests_malformed = 4;
   edge.writes_timed_out = 5;
+  edge.requests_rejected = 6;
+  edge.clouds_lost_to_readers = 7;
+  edge.points_readers = {{"1:2:3:4", true, false, 7}, {"5:6:7:8", false, true, 0}};
   const msg::StatusMessage message(s, {"a", "b", "c"}, edge, kStamp + 1);
   const msg::Status& m = message.sample();
   CHECK(m.state == sl_msgs_msg_STATE_DEGRADED);
@@ -248,6 +251,15 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK(m.requests_rate_limited == 1);
   CHECK(m.replies_timed_out == 3);
   CHECK(m.requests_malformed == 4);
+  CHECK(m.requests_rejected == 6);
+  CHECK(m.clouds_lost_to_readers == 7);
+  REQUIRE(m.points_readers._length == 2);
+  CHECK(str(m.points_readers._buffer[0].guid) == "1:2:3:4");
+  CHECK(m.points_readers._buffer[0].reliable);
+  CHECK_FALSE(m.points_readers._buffer[0].acknowledging);
+  CHECK(m.points_readers._buffer[0].clouds_lost == 7);
+  CHECK(str(m.points_readers._buffer[1].guid) == "5:6:7:8");
+  CHECK_FALSE(m.points_readers._buffer[1].reliable);
   CHECK(m.stamp.nanosec == 250'000'001u);
   CHECK(m.last_error_stamp.sec == 1'700'000'001);
   CHECK(msg::toState(ScanState::kIdle) == sl_msgs_msg_STATE_IDLE);

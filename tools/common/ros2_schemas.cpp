@@ -47,7 +47,11 @@ const std::map<std::string, std::string>& fieldLists() {
        "uint64 replies_timed_out\nstring degraded_reason\nbuiltin_interfaces/Time last_error_stamp\n"
        "uint64 errors_reported\nuint64 requests_malformed\nuint64 sets_over_quota\n"
        "float64 latency_ms\nfloat64 latency_max_ms\nfloat64 wait_ms\nfloat64 processing_ms\n"
-       "float64 publish_ms\n"},
+       "float64 publish_ms\n"
+       "uint64 requests_rejected\nuint64 clouds_lost_to_readers\n"
+       "sl_msgs/PointsReader[] points_readers\n"},
+      {"sl_msgs/PointsReader",
+       "string guid\nbool reliable\nbool acknowledging\nuint64 clouds_lost\n"},
       {"sl_msgs/ImageSet",
        "std_msgs/Header header\nstring pattern\nuint64 sequence_id\nuint32 camera_count\n"
        "string[] camera_ids\nuint8[] bit_depths\nsensor_msgs/Image[] images\n"},
