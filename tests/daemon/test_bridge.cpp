@@ -41,7 +41,8 @@ struct InProcessDaemon {
     bridge = std::make_unique<sl::daemon::DdsBridge>(config.dds, devices.cameras.front()->id(),
                                                      config.calibration.camera);
     engine = std::make_unique<sl::daemon::ScanEngine>(
-        config, std::move(devices), [this](const sl::daemon::ScanResult& r) { bridge->publish(r); });
+        config, std::move(devices), [this](const sl::daemon::ScanResult& r) { bridge->publish(r); },
+        bridge->resultContents());
   }
   void serve() {
     server = std::thread([this] { bridge->serve(*engine); });
