@@ -30,6 +30,7 @@ packages=(
   # MCAP chunk compression; Node.js + npm for the web page's three.js and the
   # wire-format / browser tests; Chromium for the headless page test.
   libwebsocketpp-dev libboost-dev libboost-system-dev libjsoncpp-dev libzstd-dev liblz4-dev
+  zlib1g-dev   # CRC-32 of MCAP records (sl_view record, MCAP replay)
   nodejs chromium
   # DDS Security material (scripts/dds-security.sh, test dds_security); the
   # plugins themselves come with libddsc0debian (cyclonedds-dev's dependency).

@@ -1,6 +1,7 @@
 #include "mcap_writer.h"
 
 #include <lz4frame.h>
+#include <zlib.h>
 #include <zstd.h>
 
 #include <array>
@@ -39,26 +40,12 @@ std::string record(std::uint8_t op, const std::string& body) {
   return r;
 }
 
-const std::array<std::uint32_t, 256>& crcTable() {
-  static const auto table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t i = 0; i < 256; ++i) {
-      std::uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[i] = c;
-    }
-    return t;
-  }();
-  return table;
-}
 
 }  // namespace
 
 std::uint32_t crc32(std::string_view bytes, std::uint32_t crc) {
-  const auto& t = crcTable();
-  crc = ~crc;
-  for (unsigned char b : bytes) crc = t[(crc ^ b) & 0xFF] ^ (crc >> 8);
-  return ~crc;
+  // zlib's CRC-32 (IEEE 802.3, as MCAP uses), continued from `crc`.
+  return static_cast<std::uint32_t>(::crc32_z(crc, reinterpret_cast<const Bytef*>(bytes.data()), bytes.size()));
 }
 
 McapWriter::McapWriter(const std::string& path, const McapWriterOptions& options)

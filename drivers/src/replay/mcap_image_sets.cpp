@@ -10,6 +10,7 @@
 
 #include <lz4frame.h>
 #include <opencv2/core.hpp>
+#include <zlib.h>
 #include <zstd.h>
 
 namespace sl::drivers {
@@ -40,20 +41,9 @@ const char* opName(std::uint8_t op) {
   }
 }
 
-// CRC-32 (IEEE 802.3, as zlib and MCAP use).
+// CRC-32 (IEEE 802.3), as MCAP uses: zlib's.
 std::uint32_t crc32(std::string_view bytes) {
-  static const std::array<std::uint32_t, 256> table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t i = 0; i < 256; ++i) {
-      std::uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[i] = c;
-    }
-    return t;
-  }();
-  std::uint32_t crc = 0xFFFFFFFFu;
-  for (unsigned char b : bytes) crc = table[(crc ^ b) & 0xFF] ^ (crc >> 8);
-  return ~crc;
+  return static_cast<std::uint32_t>(::crc32_z(0L, reinterpret_cast<const Bytef*>(bytes.data()), bytes.size()));
 }
 
 // Little-endian fields of an MCAP record body, bounds-checked; errors name
