@@ -95,35 +95,10 @@ drivers::SimHeightField makeWall() {
   return f;
 }
 
-// The height field as a triangle mesh (two triangles per cell, scene frame):
-// the simulator ray-casts meshes through a bounding volume hierarchy, several
-// times faster than marching a height field this large. Its triangles lie
-// within 0.001 mm of the bilinear surface surfaceDistance() measures against.
-drivers::SimMesh meshOf(const drivers::SimHeightField& f) {
-  drivers::SimMesh mesh;
-  const Eigen::Vector3d n = f.normal.normalized();
-  const Eigen::Vector3d x = (f.x_axis - n * n.dot(f.x_axis)).normalized();
-  const Eigen::Vector3d y = n.cross(x);
-  const cv::Mat& h = f.heights_mm;
-  for (int r = 0; r < h.rows; ++r)
-    for (int c = 0; c < h.cols; ++c) {
-      const Eigen::Vector3d p = f.origin + x * (-f.width_mm / 2 + c * f.cell_mm) +
-                                y * (-f.length_mm / 2 + r * f.cell_mm) + n * double(h.at<float>(r, c));
-      mesh.vertices.push_back(p.cast<float>());
-    }
-  for (int r = 0; r + 1 < h.rows; ++r)
-    for (int c = 0; c + 1 < h.cols; ++c) {
-      const std::int32_t i = r * h.cols + c;
-      mesh.triangles.push_back({i, i + 1, i + h.cols});
-      mesh.triangles.push_back({i + 1, i + h.cols + 1, i + h.cols});
-    }
-  mesh.albedo = f.albedo;
-  return mesh;
-}
-
 // Signed distance (mm) of a scene point from the height field's surface
 // (positive towards the sensor), to first order in the surface slope:
-// (h - H(a, b)) / sqrt(1 + |grad H|^2), H bilinear as the simulator renders it.
+// (h - H(a, b)) / sqrt(1 + |grad H|^2), H bilinear as the simulator renders
+// it (its height-field ray casting is exact on the bilinear surface).
 // NaN outside the field.
 double surfaceDistance(const drivers::SimHeightField& f, const Eigen::Vector3d& p) {
   const Eigen::Vector3d n = f.normal.normalized();
@@ -210,7 +185,7 @@ EvalResult runWall(const EvalOptions& in) {
   daemon::DaemonConfig config = daemon::loadConfig(std::string(SL_CONFIG_DIR) + "/sim-motion.yaml");
   const drivers::SimHeightField wall = makeWall();
   config.sim.scene = {};
-  config.sim.scene.meshes.push_back(meshOf(wall));
+  config.sim.scene.height_fields.push_back(wall);
   config.sim.motion = {};
   config.sim.projector_gamma = options.projector_gamma;
   // The simulated cameras render a moving view in tens of ms per image (more
@@ -478,7 +453,7 @@ EvalResult runWall(const EvalOptions& in) {
      << fmt(spacing / (kSpeedMmS / kScanRateHz), 0) << "th scan of the 5 Hz stream at "
      << kSpeedMmS << " mm/s), wall " << kWallDistance
      << " mm away with plaster relief (bumps 1.2 mm RMS, ridges 0.6 mm, roughness 0.05 mm; "
-        "1 mm cells as a triangle mesh)\n\n";
+        "a height field of 1 mm cells)\n\n";
   md << "Signed distances (mm) of the registered scans' points (every " << kSubsample
      << "rd pixel) to the simulator's exact surface, the first scan held at its true pose; drift = "
         "error of the last scan's pose relative to the pass's first (merged: to the first scan "

@@ -214,83 +214,157 @@ void intersectBox(const SimBox& box, const Eigen::Vector3d& origin,
   keepNearest(best, s_far, min_s, max_s, faceNormal(axis_far, s_far), box.albedo, &box);
 }
 
-// Height at local in-plane coordinates (a, b), bilinear; and its gradient.
-double heightAt(const SceneGeometry::HeightFieldFrame& f, double a, double b,
-                Eigen::Vector2d* gradient = nullptr) {
-  const cv::Mat& h = f.field->heights_mm;
-  const double cell = f.field->cell_mm;
-  const double x = std::clamp((a - f.a0) / cell, 0.0, double(h.cols - 1));
-  const double y = std::clamp((b - f.b0) / cell, 0.0, double(h.rows - 1));
-  const int x0 = std::min(int(x), h.cols - 2), y0 = std::min(int(y), h.rows - 2);
-  const double fx = x - x0, fy = y - y0;
-  const float* r0 = h.ptr<float>(y0);
-  const float* r1 = h.ptr<float>(y0 + 1);
-  const double h00 = r0[x0], h01 = r0[x0 + 1], h10 = r1[x0], h11 = r1[x0 + 1];
-  if (gradient) {
-    *gradient = Eigen::Vector2d(((1 - fy) * (h01 - h00) + fy * (h11 - h10)) / cell,
-                                ((1 - fx) * (h10 - h00) + fx * (h11 - h01)) / cell);
+// Walks the cells of a grid (square cells of `size` mm, [0, nx) x [0, ny),
+// corner at local coordinates (0, 0)) that the segment (oa + s da, ob + s db),
+// s in [s0, s1], crosses, in the order of s (Amanatides-Woo). Calls
+// visit(ix, iy, enter, leave) with each cell's sub-interval of s; stops early
+// and returns true when visit does. The segment is expected to lie in the
+// grid; indices are clamped against rounding at its rim.
+template <typename Visit>
+bool walkGrid(double oa, double ob, double da, double db, double s0, double s1, double size,
+              int nx, int ny, const Visit& visit) {
+  const double inf = std::numeric_limits<double>::infinity();
+  int ix = std::clamp(static_cast<int>(std::floor((oa + s0 * da) / size)), 0, nx - 1);
+  int iy = std::clamp(static_cast<int>(std::floor((ob + s0 * db) / size)), 0, ny - 1);
+  const int step_x = da > 0 ? 1 : (da < 0 ? -1 : 0);
+  const int step_y = db > 0 ? 1 : (db < 0 ? -1 : 0);
+  // s where the ray leaves cell index i along one axis.
+  auto leaving = [&](int i, int step, double o, double d) {
+    if (step == 0) return inf;
+    return ((step > 0 ? i + 1 : i) * size - o) / d;
+  };
+  double s = s0;
+  for (;;) {
+    const double sx = leaving(ix, step_x, oa, da), sy = leaving(iy, step_y, ob, db);
+    const double leave = std::max(s, std::min({sx, sy, s1}));
+    if (visit(ix, iy, s, leave)) return true;
+    if (leave >= s1) return false;
+    if (sx <= sy)
+      ix += step_x;
+    else
+      iy += step_y;
+    if (ix < 0 || ix >= nx || iy < 0 || iy >= ny) return false;
+    s = leave;
   }
-  return (1 - fy) * ((1 - fx) * h00 + fx * h01) + fy * ((1 - fx) * h10 + fx * h11);
 }
 
-// Marches the ray through the height field's bounding slab in steps of half
-// a cell and refines the first crossing from above to below by bisection.
+// The first s in [s0, s1] where the ray goes from above the bilinear patch of
+// cell (ix, iy) to on or below it, or a negative number. Local coordinates:
+// a, b in mm from sample (0, 0), h along the normal; the ray is
+// (oa, ob, oh) + s (da, db, dh). Along the ray the patch height is quadratic
+// in s and the ray's height linear, so the crossing is a root of a quadratic
+// (exact, no marching).
+double patchCrossing(const cv::Mat& heights, double cell, int ix, int iy, double oa, double ob,
+                     double oh, double da, double db, double dh, double s0, double s1) {
+  const float* r0 = heights.ptr<float>(iy);
+  const float* r1 = heights.ptr<float>(iy + 1);
+  const double h00 = r0[ix], h01 = r0[ix + 1], h10 = r1[ix], h11 = r1[ix + 1];
+  const double z0 = oh + s0 * dh, z1 = oh + s1 * dh;
+  // The patch lies within its corners' range.
+  const double lo = std::min(std::min(h00, h01), std::min(h10, h11));
+  const double hi = std::max(std::max(h00, h01), std::max(h10, h11));
+  if (std::min(z0, z1) > hi + 1e-9 || std::max(z0, z1) < lo - 1e-9) return -1;
+  // Cell coordinates (0..1) at s0 and their rates; f(t) = ray height minus
+  // patch height at s0 + t: alpha + beta t + gamma t^2.
+  const double px = (oa + s0 * da) / cell - ix, py = (ob + s0 * db) / cell - iy;
+  const double qx = da / cell, qy = db / cell;
+  const double gx = h01 - h00, gy = h10 - h00, k = h00 - h01 - h10 + h11;
+  const double alpha = z0 - (h00 + gx * px + gy * py + k * px * py);
+  const double beta = dh - (gx * qx + gy * qy + k * (px * qy + py * qx));
+  const double gamma = -k * qx * qy;
+  const double span = s1 - s0;
+  // Roots a hair outside [0, span] are taken (and clamped): a crossing on a
+  // cell boundary must not fall between two cells by rounding.
+  const double eps = 1e-9 * (1.0 + std::abs(s1));
+  double roots[2];
+  int count = 0;
+  if (std::abs(gamma) * span * span <= 1e-14 * (std::abs(alpha) + std::abs(beta) * span)) {
+    if (beta != 0.0) roots[count++] = -alpha / beta;
+  } else {
+    const double discriminant = beta * beta - 4.0 * gamma * alpha;
+    if (discriminant < 0.0) return -1;
+    const double q = -0.5 * (beta + std::copysign(std::sqrt(discriminant), beta));
+    roots[count++] = q / gamma;
+    if (q != 0.0) roots[count++] = alpha / q;
+    if (count == 2 && roots[1] < roots[0]) std::swap(roots[0], roots[1]);
+  }
+  for (int i = 0; i < count; ++i) {
+    const double t = roots[i];
+    if (!(t >= -eps && t <= span + eps)) continue;
+    // Downwards: f falls through zero (a tangent touch or an upward crossing
+    // is no entry into the surface).
+    if (beta + 2.0 * gamma * t < 0.0) return s0 + std::clamp(t, 0.0, span);
+  }
+  return -1;
+}
+
+// The ray's first crossing from above the height field to on or below it
+// (bilinear surface, only its top side exists): clipped to the field's
+// slab and rectangle, walked tile by tile, each tile's part of the ray
+// clipped to the tile's height range and walked cell by cell, each cell
+// solved exactly (patchCrossing).
 void intersectHeightField(const SceneGeometry::HeightFieldFrame& f, const Eigen::Vector3d& origin,
                           const Eigen::Vector3d& direction, double min_s, double max_s,
                           std::optional<SurfaceHit>& best) {
   const SimHeightField& field = *f.field;
+  const cv::Mat& heights = field.heights_mm;
   const Eigen::Vector3d o = origin - f.origin;
-  const double oa = o.dot(f.x), ob = o.dot(f.y), oh = o.dot(f.n);
+  // Local coordinates from sample (0, 0).
+  const double oa = o.dot(f.x) - f.a0, ob = o.dot(f.y) - f.b0, oh = o.dot(f.n);
   const double da = direction.dot(f.x), db = direction.dot(f.y), dh = direction.dot(f.n);
   double s_lo = min_s, s_hi = best ? std::min(max_s, best->distance) : max_s;
-  const double margin = 1e-6;
-  auto clip = [&](double value, double rate, double lo, double hi) {
+  // Restricts [s_lo, s_hi] to value + s * rate in [lo, hi].
+  auto clip = [](double value, double rate, double lo, double hi, double& from, double& to) {
     if (std::abs(rate) < 1e-15) {
-      if (value < lo || value > hi) s_lo = s_hi + 1;  // empty
+      if (value < lo || value > hi) to = from - 1;  // empty
       return;
     }
     double s1 = (lo - value) / rate, s2 = (hi - value) / rate;
     if (s1 > s2) std::swap(s1, s2);
-    s_lo = std::max(s_lo, s1);
-    s_hi = std::min(s_hi, s2);
+    from = std::max(from, s1);
+    to = std::min(to, s2);
   };
-  clip(oh, dh, f.min_height - margin, f.max_height + margin);
-  clip(oa, da, f.a0, f.a0 + field.width_mm);
-  clip(ob, db, f.b0, f.b0 + field.length_mm);
+  const double margin = 1e-6;
+  clip(oh, dh, f.min_height - margin, f.max_height + margin, s_lo, s_hi);
+  clip(oa, da, 0.0, f.extent_a, s_lo, s_hi);
+  clip(ob, db, 0.0, f.extent_b, s_lo, s_hi);
   if (!(s_lo <= s_hi)) return;
-  auto above = [&](double s) { return oh + s * dh - heightAt(f, oa + s * da, ob + s * db); };
-  const double speed = std::hypot(da, db);
-  double ds = speed > 0 ? 0.5 * field.cell_mm / speed : s_hi - s_lo;
-  ds = std::max(ds, (s_hi - s_lo) / 1e5);
-  double prev_s = s_lo, prev_f = above(s_lo);
-  while (prev_s < s_hi) {
-    const double s = std::min(prev_s + ds, s_hi);
-    const double fs = above(s);
-    if (prev_f > 0 && fs <= 0) {
-      double lo = prev_s, hi = s;
-      for (int k = 0; k < 40 && hi - lo > 1e-9 * (1 + hi); ++k) {
-        const double mid = 0.5 * (lo + hi);
-        (above(mid) > 0 ? lo : hi) = mid;
-      }
-      const double hit = 0.5 * (lo + hi);
-      Eigen::Vector2d g;
-      heightAt(f, oa + hit * da, ob + hit * db, &g);
-      const Eigen::Vector3d normal = (f.n - g.x() * f.x - g.y() * f.y).normalized();
-      double albedo = field.albedo;
-      if (!field.albedo_texture.empty()) {
-        // Texture columns span the width, rows the length (as the heights).
-        const cv::Mat& t = field.albedo_texture;
-        const double x = (oa + hit * da - f.a0) / field.width_mm * (t.cols - 1);
-        const double y = (ob + hit * db - f.b0) / field.length_mm * (t.rows - 1);
-        albedo = sampleTexture(t, x, y, field.albedo);
-      }
-      keepNearest(best, hit, min_s, max_s, normal, albedo, &field, nullptr,
-                  !field.albedo_texture.empty());
-      return;
-    }
-    prev_s = s;
-    prev_f = fs;
+  const double cell = field.cell_mm;
+  const int cells_x = heights.cols - 1, cells_y = heights.rows - 1;
+  constexpr int kTile = SceneGeometry::kHeightFieldTile;
+  double hit = -1;
+  walkGrid(oa, ob, da, db, s_lo, s_hi, kTile * cell, f.tiles_x, f.tiles_y,
+           [&](int tx, int ty, double t0, double t1) {
+             const std::size_t tile = static_cast<std::size_t>(ty) * f.tiles_x + tx;
+             clip(oh, dh, f.tile_min[tile] - margin, f.tile_max[tile] + margin, t0, t1);
+             if (!(t0 <= t1)) return false;
+             return walkGrid(oa, ob, da, db, t0, t1, cell, cells_x, cells_y,
+                             [&](int ix, int iy, double c0, double c1) {
+                               hit = patchCrossing(heights, cell, ix, iy, oa, ob, oh, da, db, dh,
+                                                   c0, c1);
+                               return hit >= 0;
+                             });
+           });
+  if (hit < 0) return;
+  const double a = oa + hit * da, b = ob + hit * db;
+  const int ix = std::clamp(static_cast<int>(std::floor(a / cell)), 0, cells_x - 1);
+  const int iy = std::clamp(static_cast<int>(std::floor(b / cell)), 0, cells_y - 1);
+  const double fx = std::clamp(a / cell - ix, 0.0, 1.0), fy = std::clamp(b / cell - iy, 0.0, 1.0);
+  const float* r0 = heights.ptr<float>(iy);
+  const float* r1 = heights.ptr<float>(iy + 1);
+  const double h00 = r0[ix], h01 = r0[ix + 1], h10 = r1[ix], h11 = r1[ix + 1];
+  const double grad_a = ((1 - fy) * (h01 - h00) + fy * (h11 - h10)) / cell;
+  const double grad_b = ((1 - fx) * (h10 - h00) + fx * (h11 - h01)) / cell;
+  const Eigen::Vector3d normal = (f.n - grad_a * f.x - grad_b * f.y).normalized();
+  double albedo = field.albedo;
+  if (!field.albedo_texture.empty()) {
+    // Texture columns span the width, rows the length (as the heights).
+    const cv::Mat& t = field.albedo_texture;
+    albedo = sampleTexture(t, a / field.width_mm * (t.cols - 1), b / field.length_mm * (t.rows - 1),
+                           field.albedo);
   }
+  keepNearest(best, hit, min_s, max_s, normal, albedo, &field, nullptr,
+              !field.albedo_texture.empty());
 }
 
 }  // namespace
@@ -322,10 +396,30 @@ SceneGeometry::SceneGeometry(const SimScene& scene) : scene_(scene) {
     f.origin = field.origin;
     f.a0 = -0.5 * field.width_mm;
     f.b0 = -0.5 * field.length_mm;
+    const cv::Mat& h = field.heights_mm;
+    // The surface spans the samples (a width that is not a whole number of
+    // cells ends at the last sample, or inside the last cell).
+    f.extent_a = std::min(field.width_mm, (h.cols - 1) * field.cell_mm);
+    f.extent_b = std::min(field.length_mm, (h.rows - 1) * field.cell_mm);
     double lo = 0, hi = 0;
-    cv::minMaxLoc(field.heights_mm, &lo, &hi);
+    cv::minMaxLoc(h, &lo, &hi);
     f.min_height = static_cast<float>(lo);
     f.max_height = static_cast<float>(hi);
+    // Tile ranges over the samples of each tile's cells (shared edges included).
+    f.tiles_x = (h.cols - 1 + kHeightFieldTile - 1) / kHeightFieldTile;
+    f.tiles_y = (h.rows - 1 + kHeightFieldTile - 1) / kHeightFieldTile;
+    f.tile_min.assign(static_cast<std::size_t>(f.tiles_x) * f.tiles_y, 0.0f);
+    f.tile_max.assign(f.tile_min.size(), 0.0f);
+    for (int ty = 0; ty < f.tiles_y; ++ty)
+      for (int tx = 0; tx < f.tiles_x; ++tx) {
+        const int c0 = tx * kHeightFieldTile, r0 = ty * kHeightFieldTile;
+        const int c1 = std::min(c0 + kHeightFieldTile, h.cols - 1);
+        const int r1 = std::min(r0 + kHeightFieldTile, h.rows - 1);
+        cv::minMaxLoc(h(cv::Range(r0, r1 + 1), cv::Range(c0, c1 + 1)), &lo, &hi);
+        const std::size_t i = static_cast<std::size_t>(ty) * f.tiles_x + tx;
+        f.tile_min[i] = static_cast<float>(lo);
+        f.tile_max[i] = static_cast<float>(hi);
+      }
     height_fields_.push_back(f);
   }
   for (const SimMesh& mesh : scene.meshes) meshes_.emplace_back(mesh);

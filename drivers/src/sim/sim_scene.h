@@ -40,12 +40,20 @@ class SceneGeometry {
 
   const SimScene& scene() const { return scene_; }
 
+  // A height field prepared for exact ray casting: its frame, and the
+  // height range of every tile of kHeightFieldTile x kHeightFieldTile cells
+  // (a bound of the bilinear surface over the tile), so that a ray skips
+  // whole tiles it passes above or below.
   struct HeightFieldFrame {
     const SimHeightField* field;
     Eigen::Vector3d origin, x, y, n;  // n = normal, x, y in-plane (unit)
     double a0, b0;                    // local coordinates of sample (0, 0)
+    double extent_a, extent_b;        // mm from sample (0, 0) covered by the surface
     float min_height, max_height;     // mm
+    int tiles_x = 0, tiles_y = 0;
+    std::vector<float> tile_min, tile_max;  // mm, row-major (tiles_y x tiles_x)
   };
+  static constexpr int kHeightFieldTile = 8;  // cells per tile side
   struct PlaneTextureFrame {
     Eigen::Vector3d corner, x, y;  // image corner (-x, -y side) on the plane, unit axes
     double mm_per_px;              // image pixel size on the plane
