@@ -203,6 +203,9 @@ void parseMotion(const YamlMap& m, MotionConfig& motion) {
     m.fail("subsample", "must be 1, 2 or 4");
   o.window = m.get<bool>("window", o.window);
   o.max_shift_px = positive(m, "max_shift_px", o.max_shift_px);
+  o.max_deviation_px = m.get<double>("max_deviation_px", o.max_deviation_px);
+  if (!(o.max_deviation_px >= 0 && o.max_deviation_px <= 1000))
+    m.fail("max_deviation_px", "must be in [0, 1000] px (0: no consistency check)");
   m.done();
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <vector>
 
@@ -50,7 +51,7 @@ MotionCompensator::MotionCompensator(MotionCompensationOptions options) : option
     throw std::invalid_argument("motion compensation: max_shift_px must be > 0");
 }
 
-double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat& moving) const {
+cv::Mat MotionCompensator::correlate(const cv::Mat& reference, const cv::Mat& moving) const {
   if (reference.size() != moving.size() || reference.empty())
     throw std::invalid_argument("motion compensation: images differ in size or are empty");
   const bool transpose = options_.axis == MotionCompensationOptions::Axis::kY;
@@ -116,28 +117,64 @@ double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat&
   }
   cv::Mat correlation;
   cv::idft(line, correlation, cv::DFT_REAL_OUTPUT | cv::DFT_SCALE);
+  return correlation;
+}
+
+namespace {
+
+// The correlation's maximum over the shifts [first, last] (subsampled px,
+// first <= last, the line circular), refined to sub-pixel by a parabola
+// through it and its neighbours. A maximum on an end of the range is no peak
+// (the correlation may still rise beyond it): `edge` is then -1 or +1 (the
+// end) and the shift NaN; unless the range covers the whole line.
+struct Peak {
+  double shift = std::numeric_limits<double>::quiet_NaN();
+  int edge = 0;
+};
+
+Peak peakWithin(const cv::Mat& correlation, int first, int last) {
   const auto* c = correlation.ptr<float>(0);
-  // The peak is searched only within +-max_shift_px: a far-away false peak
-  // (measured with the Hann window on unit-frequency frames: +620 px against a
-  // true -9.3 px) cannot win.
-  const int reach = std::min(cols / 2, static_cast<int>(std::ceil(options_.max_shift_px / factor)));
-  int best = 0, best_d = 0;
-  for (int d = -reach; d <= reach; ++d) {
-    const int x = (d + cols) % cols;
-    if (c[x] > c[best]) best = x, best_d = d;
+  const int cols = correlation.cols;
+  auto at = [&](int d) { return c[((d % cols) + cols) % cols]; };
+  int best = first;
+  for (int d = first; d <= last; ++d)
+    if (at(d) > at(best)) best = d;
+  Peak peak;
+  if (last - first + 1 < cols && (best == first || best == last)) {
+    peak.edge = best == first ? -1 : 1;
+    return peak;
   }
-  // A maximum on the edge of the search range is no peak (the correlation
-  // still rises beyond it): reported as beyond the limit.
-  if (std::abs(best_d) == reach && reach < cols / 2)
-    return std::copysign(options_.max_shift_px + factor, double(best_d));
-  // Sub-pixel: parabola through the peak and its neighbours (circular).
-  const float left = c[(best + cols - 1) % cols], right = c[(best + 1) % cols];
-  const float denominator = left - 2 * c[best] + right;
+  const float left = at(best - 1), right = at(best + 1), centre = at(best);
+  const float denominator = left - 2 * centre + right;
   double offset = denominator != 0 ? 0.5 * (left - right) / denominator : 0.0;
   offset = std::clamp(offset, -0.5, 0.5);
-  double shift = best + offset;
-  if (shift > cols / 2.0) shift -= cols;  // circular: negative shifts
-  return shift * factor;
+  peak.shift = best + offset;
+  return peak;
+}
+
+}  // namespace
+
+double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat& moving) const {
+  const cv::Mat correlation = correlate(reference, moving);
+  const int cols = correlation.cols, factor = options_.subsample;
+  // The peak is searched only within +-max_shift_px: a far-away false peak
+  // (measured with the Hann window on unit-frequency frames: +620 px against a
+  // true -9.3 px) cannot win. A maximum on the edge of the search range is
+  // reported as beyond the limit.
+  const int reach = std::min(cols / 2, static_cast<int>(std::ceil(options_.max_shift_px / factor)));
+  const int last = 2 * reach + 1 > cols ? cols - 1 - reach : reach;  // each shift once
+  const Peak peak = peakWithin(correlation, -reach, last);
+  if (peak.edge != 0) return peak.edge * (options_.max_shift_px + factor);
+  return peak.shift * factor;
+}
+
+double MotionCompensator::estimateShiftWithin(const cv::Mat& reference, const cv::Mat& moving,
+                                              double from_px, double to_px) const {
+  const cv::Mat correlation = correlate(reference, moving);
+  const int factor = options_.subsample;
+  const int first = static_cast<int>(std::ceil(from_px / factor));
+  const int last = std::max(first, static_cast<int>(std::floor(to_px / factor)));
+  return peakWithin(correlation, first, last).shift * factor;
 }
 
 std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& set,
@@ -148,6 +185,7 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
   MotionEstimate local;
   MotionEstimate& result = estimate ? *estimate : local;
   result = {};
+  const bool along_x = options_.axis == MotionCompensationOptions::Axis::kX;
   for (CameraImages& camera : out->cameras) {
     const int n = static_cast<int>(camera.frames.size());
     const int ref = options_.reference_frame < 0 ? n / 2 : options_.reference_frame;
@@ -155,45 +193,86 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
       throw std::invalid_argument("motion compensation: reference frame " + std::to_string(ref) +
                                   " but the sequence has " + std::to_string(n) + " frames");
     std::vector<double> shifts(n, 0.0);
+    std::vector<bool> within(n, true), corrected(n, false), resampled(n, false);
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
-      double shift = estimateShift(camera.frames[ref], camera.frames[i]);
-      if (std::abs(shift) > options_.max_shift_px) {
-        result.all_within_limit = false;
-        shift = 0;
+      shifts[i] = estimateShift(camera.frames[ref], camera.frames[i]);
+      within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
+    }
+    // Consistency along the sequence (see the options): the speed is the
+    // median over the frames, so that one or two false peaks do not move it.
+    const bool stamped = static_cast<int>(camera.stamps_ns.size()) == n;
+    auto time = [&](int i) {
+      return stamped ? double(camera.stamps_ns[i] - camera.stamps_ns[ref]) : double(i - ref);
+    };
+    std::vector<double> rates;
+    for (int i = 0; i < n; ++i)
+      if (i != ref && within[i] && time(i) != 0) rates.push_back(shifts[i] / time(i));
+    if (options_.max_deviation_px > 0 && rates.size() >= 3) {
+      std::nth_element(rates.begin(), rates.begin() + rates.size() / 2, rates.end());
+      double rate = rates[rates.size() / 2];
+      if (rates.size() % 2 == 0) {
+        const double below = *std::max_element(rates.begin(), rates.begin() + rates.size() / 2);
+        rate = 0.5 * (rate + below);
       }
-      shifts[i] = shift;
+      for (int i = 0; i < n; ++i) {
+        if (i == ref) continue;
+        const double predicted = rate * time(i);
+        const double band =
+            std::max(options_.max_deviation_px, options_.max_deviation_fraction * std::abs(predicted));
+        if (within[i] && std::abs(shifts[i] - predicted) <= band) continue;
+        const double again =
+            estimateShiftWithin(camera.frames[ref], camera.frames[i], predicted - band, predicted + band);
+        shifts[i] = std::isnan(again) ? predicted : again;
+        within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
+        corrected[i] = true;
+        ++result.frames_corrected;
+      }
+    }
+    // [from, to) along the axis: the pixels some frame lacks (its source lies
+    // even partly outside the frame).
+    const int length = along_x ? camera.frames[ref].cols : camera.frames[ref].rows;
+    int lacking_before = 0, lacking_from = length;
+    for (int i = 0; i < n; ++i) {
+      if (i == ref) continue;
+      if (!within[i]) {
+        result.all_within_limit = false;
+        shifts[i] = 0;
+        continue;
+      }
+      const double shift = shifts[i];
       // Move frame i's content back onto the reference: translate by -shift.
       cv::Mat m = cv::Mat::zeros(2, 3, CV_64F);
       m.at<double>(0, 0) = m.at<double>(1, 1) = 1;
-      (options_.axis == MotionCompensationOptions::Axis::kX ? m.at<double>(0, 2)
-                                                            : m.at<double>(1, 2)) = -shift;
+      (along_x ? m.at<double>(0, 2) : m.at<double>(1, 2)) = -shift;
       cv::Mat aligned;
       cv::warpAffine(camera.frames[i], aligned, m, camera.frames[i].size(), cv::INTER_LINEAR,
                      cv::BORDER_CONSTANT, cv::Scalar(0));
-      // Pixels whose source lies even partly outside the frame (bilinear
-      // blends of an edge pixel with the border's 0) are set to 0 as well:
-      // dimmed, they would decode to a wrong phase instead of an invalid one.
-      const bool along_x = options_.axis == MotionCompensationOptions::Axis::kX;
-      const int length = along_x ? aligned.cols : aligned.rows;
-      int from = 0, to = 0;  // [from, to) along the axis is zeroed
-      if (shift < 0) {
-        to = std::min(length, static_cast<int>(std::ceil(-shift)));
-      } else if (shift > 0) {
-        from = std::max(0, static_cast<int>(std::floor(length - 1 - shift)) + 1);
-        to = length;
-      }
-      if (to > from) {
-        if (along_x)
-          aligned.colRange(from, to).setTo(cv::Scalar(0));
-        else
-          aligned.rowRange(from, to).setTo(cv::Scalar(0));
-      }
       camera.frames[i] = aligned;
+      resampled[i] = true;
+      // aligned(x) = frame(x + shift): a bilinear blend with the border where
+      // x + shift < 0 or > length - 1.
+      if (shift < 0)
+        lacking_before = std::max(lacking_before, std::min(length, int(std::ceil(-shift))));
+      else if (shift > 0)
+        lacking_from = std::min(lacking_from, std::max(0, int(std::floor(length - 1 - shift)) + 1));
+    }
+    // Those pixels are 0 in every frame (dimmed or missing in one frame, they
+    // would decode to a wrong phase; 0 in all, they have no modulation).
+    for (int i = 0; i < n && (lacking_before > 0 || lacking_from < length); ++i) {
+      if (!resampled[i]) camera.frames[i] = camera.frames[i].clone();  // not the input's pixels
+      for (const auto& [from, to] : {std::pair{0, lacking_before}, std::pair{lacking_from, length}}) {
+        if (to <= from) continue;
+        if (along_x)
+          camera.frames[i].colRange(from, to).setTo(cv::Scalar(0));
+        else
+          camera.frames[i].rowRange(from, to).setTo(cv::Scalar(0));
+      }
     }
     if (&camera == &out->cameras.front() && ref < static_cast<int>(camera.stamps_ns.size()))
       out->trigger_stamp_ns = camera.stamps_ns[ref];
     result.shifts_px.push_back(std::move(shifts));
+    result.corrected.push_back(std::move(corrected));
   }
   return out;
 }

@@ -170,6 +170,7 @@ TEST_CASE("pixels shifted in from outside the frame are 0, partly outside includ
     MotionEstimate estimate;
     const auto aligned = MotionCompensator(options).compensate(set, &estimate);
     const cv::Mat& f = aligned->cameras[0].frames[1];
+    const cv::Mat& reference = aligned->cameras[0].frames[0];
     const double s = estimate.shifts_px[0][1];
     INFO("shift " << shift << ", estimated " << s);
     REQUIRE(s == Approx(shift).margin(0.1));
@@ -177,9 +178,70 @@ TEST_CASE("pixels shifted in from outside the frame are 0, partly outside includ
     for (int x = 0; x < f.cols; ++x) {
       const bool inside = x + s >= 0 && x + s <= f.cols - 1;
       INFO("column " << x);
+      // Those pixels are 0 in the reference too (no modulation: invalid).
       if (!inside) CHECK(cv::countNonZero(f.col(x)) == 0);
+      if (!inside) CHECK(cv::countNonZero(reference.col(x)) == 0);
       // (the texture itself saturates to 0 in places, so a column need not be all non-zero)
       if (inside && (x + s >= 1 && x + s <= f.cols - 2)) CHECK(cv::countNonZero(f.col(x)) > f.rows / 2);
     }
+    // The input's reference frame is not written to.
+    CHECK(cv::norm(set.cameras[0].frames[0], frame(texture, 0, 0), cv::NORM_INF) == 0);
+  }
+}
+
+// A frame whose correlation peaks falsely: its content holds the scene at
+// its true place (weaker) and the same scene 50 px further (stronger), so
+// that its correlation has a higher maximum far from the true shift, as the
+// false peaks seen in sl_eval wall had. Under uniform motion the other frames
+// give the speed; the false frame is registered again near the prediction
+// and finds the true peak there. Without the check it takes the false one.
+TEST_CASE("a frame whose shift disagrees with the sequence's motion is registered near it",
+          "[motion]") {
+  const Texture texture(13);
+  const std::vector<double> truth = {0.0, 2.0, 4.0, 6.0, 8.0, 10.0};
+  ImageSet set;
+  set.cameras.resize(1);
+  for (int i = 0; i < 6; ++i) {
+    cv::Mat f = frame(texture, truth[i], i % 3);
+    if (i == 5) {
+      cv::Mat near, far;
+      frame(texture, truth[i], i % 3).convertTo(near, CV_32F);
+      frame(texture, truth[i] + 50, i % 3).convertTo(far, CV_32F);
+      cv::Mat mixed = 0.35 * near + 0.65 * far;
+      mixed.convertTo(f, CV_16U);
+    }
+    set.cameras[0].frames.push_back(f);
+    set.cameras[0].stamps_ns.push_back(1000 + 33'333'333LL * i);
+  }
+  const int ref = 3;
+  MotionCompensationOptions options;
+  options.subsample = 1;
+  SECTION("checked") {
+    MotionEstimate estimate;
+    MotionCompensator(options).compensate(set, &estimate);
+    INFO("frame 5: " << estimate.shifts_px[0][5] << " px, true " << truth[5] - truth[ref]);
+    CHECK(estimate.frames_corrected == 1);
+    CHECK(estimate.corrected[0][5]);
+    // Near the true peak, not at the false one 50 px away (the two copies
+    // modulate the whitening and bias the weaker peak by about a pixel).
+    CHECK(estimate.shifts_px[0][5] == Approx(truth[5] - truth[ref]).margin(1.5));
+    for (int i = 0; i < 5; ++i) {
+      CHECK_FALSE(estimate.corrected[0][i]);
+      CHECK(estimate.shifts_px[0][i] == Approx(truth[i] - truth[ref]).margin(0.15));
+    }
+  }
+  SECTION("unchecked") {
+    options.max_deviation_px = 0;
+    MotionEstimate estimate;
+    MotionCompensator(options).compensate(set, &estimate);
+    CHECK(estimate.frames_corrected == 0);
+    CHECK(estimate.shifts_px[0][5] == Approx(truth[5] + 50 - truth[ref]).margin(0.5));
+  }
+  SECTION("no peak near the prediction: moved by the prediction") {
+    set.cameras[0].frames[5] = frame(texture, truth[5] + 50, 2);
+    MotionEstimate estimate;
+    MotionCompensator(options).compensate(set, &estimate);
+    CHECK(estimate.corrected[0][5]);
+    CHECK(estimate.shifts_px[0][5] == Approx(truth[5] - truth[ref]).margin(0.3));
   }
 }

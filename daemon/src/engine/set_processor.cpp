@@ -138,6 +138,10 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
       compensated = motion_.compensate(input, &estimate);
       if (!estimate.all_within_limit)
         out.warning = "motion compensation: a shift beyond max_shift_px was ignored";
+      else if (estimate.frames_corrected > 0)
+        out.warning = "motion compensation: " + std::to_string(estimate.frames_corrected) +
+                      " frame(s) whose shift disagreed with the sequence's motion (a false "
+                      "correlation peak) registered again near the motion's prediction";
     } catch (const std::exception& e) {
       out.error = std::string("motion compensation: ") + e.what();
       return out;

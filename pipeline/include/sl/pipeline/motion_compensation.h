@@ -31,6 +31,16 @@ struct MotionCompensationOptions {
   int subsample = 2;           // register on images downsampled by this factor (1, 2, 4)
   bool window = true;          // Hann window against edge effects
   double max_shift_px = 200;   // the shift is searched within +-max_shift_px
+  // Consistency along the sequence (needs at least 3 frames besides the
+  // reference): under linear motion a frame's shift is the sequence's speed
+  // (px per ns, the median of shift / (stamp - reference stamp) over its
+  // frames) times its time from the reference. A frame whose shift differs
+  // from that by more than max(max_deviation_px, max_deviation_fraction *
+  // |predicted|) took a false correlation peak: it is registered again
+  // within that band around the prediction, and moved by the prediction if
+  // its correlation has no peak there. 0 turns the check off.
+  double max_deviation_px = 3.0;
+  double max_deviation_fraction = 0.25;
 };
 
 struct MotionEstimate {
@@ -38,6 +48,10 @@ struct MotionEstimate {
   // reference frame along the axis (px, full resolution). The reference is 0.
   std::vector<std::vector<double>> shifts_px;
   bool all_within_limit = true;
+  // Frames whose own estimate disagreed with the sequence's motion and was
+  // replaced (options' max_deviation_px): all cameras, per camera per frame.
+  int frames_corrected = 0;
+  std::vector<std::vector<bool>> corrected;
 };
 
 // Thread-compatible; holds only its options and a cached window.
@@ -50,17 +64,27 @@ class MotionCompensator {
   // whose maximum lies on the edge of the +-max_shift_px search range has no
   // peak within it: the result is then beyond max_shift_px (by the sign).
   double estimateShift(const cv::Mat& reference, const cv::Mat& moving) const;
+  // The same with the peak searched within [from_px, to_px] only: NaN when
+  // the correlation has no maximum inside (it rises beyond an end).
+  double estimateShiftWithin(const cv::Mat& reference, const cv::Mat& moving, double from_px,
+                             double to_px) const;
 
   // A new image set whose frames are aligned with the reference frame (by
-  // sub-pixel resampling along the axis; pixels whose source lies even partly
-  // outside the frame are 0, so the decoder marks them invalid), stamped with
-  // the reference frame's time. Throws std::invalid_argument on an empty set or a bad reference.
+  // sub-pixel resampling along the axis), stamped with the reference frame's
+  // time. A pixel whose source lies even partly outside the frame in any
+  // frame of the camera is 0 in all of its frames (the reference included),
+  // so the decoder finds no modulation there and marks it invalid. Throws
+  // std::invalid_argument on an empty set or a bad reference.
   std::shared_ptr<const ImageSet> compensate(const ImageSet& set,
                                              MotionEstimate* estimate = nullptr) const;
 
   const MotionCompensationOptions& options() const { return options_; }
 
  private:
+  // The correlation along the axis (subsampled px, circular) of `moving`
+  // against `reference`.
+  cv::Mat correlate(const cv::Mat& reference, const cv::Mat& moving) const;
+
   MotionCompensationOptions options_;
   mutable cv::Mat window_;  // cached Hann window for the last size (thread-compatible)
 };
