@@ -21,6 +21,12 @@ struct EvalOptions {
   // gamma from its first scan's captures (pipeline::estimateProjectorGamma)
   // and decodes every scan with that response.
   bool compensate_gamma = false;
+  // wall: write the scans (PLY), their true poses and the prior (TUM) to
+  // this folder; or read them from one so written instead of scanning
+  // (registration and evaluation only, e.g. to compare registration
+  // settings). Empty: neither.
+  std::string save_scans_dir;
+  std::string load_scans_dir;
 };
 
 struct EvalResult {

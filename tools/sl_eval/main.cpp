@@ -1,4 +1,5 @@
-// sl_eval EXPERIMENT|all [--scans N] [--out DIR] [--gamma G]: runs the paper's
+// sl_eval EXPERIMENT|all [--scans N] [--out DIR] [--gamma G] [--save-scans DIR |
+// --load-scans DIR]: runs the paper's
 // experiments on the simulated sensor and prints Markdown tables; plots go to
 // DIR (default sl_eval_out). `all` runs every experiment in turn with its
 // default scan count (or N) and reports progress on stderr.
@@ -15,11 +16,14 @@
 namespace {
 
 int usage() {
-  std::cerr << "usage: sl_eval EXPERIMENT|all [--scans N] [--out DIR] [--gamma G]\n  experiments:";
+  std::cerr << "usage: sl_eval EXPERIMENT|all [--scans N] [--out DIR] [--gamma G]\n"
+               "               [--save-scans DIR | --load-scans DIR]\n  experiments:";
   for (const std::string& n : sl::eval::experimentNames()) std::cerr << ' ' << n;
   std::cerr << "\n  --scans N: scans per condition (default: each experiment's own)"
                "\n  --gamma G: simulated projector response (level / 255)^G (default 1, linear;"
-               "\n             for `gamma`: the non-linear case, default 2.2)\n";
+               "\n             for `gamma`: the non-linear case, default 2.2)"
+               "\n  --save-scans DIR: wall: write the scans (PLY), true poses and prior (TUM) there"
+               "\n  --load-scans DIR: wall: register and evaluate scans so written (no scanning)\n";
   return 2;
 }
 
@@ -59,10 +63,16 @@ int main(int argc, char** argv) {
   options.out_dir = "sl_eval_out";
   for (int i = 2; i < argc; ++i) {
     const std::string arg = argv[i];
-    if ((arg == "--scans" || arg == "--out" || arg == "--gamma") && i + 1 < argc) {
+    if ((arg == "--scans" || arg == "--out" || arg == "--gamma" || arg == "--save-scans" ||
+         arg == "--load-scans") &&
+        i + 1 < argc) {
       const std::string value = argv[++i];
       if (arg == "--out") {
         options.out_dir = value;
+      } else if (arg == "--save-scans") {
+        options.save_scans_dir = value;
+      } else if (arg == "--load-scans") {
+        options.load_scans_dir = value;
       } else if (arg == "--gamma") {
         try {
           std::size_t used = 0;

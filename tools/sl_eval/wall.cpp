@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <numeric>
 #include <opencv2/core.hpp>
@@ -28,7 +29,9 @@
 #include "common.h"
 #include "eval.h"
 #include "plots.h"
+#include "common/ply.h"
 #include "registration.h"
+#include "scan_files.h"
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/drivers/sim.h"
@@ -166,24 +169,80 @@ Stats statsOf(const std::vector<double>& d) {
 
 double angleDeg(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle() * 180 / kPi; }
 
-}  // namespace
+using Say = std::function<void(const std::string&)>;
 
-EvalResult runWall(const EvalOptions& in) {
-  using Clock = std::chrono::steady_clock;
-  const auto t_start = Clock::now();
-  auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
-  auto say = [&](const std::string& line) {
-    std::fprintf(stderr, "wall: [%5.0f s] %s\n", seconds(), line.c_str());
-  };
-  const EvalOptions options = withDefaultScans(in, "wall");
-  const int horizontal_scans = std::max(3, options.scans);
+const char* passName(int pass) { return pass == 0 ? "horizontal" : "vertical"; }
+
+std::string scanName(const Captured& c) {
+  char name[32];
+  std::snprintf(name, sizeof name, "%s_%02d", c.pass == 0 ? "h" : "v", c.index);
+  return name;
+}
+
+// The scans as sl_register reads them: DIR/horizontal/h_NN.ply and
+// DIR/vertical/v_NN.ply (mm, the triangulating camera's frame, stamped),
+// with DIR/truth.tum (true poses) and DIR/prior.tum (the robot poses of the
+// prior), so that `sl_register --poses DIR/prior.tum --out OUT
+// DIR/horizontal DIR/vertical` registers them as this experiment does.
+void saveScans(const std::string& dir, const std::vector<Captured>& captured,
+               const std::vector<Eigen::Isometry3d>& truth,
+               const std::vector<Eigen::Isometry3d>& prior) {
+  std::vector<reg::StampedPose> true_poses, prior_poses;
+  for (std::size_t i = 0; i < captured.size(); ++i) {
+    const Captured& c = captured[i];
+    const std::string folder = dir + "/" + passName(c.pass);
+    std::filesystem::create_directories(folder);
+    pipeline::PointCloud cloud;
+    cloud.width = int(c.points.size());
+    cloud.height = 1;
+    cloud.stamp_ns = c.stamp_ns;
+    cloud.frame_id = c.camera;
+    for (const Eigen::Vector3f& p : c.points) cloud.points.push_back({p.x(), p.y(), p.z(), 0.0f});
+    tools::writePly(cloud, folder + "/" + scanName(c) + ".ply", tools::LengthUnit::kMillimetre);
+    true_poses.push_back({c.stamp_ns, truth[i]});
+    prior_poses.push_back({c.stamp_ns, prior[i]});
+  }
+  reg::writeTum(dir + "/truth.tum", true_poses);
+  reg::writeTum(dir + "/prior.tum", prior_poses);
+}
+
+// Scans saved by saveScans, with their true poses; the counts must be those
+// asked for.
+std::vector<Captured> loadScans(const std::string& dir, int horizontal_scans, int vertical_scans,
+                                std::vector<Eigen::Isometry3d>& truth) {
+  const std::vector<reg::StampedPose> true_poses = reg::readPoses(dir + "/truth.tum");
+  std::vector<Captured> captured;
+  for (int pass = 0; pass < 2; ++pass) {
+    const std::vector<std::string> files = reg::listScanFiles(dir + "/" + passName(pass));
+    const int expected = pass == 0 ? horizontal_scans : vertical_scans;
+    if (int(files.size()) != expected)
+      throw std::runtime_error("wall: " + dir + "/" + passName(pass) + " holds " +
+                               std::to_string(files.size()) + " scans, the scan count asks for " +
+                               std::to_string(expected));
+    for (std::size_t k = 0; k < files.size(); ++k) {
+      const reg::ScanFile file = reg::readScanFile(files[k]);
+      Captured c;
+      c.pass = pass;
+      c.index = int(k);
+      c.stamp_ns = file.stamp_ns;
+      c.points = file.points;
+      truth.push_back(reg::poseAt(true_poses, file.stamp_ns, 0, "the true pose of " + files[k]));
+      captured.push_back(std::move(c));
+    }
+  }
+  return captured;
+}
+
+// The two passes through the daemon's ScanEngine: the scans (horizontal
+// pass, then vertical) with each scan's true pose T_scene_scan appended to
+// `truth`.
+std::vector<Captured> scanWall(const EvalOptions& options, const drivers::SimHeightField& wall,
+                               int horizontal_scans, int vertical_scans,
+                               std::vector<Eigen::Isometry3d>& truth, const Say& say) {
   const double spacing = kHorizontalLength / (horizontal_scans - 1);
-  const int vertical_scans = std::max(2, int(std::lround(kVerticalLength / spacing)) + 1);
-
   // The daemon's config for the two-camera simulated sensor (config/sim-motion.yaml),
   // with the wall as its scene; the robot (this experiment) moves the sensor.
   daemon::DaemonConfig config = daemon::loadConfig(std::string(SL_CONFIG_DIR) + "/sim-motion.yaml");
-  const drivers::SimHeightField wall = makeWall();
   config.sim.scene = {};
   config.sim.scene.height_fields.push_back(wall);
   config.sim.motion = {};
@@ -263,7 +322,6 @@ EvalResult runWall(const EvalOptions& in) {
   // requested (software trigger, one scan), the sensor moving at 12.5 mm/s
   // during it. The scans kept are every (spacing / 2.5 mm)-th of the 5 Hz
   // stream a continuous pass would give.
-  std::vector<Eigen::Isometry3d> truth;  // T_scene_scan per captured scan
   const int reference_frame = 3;         // MotionCompensator's default: the middle of 6 frames
   for (std::size_t p = 0; p < plans.size(); ++p) {
     const PassPlan& plan = plans[p];
@@ -317,6 +375,32 @@ EvalResult runWall(const EvalOptions& in) {
           ": " + std::to_string(captured.back().points.size()) + " points");
     }
   }
+  return captured;
+}
+
+}  // namespace
+
+EvalResult runWall(const EvalOptions& in) {
+  using Clock = std::chrono::steady_clock;
+  const auto t_start = Clock::now();
+  auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
+  auto say = [&](const std::string& line) {
+    std::fprintf(stderr, "wall: [%5.0f s] %s\n", seconds(), line.c_str());
+  };
+  const EvalOptions options = withDefaultScans(in, "wall");
+  const int horizontal_scans = std::max(3, options.scans);
+  const double spacing = kHorizontalLength / (horizontal_scans - 1);
+  const int vertical_scans = std::max(2, int(std::lround(kVerticalLength / spacing)) + 1);
+
+  const drivers::SimHeightField wall = makeWall();
+  std::vector<Eigen::Isometry3d> truth;  // T_scene_scan per captured scan
+  std::vector<Captured> captured;
+  if (!options.load_scans_dir.empty()) {
+    captured = loadScans(options.load_scans_dir, horizontal_scans, vertical_scans, truth);
+    say("loaded " + std::to_string(captured.size()) + " scans from " + options.load_scans_dir);
+  } else {
+    captured = scanWall(options, wall, horizontal_scans, vertical_scans, truth, say);
+  }
   const double scanning_s = seconds();
 
   // The scans on their own: every point at its scan's true pose (no
@@ -349,9 +433,7 @@ EvalResult runWall(const EvalOptions& in) {
   for (std::size_t i = 0; i < captured.size(); ++i) {
     reg::ScanInput s;
     const Captured& c = captured[i];
-    char name[32];
-    std::snprintf(name, sizeof name, "%s_%02d", c.pass == 0 ? "h" : "v", c.index);
-    s.name = name;
+    s.name = scanName(c);
     s.pass = c.pass;
     s.stamp_ns = c.stamp_ns;
     s.points = c.points;
@@ -364,6 +446,12 @@ EvalResult runWall(const EvalOptions& in) {
     s.initial = truth[i] * error;
     scans.push_back(std::move(s));
   }
+  if (!options.save_scans_dir.empty()) {
+    std::vector<Eigen::Isometry3d> prior;
+    for (const reg::ScanInput& s : scans) prior.push_back(s.initial);
+    saveScans(options.save_scans_dir, captured, truth, prior);
+    say("scans saved to " + options.save_scans_dir);
+  }
 
   EvalResult result;
   std::ostringstream md;
@@ -373,7 +461,7 @@ EvalResult runWall(const EvalOptions& in) {
     double drift_mm = 0, drift_deg = 0;
   };
   std::vector<Row> rows;
-  std::vector<std::string> refused_lines;
+  std::vector<std::string> refused_lines, edge_lines;
   {
     std::vector<double> merged = truth_per_pass[0];
     merged.insert(merged.end(), truth_per_pass[1].begin(), truth_per_pass[1].end());
@@ -394,6 +482,37 @@ EvalResult runWall(const EvalOptions& in) {
     say(method + ": registered in " + fmt(reg_s, 1) + " s");
     result.metrics[method + "_registration_s"] = reg_s;
     for (const std::string& refused : r.refused) refused_lines.push_back(method + ": " + refused);
+    // Each kept edge's measurement against the truth (the error of
+    // T_target_source in the source's frame): a bias common to the edges
+    // accumulates along the pass whatever the pose graph does.
+    for (const reg::EdgeKind kind :
+         {reg::EdgeKind::kNeighbour, reg::EdgeKind::kSkip, reg::EdgeKind::kCrossPass}) {
+      Eigen::Vector3d t_sum = Eigen::Vector3d::Zero(), r_sum = Eigen::Vector3d::Zero();
+      double t2 = 0, r2 = 0;
+      int count = 0;
+      for (const reg::EdgeReport& e : r.edges) {
+        if (e.kind != kind || !e.accepted || e.pruned) continue;
+        const Eigen::Isometry3d tru = truth[std::size_t(e.target)].inverse() * truth[std::size_t(e.source)];
+        const Eigen::Isometry3d err = tru.inverse() * Eigen::Isometry3d(e.transform);
+        const Eigen::AngleAxisd aa(err.linear());
+        const Eigen::Vector3d rv = aa.axis() * aa.angle() * 180 / kPi;
+        t_sum += err.translation();
+        r_sum += rv;
+        t2 += err.translation().squaredNorm();
+        r2 += rv.squaredNorm();
+        ++count;
+      }
+      if (count == 0) continue;
+      const Eigen::Vector3d tm = t_sum / count, rm = r_sum / count;
+      char line[320];
+      std::snprintf(line, sizeof line,
+                    "%s: %d kept %s edges against the truth: translation mean (%.3f, %.3f, %.3f) "
+                    "mm, RMS %.3f mm; rotation mean (%.4f, %.4f, %.4f) deg, RMS %.4f deg",
+                    method.c_str(), count, reg::toString(kind), tm.x(), tm.y(), tm.z(),
+                    std::sqrt(t2 / count), rm.x(), rm.y(), rm.z(), std::sqrt(r2 / count));
+      say(line);
+      edge_lines.push_back(line);
+    }
     // The estimate in the scene frame, held at the first scan's true pose.
     const Eigen::Isometry3d fix = truth[0] * r.poses[0].inverse();
     std::vector<std::vector<double>> per_pass(2);
@@ -474,6 +593,8 @@ EvalResult runWall(const EvalOptions& in) {
      << fmt(result.metrics["pairwise_registration_s"], 0) << " s pairwise + "
      << fmt(result.metrics["multiway_registration_s"], 0) << " s multi-way, total "
      << fmt(total_s, 0) << " s.\n";
+  for (const std::string& line : edge_lines) md << "\nedges: " << line;
+  if (!edge_lines.empty()) md << "\n";
   for (const std::string& line : refused_lines) md << "\nrefused: " << line;
   if (!refused_lines.empty()) md << "\n";
   for (const std::string& plot : result.plots) md << "\nheat map: " << plot;
