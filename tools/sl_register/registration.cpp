@@ -265,7 +265,8 @@ class Registrar {
 
   // Pairwise: each scan's pose from the first accepted edge to an earlier
   // registered scan (its predecessors in the pass first, then other passes),
-  // the guess being that scan's pose moved by the prior's relative motion.
+  // the guess being that scan's pose moved by the prior's relative motion;
+  // then scans still unplaced from their registered successors in the pass.
   void chain() {
     chain_edges_.clear();
     for (int j = 1; j < int(scans_.size()); ++j) {
@@ -297,8 +298,31 @@ class Registrar {
                                      scans_[std::size_t(j)].initial;
             break;
           }
-        say("scan " + scans_[std::size_t(j)].name + ": no pairwise match");
+        say("scan " + scans_[std::size_t(j)].name + ": no match to an earlier scan");
       }
+    }
+    // Backwards: a scan left out (e.g. the first scans of a pass that
+    // overlap no earlier pass enough) is placed from its successors in the
+    // pass, once one of them is registered.
+    for (int j = int(scans_.size()) - 2; j >= 0; --j) {
+      if (registered_[std::size_t(j)]) continue;
+      for (int i = j + 1; i <= std::min(int(scans_.size()) - 1, j + 3); ++i) {
+        if (scans_[std::size_t(i)].pass != scans_[std::size_t(j)].pass || !registered_[std::size_t(i)])
+          continue;
+        const Pose guess_j =
+            poses_[std::size_t(i)] * scans_[std::size_t(i)].initial.inverse() * scans_[std::size_t(j)].initial;
+        const Eigen::Matrix4d guess = (guess_j.inverse() * poses_[std::size_t(i)]).matrix();
+        Measured m = measure(i, j, guess);
+        const bool ok = m.report.accepted;
+        if (ok) poses_[std::size_t(j)] = poses_[std::size_t(i)] * Pose(m.report.transform).inverse();
+        chain_edges_.push_back(std::move(m));
+        if (ok) {
+          registered_[std::size_t(j)] = true;
+          say("scan " + scans_[std::size_t(j)].name + ": placed from a later scan of its pass");
+          break;
+        }
+      }
+      if (!registered_[std::size_t(j)]) say("scan " + scans_[std::size_t(j)].name + ": no pairwise match");
     }
   }
 
