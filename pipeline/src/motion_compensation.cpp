@@ -130,6 +130,7 @@ namespace {
 struct Peak {
   double shift = std::numeric_limits<double>::quiet_NaN();
   int edge = 0;
+  float value = 0;  // the correlation at the maximum
 };
 
 Peak peakWithin(const cv::Mat& correlation, int first, int last) {
@@ -140,6 +141,7 @@ Peak peakWithin(const cv::Mat& correlation, int first, int last) {
   for (int d = first; d <= last; ++d)
     if (at(d) > at(best)) best = d;
   Peak peak;
+  peak.value = at(best);
   if (last - first + 1 < cols && (best == first || best == last)) {
     peak.edge = best == first ? -1 : 1;
     return peak;
@@ -151,6 +153,12 @@ Peak peakWithin(const cv::Mat& correlation, int first, int last) {
   peak.shift = best + offset;
   return peak;
 }
+
+// A re-registration's peak near the prediction must reach this fraction of
+// the correlation's maximum (the true peak of a frame with a false one
+// elsewhere: about half of it in test_motion_compensation; a side lobe of a
+// textured scene's peak: a few tenths at most).
+constexpr double kMinPeakRatio = 0.3;
 
 }  // namespace
 
@@ -174,7 +182,13 @@ double MotionCompensator::estimateShiftWithin(const cv::Mat& reference, const cv
   const int factor = options_.subsample;
   const int first = static_cast<int>(std::ceil(from_px / factor));
   const int last = std::max(first, static_cast<int>(std::floor(to_px / factor)));
-  return peakWithin(correlation, first, last).shift * factor;
+  const Peak peak = peakWithin(correlation, first, last);
+  // A side lobe of a peak elsewhere is no peak: the maximum in the band must
+  // reach kMinPeakRatio of the correlation's global maximum.
+  double global = 0;
+  cv::minMaxLoc(correlation, nullptr, &global);
+  if (!(peak.value >= kMinPeakRatio * global)) return std::numeric_limits<double>::quiet_NaN();
+  return peak.shift * factor;
 }
 
 std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& set,

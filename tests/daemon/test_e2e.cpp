@@ -677,10 +677,12 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
   const auto status = client.status(3s);
   REQUIRE(status);
   // A textureless scene gives the registration little to hold on to: an
-  // implausible shift may be flagged (and ignored), but nothing else fails.
+  // implausible shift may be flagged (and ignored, or replaced by the
+  // sequence's motion), but nothing else fails.
   INFO("last error: " << status->last_error);
   CHECK((status->last_error.empty() ||
-         status->last_error.find("beyond max_shift_px") != std::string::npos));
+         status->last_error.find("beyond max_shift_px") != std::string::npos ||
+         status->last_error.find("disagreed with the sequence's motion") != std::string::npos));
   REQUIRE(daemon.terminate(5s) == 0);
 }
 

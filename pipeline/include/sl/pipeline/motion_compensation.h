@@ -39,8 +39,11 @@ struct MotionCompensationOptions {
   // |predicted|) took a false correlation peak: it is registered again
   // within that band around the prediction, and moved by the prediction if
   // its correlation has no peak there. 0 turns the check off.
-  double max_deviation_px = 3.0;
-  double max_deviation_fraction = 0.25;
+  // (Generous: a sequence may accelerate; sl_eval motion's 1 -> 3 mm per
+  // image is off a constant speed by 38 % at its ends. False peaks lie tens
+  // to hundreds of px away.)
+  double max_deviation_px = 5.0;
+  double max_deviation_fraction = 0.5;
 };
 
 struct MotionEstimate {
@@ -65,7 +68,9 @@ class MotionCompensator {
   // peak within it: the result is then beyond max_shift_px (by the sign).
   double estimateShift(const cv::Mat& reference, const cv::Mat& moving) const;
   // The same with the peak searched within [from_px, to_px] only: NaN when
-  // the correlation has no maximum inside (it rises beyond an end).
+  // the correlation has no maximum inside (it rises beyond an end) or the
+  // maximum inside is below 0.3 of the correlation's global maximum (a side
+  // lobe).
   double estimateShiftWithin(const cv::Mat& reference, const cv::Mat& moving, double from_px,
                              double to_px) const;
 
