@@ -800,11 +800,14 @@ TEST_CASE("the status says where each scan's latency went: waiting, processing, 
                                   ++published;
                                 });
   CHECK(engine.status().latency_ms == 0);  // no scan yet
-  REQUIRE(engine.start("3+3_horizontal", 4).accepted());
+  // Continuous: a simulator that falls behind (sanitizer builds) costs
+  // sequences, and a finite request's schedule would then end short.
+  REQUIRE(engine.start("3+3_horizontal", 0).accepted());
   const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(30s);
   while (published < 4 && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(20ms);
-  REQUIRE(published == 4);
-  std::this_thread::sleep_for(50ms);  // the stages are stored after the callback returns
+  REQUIRE(published >= 4);
+  CHECK(engine.stop().accepted());
+  std::this_thread::sleep_for(100ms);  // the stages are stored after the callback returns
   const sl::daemon::EngineStatus s = engine.status();
   CHECK(s.publish_ms >= 40.0);
   CHECK(s.processing_ms > 0.0);
