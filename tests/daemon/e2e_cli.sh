@@ -129,8 +129,15 @@ sleep 2.5
 "$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
 "$bin/tools/slctl" --ns "$ns" stop > /dev/null
 grep -E "^(scan|frame) rate" "$work/status.log"
-grep -Eq "^frame rate: *(2[6-9]|3[0-4])\.[0-9] Hz" "$work/status.log" || fail "frame rate: $(cat "$work/status.log")"
-grep -Eq "^scan rate: *(4\.[3-9]|5\.[0-7])[0-9] Hz" "$work/status.log" || fail "scan rate: $(cat "$work/status.log")"
+if grep -Eq '^SL_SANITIZE:STRING=.+' "$bin/CMakeCache.txt" 2> /dev/null; then
+  # A sanitizer build runs the simulator 2-15x slower: it falls behind its
+  # 30 Hz, so only that both rates are measured is checked there.
+  awk '/^(frame|scan) rate:/ { n++; if ($3 + 0 > 0) ok++ } END { exit !(n == 2 && ok == 2) }' \
+    "$work/status.log" || fail "rates: $(cat "$work/status.log")"
+else
+  grep -Eq "^frame rate: *(2[6-9]|3[0-4])\.[0-9] Hz" "$work/status.log" || fail "frame rate: $(cat "$work/status.log")"
+  grep -Eq "^scan rate: *(4\.[3-9]|5\.[0-7])[0-9] Hz" "$work/status.log" || fail "scan rate: $(cat "$work/status.log")"
+fi
 # A sequence cut short by a stop is no fault: another start and stop leave
 # the incomplete-sequence count at 0.
 "$bin/tools/slctl" --ns "$ns" start > /dev/null
