@@ -592,11 +592,11 @@ TEST_CASE("image sets recorded as MCAP by sl_view replay through the daemon into
                                ns + "_record.log 2>&1";
     auto recorder = std::async(std::launch::async, [&] { return std::system(record.c_str()); });
     for (int i = 0; i < kScans; ++i) {
-      auto cloud = client_owner->receiveCloud(t0, 30s);
+      auto cloud = client_owner->receiveCloud(t0, sl::test::scaledBound(30s));
       REQUIRE(cloud);
       published.push_back(std::move(*cloud));
     }
-    REQUIRE(recorder.wait_for(60s) == std::future_status::ready);
+    REQUIRE(recorder.wait_for(sl::test::scaledBound(60s)) == std::future_status::ready);
     const int rc = recorder.get();
     INFO("sl_view record log: /tmp/sl_test_" << ns << "_record.log");
     REQUIRE(rc == 0);
