@@ -345,6 +345,7 @@ RestampResult VersavisTriggerSource::restamp(std::size_t camera, std::uint64_t f
     throw std::out_of_range("VersaVIS: camera " + std::to_string(camera) + " has no channel");
   std::string message;  // logged after the lock is released
   RestampResult result = RestampResult::kLearning;
+  bool wake = false;  // outbox_ is read under cameras_mutex_ only (next() swaps it)
   {
     std::unique_lock lock(cameras_mutex_);
     CameraState& cam = cameras_[camera];
@@ -415,8 +416,9 @@ RestampResult VersavisTriggerSource::restamp(std::size_t camera, std::uint64_t f
         ++counters_.frames_unstamped;
       }
     }
+    wake = !outbox_.empty();
   }
-  if (!outbox_.empty()) {
+  if (wake) {
     const std::uint64_t one = 1;
     [[maybe_unused]] const ssize_t n = ::write(wake_fd_, &one, sizeof one);
   }
