@@ -210,6 +210,11 @@ stop_daemon() {
   wait "$daemon_pid" 2> /dev/null || true
   daemon_pid=""
 }
+# minflt: the daemon's minor page faults so far (/proc/PID/stat field 10).
+minflt() { awk '{ print $10 }' "/proc/$daemon_pid/stat" 2> /dev/null || echo 0; }
+# udp_drops: UDP datagrams this namespace dropped for a full socket receive
+# buffer (each costs a repair round of the cloud it belonged to).
+udp_drops() { awk '$1 == "Udp:" && $2 ~ /^[0-9]+$/ { print $6 }' /proc/net/snmp; }
 rss_mb() { awk '/^VmHWM/ { printf "%.0f", $2 / 1024 }' "/proc/$daemon_pid/status" 2> /dev/null || echo nan; }
 reset_rss() { echo 5 > "/proc/$daemon_pid/clear_refs" 2> /dev/null || true; }
 
@@ -229,8 +234,11 @@ scenario() {
   done
   sleep 3  # discovery: the volatile cloud topic only reaches matched readers
   reset_rss
-  local load
+  local load faults0
   load=$(cut -d' ' -f1-3 /proc/loadavg)
+  faults0=$(minflt)
+  local drops0
+  drops0=$(udp_drops)
   timeout 20 "${ctl[@]}" --ns "$ns" start > /dev/null || { echo "bench-delivery: slctl start failed" >&2; cat "$work/daemon.log" >&2; exit 1; }
   if [ "$stall" = 1 ]; then
     sleep 5
@@ -241,8 +249,11 @@ scenario() {
     kill -CONT "${stalled[@]}"
   fi
   for p in "${sub_pids[@]}"; do wait "$p" || true; done
-  local rss
+  local rss faults
   rss=$(rss_mb)
+  faults=$(( $(minflt) - faults0 ))
+  local drops
+  drops=$(( $(udp_drops) - drops0 ))
   local status
   status=$(timeout 20 "${ctl[@]}" --ns "$ns" status 2>&1 | tr '\n' ' ' | tr -s ' ')
   timeout 20 "${ctl[@]}" --ns "$ns" stop > /dev/null 2>&1 || true
@@ -272,6 +283,12 @@ scenario() {
             else printf "  stalled/%s sub2: no gap of more than 5 s between its takes: it took no cloud after resuming (%s)\n", cfg, (prev ? "or never stopped" : "nor before") }' cfg="$cfg" "$work/sub2.log"
   fi
   echo "  $name/$cfg: load average $load; daemon status: ${status:0:400}"
+  # Minor page faults per cloud: fresh memory for 25 MB buffers (README).
+  local scans
+  scans=$(echo "$status" | grep -o 'scans: [0-9]*' | head -n 1 | cut -d' ' -f2)
+  echo "  $name/$cfg: page faults per scan: daemon $(awk -v f="$faults" -v n="${scans:-0}" 'BEGIN { printf "%.0f", (n > 0 ? f / n : 0) }')$(for i in $(seq 1 "$subs"); do
+    sed -n 's/^listen: done \([0-9]*\), minor page faults \([0-9]*\)/\1 \2/p' "$work/sub$i.log" |
+      awk -v i="$i" '$1 > 0 { printf ", sub%d %.0f", i, $2 / $1 }'; done); UDP datagrams dropped (receive buffer full): $drops"
   # Where the time went inside the daemon (its status: last 64 scans).
   echo "  $name/$cfg: daemon $(echo "$status" | grep -o 'latency: [^)]*)' || echo 'latency: not reported')"
   results+=("delivery: $cfg $name $worst rss_mb=$rss")

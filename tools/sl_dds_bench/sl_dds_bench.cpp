@@ -38,6 +38,8 @@
 #include <utility>
 #include <vector>
 
+#include <sys/resource.h>
+
 #include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/dds.h"
 
@@ -291,7 +293,11 @@ int listen(const Args& a) {
     }
   }
   for (const auto& [stamp, take] : rx) std::printf("rx %" PRId64 " %" PRId64 "\n", stamp, take);
-  std::printf("listen: done %ld\n", received);
+  // Page faults are what a reader's fresh 25 MB buffers cost (README, DDS
+  // deployment): printed so that the benchmark can report them per cloud.
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  std::printf("listen: done %ld, minor page faults %ld\n", received, usage.ru_minflt);
   return received > 0 ? 0 : 1;
 }
 
