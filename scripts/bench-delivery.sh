@@ -49,6 +49,14 @@ set -euo pipefail
 src=$(cd "$(dirname "$0")/.." && pwd)
 build=$(cd "${1:-$src/build}" && pwd)
 secs=${SL_BENCH_SECONDS:-30}
+# A new reader's first clouds pay for its fresh buffers (Cyclone's receive
+# buffers, the deserialized sample, the kernel's socket buffers): on this
+# VM first-touched memory costs ~5 ms/MB (README, "Measured"), i.e. the
+# first clouds take 0.1-0.8 s. p50/p99/max are over the clouds a reader
+# takes from SL_BENCH_WARMUP_S (default 1 s) after its first one; the
+# warm-up's clouds are counted for loss and rate, and their latencies are
+# printed on the reader's own line (first_ms, warmup_max_ms).
+warmup_ns=$(awk -v s="${SL_BENCH_WARMUP_S:-1}" 'BEGIN { printf "%.0f", s * 1e9 }')
 subs3_fps=${SL_BENCH_3SUBS_FPS:-90}
 # SL_BENCH_DAEMON_RT=N runs the daemon (all its threads) at SCHED_FIFO
 # priority N, as the unit's CPUSchedulingPolicy=fifo would; default: as an
@@ -174,16 +182,23 @@ stats() {
       span = (r1 - r0) / 1e9
       printf "clouds_per_s=%.2f lost=%d", (n > 1 && span > 0 ? (n - 1) / span : 0), expected - u }' "$file")
   local lat
-  lat=$(awk -v o="$offset" '$1 == "rx" { printf "%.3f\n", ($3 - $2 - o) / 1e6 }' "$file" | sort -g |
+  # Latencies of the clouds taken after the reader's warm-up (warmup_ns
+  # from its first take); the warm-up's own are in warmup() below.
+  lat=$(awk -v o="$offset" -v w="$warmup_ns" '$1 == "rx" { if (!(n++)) t0 = $3
+      if ($3 - t0 >= w) printf "%.3f\n", ($3 - $2 - o) / 1e6 }' "$file" | sort -g |
     awk '{ v[NR] = $1 } END {
       i50 = int(0.50 * (NR - 1) + 0.5) + 1; i99 = int(0.99 * (NR - 1) + 0.5) + 1
       printf "p50_ms=%.1f p99_ms=%.1f max_ms=%.1f", v[i50], v[i99], v[NR] }')
   echo "$head $lat"
 }
 field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
-# first FILE OFFSET_NS -> "first_ms=<the first two clouds' latencies>"
-first() { awk -v o="$2" '$1 == "rx" && n++ < 2 { v = v (v ? "," : "") sprintf("%.1f", ($3 - $2 - o) / 1e6) }
-                         END { print "first_ms=" (v ? v : "nan") }' "$1"; }
+# first FILE OFFSET_NS -> "first_ms=<the first two clouds' latencies>
+# warmup_clouds=<n> warmup_max_ms=<the worst latency within the warm-up>"
+first() { awk -v o="$2" -v w="$warmup_ns" '$1 == "rx" { l = ($3 - $2 - o) / 1e6
+      if (!(n++)) t0 = $3
+      if (n <= 2) v = v (v ? "," : "") sprintf("%.1f", l)
+      if ($3 - t0 < w) { k++; if (l > m) m = l } }
+    END { printf "first_ms=%s warmup_clouds=%d warmup_max_ms=%.1f\n", (v ? v : "nan"), k, m }' "$1"; }
 
 # --- the daemon ---
 daemon_pid=""
