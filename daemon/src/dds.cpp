@@ -1,6 +1,11 @@
 #include "sl/daemon/dds.h"
 
+#include <malloc.h>
+
 #include <algorithm>
+#include <climits>
+#include <cstdlib>
+#include <cstring>
 #include <chrono>
 #include <thread>
 
@@ -13,6 +18,15 @@ Error::Error(const std::string& call, dds_return_t code)
 dds_return_t check(dds_return_t rc, const std::string& call) {
   if (rc < 0) throw Error(call, rc);
   return rc;
+}
+
+bool retainLargeSampleMemory() {
+  if (const char* keep = std::getenv("SL_DEFAULT_MALLOC"); keep && std::strcmp(keep, "1") == 0)
+    return true;  // glibc's defaults, for comparisons (bench-delivery)
+  bool ok = mallopt(M_MMAP_THRESHOLD, 32 << 20) == 1;
+  ok = mallopt(M_TRIM_THRESHOLD, INT_MAX) == 1 && ok;
+  ok = mallopt(M_TOP_PAD, 64 << 20) == 1 && ok;
+  return ok;
 }
 
 // --- Qos ---

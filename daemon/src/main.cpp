@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "sl/daemon/config.h"
+#include "sl/daemon/dds.h"
 #include "sl/daemon/dds_bridge.h"
 #include "sl/daemon/dds_environment.h"
 #include "sl/daemon/devices.h"
@@ -166,6 +167,12 @@ int main(int argc, char** argv) {
     std::cerr << "sl_sensord: --config FILE is required\n" << kUsage;
     return 2;
   }
+
+  // Before any thread allocates: freed clouds' memory stays in the process
+  // (each scan would otherwise page-fault 25 MB buffers in again).
+  if (!sl::dds::retainLargeSampleMemory())
+    sl::daemon::logWarning("glibc refused the allocator settings for large samples (mallopt): "
+                           "clouds may cost page faults");
 
   // Signals are taken synchronously by the main thread: block them before
   // any thread starts so that every thread inherits the mask.

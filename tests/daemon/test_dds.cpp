@@ -5,6 +5,7 @@
 #include "support/time_scale.h"
 #include <signal.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -189,6 +190,57 @@ class ChildProcess {
 };
 
 }  // namespace
+
+namespace {
+
+long minorFaults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+// A writer's keep-last history of 25 MB clouds as Cyclone keeps it: the
+// writing thread allocates each cloud's serialized copy, and another thread
+// (the one processing acknowledgements) frees the oldest when a fifth
+// arrives. Returns the minor page faults per cloud after the first ten.
+double faultsPerCloudInHistory() {
+  constexpr std::size_t kCloud = 25'000'000;
+  constexpr int kDepth = 4, kWarmUp = 10, kMeasured = 20;
+  void* (*volatile allocate)(std::size_t) = std::malloc;  // not elided by the compiler
+  std::vector<unsigned char*> history;
+  long faults = 0;
+  for (int i = 0; i < kWarmUp + kMeasured; ++i) {
+    const long before = minorFaults();
+    unsigned char* cloud = nullptr;
+    std::thread([&] {  // the writer
+      cloud = static_cast<unsigned char*>(allocate(kCloud));
+      if (cloud) std::memset(cloud, i + 1, kCloud);
+    }).join();
+    REQUIRE(cloud != nullptr);
+    history.push_back(cloud);
+    if (history.size() > kDepth) {
+      std::thread([&] { std::free(history.front()); }).join();  // acknowledged by all
+      history.erase(history.begin());
+    }
+    if (i >= kWarmUp) faults += minorFaults() - before;
+  }
+  for (unsigned char* c : history) std::free(c);
+  return double(faults) / kMeasured;
+}
+
+}  // namespace
+
+#ifndef SL_SANITIZER_BUILD  // the sanitizers' allocators ignore mallopt
+TEST_CASE("retainLargeSampleMemory keeps freed clouds' memory for the next ones", "[dds][memory]") {
+  REQUIRE(sl::dds::retainLargeSampleMemory());
+  // A 25 MB cloud is ~6,100 pages; with glibc's defaults this history
+  // page-faults most of every new cloud in again (the heaps of the writer's
+  // threads are given back when they empty).
+  const double faults = faultsPerCloudInHistory();
+  INFO("minor page faults per cloud: " << faults);
+  CHECK(faults < 300);
+}
+#endif
 
 TEST_CASE("full-size PointCloud2 round trip between two participants", "[dds]") {
   useLoopbackConfig();

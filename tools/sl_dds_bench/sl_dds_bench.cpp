@@ -305,6 +305,7 @@ int listen(const Args& a) {
 
 int main(int argc, char** argv) {
   const Args args = parse(argc, argv);
+  sl::dds::retainLargeSampleMemory();  // as the daemon and its tools do
   try {
     if (args.mode == "listen") return listen(args);
     return args.mode == "pub" ? publish(args) : subscribe(args);

@@ -31,6 +31,7 @@
 #include "preview.h"
 #include "raw_topics.h"
 #include "sl/daemon/client.h"
+#include "sl/daemon/dds.h"
 
 #ifndef SL_VIEW_WEB_DIR
 #define SL_VIEW_WEB_DIR "tools/sl_view/web"
@@ -331,6 +332,7 @@ int serve(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  sl::dds::retainLargeSampleMemory();  // the clouds' memory stays for the next ones
   try {
     if (argc >= 2 && std::strcmp(argv[1], "record") == 0) {
       std::signal(SIGINT, onSignal);

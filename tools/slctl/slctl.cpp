@@ -21,6 +21,7 @@
 #include "common/cli.h"
 #include "common/ply.h"
 #include "sl/daemon/client.h"
+#include "sl/daemon/dds.h"
 
 namespace {
 
@@ -447,6 +448,7 @@ int run(const Args& args) {
 
 int main(int argc, char** argv) {
   const Args args = parseArgs(argc, argv);
+  sl::dds::retainLargeSampleMemory();  // `scan` and `start` receive clouds
   try {
     return run(args);
   } catch (const std::exception& e) {

@@ -46,6 +46,27 @@ class Error : public std::runtime_error {
 // return codes alike); returns rc otherwise.
 dds_return_t check(dds_return_t rc, const std::string& call);
 
+// Makes the process keep the memory of freed large samples for the next
+// ones instead of giving it back to the kernel, where each 25 MB cloud would
+// be page-faulted in again (~6,100 faults per cloud; README "DDS
+// deployment"). glibc's allocator serves blocks above its mmap threshold
+// (128 KiB, raised dynamically up to 32 MiB) with mmap and unmaps them on
+// free, trims the main heap's free top, and unmaps a thread heap that
+// becomes empty; this sets, for the whole process:
+//   M_MMAP_THRESHOLD 32 MiB  blocks up to 32 MiB come from the heaps
+//   M_TRIM_THRESHOLD 2 GiB   the main heap's free top is kept
+//   M_TOP_PAD 64 MiB         thread heaps keep 64 MiB (a whole heap) free
+// The cost is that the peak stays resident (bounded by the peak, as the
+// writers' and readers' histories are bounded). Call once at the start of
+// main, before threads allocate; the same settings can be given to any
+// other process as GLIBC_TUNABLES (kGlibcTunables). Returns false if glibc
+// refused one of them. SL_DEFAULT_MALLOC=1 in the environment leaves glibc's
+// defaults (to measure the difference).
+bool retainLargeSampleMemory();
+inline constexpr const char* kGlibcTunables =
+    "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=2147483647:"
+    "glibc.malloc.top_pad=67108864";
+
 // Owning, copyable QoS policy set. An empty Qos leaves every policy at
 // Cyclone's default. Builders return *this so they chain:
 //   Qos().reliable(DDS_MSECS(500)).keepLast(1).xcdr1()
