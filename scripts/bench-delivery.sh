@@ -312,6 +312,7 @@ scenario() {
 echo "bench-delivery: $(date -u +%FT%TZ), $(nproc) cores, $isolation, load average $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "bench-delivery: net.core.rmem_max=$(cat /proc/sys/net/core/rmem_max) wmem_max=$(cat /proc/sys/net/core/wmem_max)"
 echo "bench-delivery: daemon scheduling: ${daemon_prefix[*]:-ordinary (SCHED_OTHER, nice 0)}"
+echo "bench-delivery: allocator: $([ "${SL_DEFAULT_MALLOC:-0}" = 1 ] && echo "glibc's defaults (SL_DEFAULT_MALLOC=1)" || echo "large samples retained (sl::dds::retainLargeSampleMemory)")"
 
 # --- bare DDS ceiling: sl_dds_bench pub -> sub, no daemon ---
 declare -A ceiling_rate ceiling_p50
@@ -376,7 +377,12 @@ elif [ -x "$fastdds" ]; then
   export FASTRTPS_DEFAULT_PROFILES_FILE=$src/config/fastdds-loopback.xml
   start_daemon 30
   n=$((secs_5hz * 5))
-  timeout $((secs + 60)) "$fastdds" --topic "rt/$ns/points" --count "$n" --timeout $((secs + 50)) --rx-times \
+  # The Fast DDS subscriber stands for a ROS 2 node: it runs with the
+  # allocator settings the README recommends for subscribers of full clouds
+  # (sl::dds::kGlibcTunables), unless SL_DEFAULT_MALLOC=1.
+  tunables=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=2147483647:glibc.malloc.top_pad=67108864
+  [ "${SL_DEFAULT_MALLOC:-0}" = 1 ] && tunables=${GLIBC_TUNABLES:-}
+  timeout $((secs + 60)) env GLIBC_TUNABLES="$tunables" "$fastdds" --topic "rt/$ns/points" --count "$n" --timeout $((secs + 50)) --rx-times \
     > "$work/fastdds.log" 2> "$work/fastdds.err" &
   fpid=$!
   pids+=("$fpid")
