@@ -4,6 +4,7 @@
 #include "support/time_scale.h"
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <memory>
@@ -154,4 +155,75 @@ TEST_CASE("requests refused by the full request reader are counted") {
   CHECK(s->requests_rejected >= kRequests - 256);  // each refused sample at least once
   CHECK(s->requests_answered + s->requests_rate_limited + s->replies_timed_out ==
         s->requests_received);
+}
+
+// The flood probe of the hardening issue (one unthrottled writer of 20k
+// LIST_PATTERNS got 17 % answered, and honest clients' STOPs timed out):
+// a client that writes as fast as the reliable protocol lets it is held back
+// at its own writer and rate-limited; another client is answered meanwhile,
+// and every request the daemon took is answered or counted.
+TEST_CASE("a flooding client neither starves another client nor loses requests uncounted") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("flood");
+  InProcessDaemon daemon(ns);
+  daemon.serve();
+  const auto honest = connectTo(ns);
+
+  sl::dds::Participant participant(0);
+  sl::dds::Topic<sl_msgs_msg_CommandRequest> topic(participant, "rq/" + ns + "/commandRequest",
+                                                   sl_msgs_msg_CommandRequest_desc);
+  sl::dds::Writer<sl_msgs_msg_CommandRequest> writer(
+      participant, topic, sl::dds::Qos().reliable(DDS_MSECS(500)).keepAll().xcdr1());
+  REQUIRE(writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
+  constexpr int kFlood = 20000;  // as the probe
+  std::atomic<int> written{0};
+  std::atomic<bool> flooding{true};
+  std::thread flood([&] {
+    std::string client_id = "flooder", empty;
+    for (int i = 0; i < kFlood; ++i) {
+      sl_msgs_msg_CommandRequest request{};
+      request.client_id = client_id.data();
+      request.request_id = static_cast<std::uint32_t>(i + 1);  // all distinct: none is a repeat
+      request.command = sl_msgs_msg_COMMAND_LIST_PATTERNS;
+      request.pattern = request.recording = empty.data();
+      if (writer.write(request)) ++written;
+    }
+    flooding = false;
+  });
+  // The honest client's requests during the flood: each answered within
+  // slctl's default timeout (5 s, retries included in request()).
+  int honest_sent = 0, honest_answered = 0;
+  while (flooding && honest_sent < 20) {
+    ++honest_sent;
+    const auto reply = honest->request(sl::daemon::Command::kStop, "", 0, sl::test::scaledBound(5s));
+    if (reply) ++honest_answered;  // NOT_RUNNING: nothing was scanning, but answered
+    std::this_thread::sleep_for(50ms);
+  }
+  flood.join();
+  INFO("flooder wrote " << written << " of " << kFlood << "; the honest client sent " << honest_sent);
+  CHECK(honest_sent >= 3);  // the flood lasted long enough to test anything
+  CHECK(honest_answered == honest_sent);
+
+  const auto s = statusWhen(
+      *honest,
+      [&](const auto& s) {
+        return s.requests_answered + s.requests_rate_limited + s.replies_timed_out ==
+                   s.requests_received &&
+               s.requests_received >= std::uint64_t(written + honest_sent);
+      },
+      sl::test::scaledBound(20s));
+  REQUIRE(s);
+  INFO("received " << s->requests_received << ", answered " << s->requests_answered
+                   << ", rate-limited " << s->requests_rate_limited << ", timed out "
+                   << s->replies_timed_out << ", rejected " << s->requests_rejected);
+  // Every sample the flooder's writer delivered was taken (reliable, and the
+  // reader refuses only while full, which holds the writer back): all
+  // accounted for, none lost between the writer and the counters.
+  CHECK(s->requests_received >= std::uint64_t(written + honest_sent));
+  CHECK(s->requests_answered + s->requests_rate_limited + s->replies_timed_out ==
+        s->requests_received);
+  // 20 requests/s per client after a burst of 40: most of the flood is
+  // rate-limited, not answered.
+  CHECK(s->requests_rate_limited > 0);
+  CHECK(s->requests_rate_limited >= std::uint64_t(written) / 2);
 }
