@@ -3,14 +3,18 @@
 // projector), single-threaded. Reported as scans/s.
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <numbers>
+#include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
 #include <benchmark/benchmark.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "sl/pipeline/decoder.h"
+#include "sl/pipeline/motion_compensation.h"
 #include "sl/pipeline/triangulator.h"
 #include "support/test_rig.h"
 
@@ -114,8 +118,53 @@ void BM_TriangulatorConstruction(benchmark::State& state) {
   }
 }
 
+// The scan's frames times a texture moving 2 px per frame along y (the
+// fringes' direction), as one camera's set for motion compensation.
+ImageSet movingSet() {
+  const Scan& s = scan();
+  const PinholeModel& cam = s.calibration.camera;
+  cv::Mat noise(cam.height + 40, cam.width, CV_32FC1), texture;
+  cv::RNG(3).fill(noise, cv::RNG::NORMAL, 0, 1);
+  cv::GaussianBlur(noise, texture, cv::Size(0, 0), 4);
+  cv::normalize(texture, texture, 0.6, 1.0, cv::NORM_MINMAX);
+  ImageSet set;
+  set.cameras.resize(1);
+  set.cameras[0].camera_id = "camera";
+  for (std::size_t f = 0; f < s.frames.size(); ++f) {
+    cv::Mat lit;
+    s.frames[f].convertTo(lit, CV_32F);
+    const cv::Mat moved = texture.rowRange(int(2 * f), int(2 * f) + cam.height);
+    cv::Mat frame;
+    cv::Mat(lit.mul(moved)).convertTo(frame, CV_8U);
+    set.cameras[0].frames.push_back(frame);
+    set.cameras[0].stamps_ns.push_back(std::int64_t(f) * 33'333'333);
+  }
+  return set;
+}
+
+// Motion compensation of that set along y, single-threaded. Argument 0: the
+// whole frame shifted (no camera model), 1: through the camera's distortion
+// model (MotionCompensator given the model, as the daemon does).
+void BM_MotionCompensation(benchmark::State& state) {
+  const int threads = cv::getNumThreads();
+  cv::setNumThreads(1);
+  const ImageSet set = movingSet();
+  MotionCompensationOptions options;
+  options.axis = MotionCompensationOptions::Axis::kY;
+  const MotionCompensator compensator(options);
+  MotionEstimate estimate;
+  for (auto _ : state) {
+    auto aligned = compensator.compensate(set, &estimate);
+    benchmark::DoNotOptimize(aligned.get());
+  }
+  state.counters["shift_0_px"] = estimate.shifts_px[0][0];
+  reportScans(state);
+  cv::setNumThreads(threads);
+}
+
 }  // namespace
 
+BENCHMARK(BM_MotionCompensation)->Arg(0)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Decode)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Triangulate)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_DecodeAndTriangulate)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
