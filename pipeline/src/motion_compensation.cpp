@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -13,14 +14,26 @@ namespace sl::pipeline {
 
 namespace {
 
-// Float image, downsampled by `factor` (area average), transposed so that the
-// motion axis runs along the columns (x).
-cv::Mat prepare(const cv::Mat& image, int factor, bool transpose) {
-  cv::Mat f;
-  image.convertTo(f, CV_32F);
-  if (factor > 1) cv::resize(f, f, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
-  if (transpose) cv::transpose(f, f);
-  return f;
+// The size cv::resize gives `size` scaled by 1 / factor.
+cv::Size subsampledSize(cv::Size size, int factor) {
+  return {cvRound(size.width * (1.0 / factor)), cvRound(size.height * (1.0 / factor))};
+}
+
+// Grid nodes of a lens's undistortion every kGridStep px: the resampling's
+// displacement field (the shift through the distortion model) is bilinear
+// between them, off the exact field by ~1e-5 px for the sim cameras' lens
+// (k1 = -0.08, 12 px of shift: its second derivative is ~6e-7 px per px^2).
+constexpr int kGridStep = 16;
+
+// Bilinear sample of `src` (T: uint8 or uint16) at rows r0, r0 + 1 and
+// columns c0, c0 + 1 with weights a (along x) and b (along y), rounded.
+template <typename T>
+T bilinear(const cv::Mat& src, int r0, int c0, float a, float b) {
+  const T* top = src.ptr<T>(r0) + c0;
+  const T* bottom = src.ptr<T>(r0 + 1) + c0;
+  const float upper = float(top[0]) + a * (float(top[1]) - float(top[0]));
+  const float lower = float(bottom[0]) + a * (float(bottom[1]) - float(bottom[0]));
+  return cv::saturate_cast<T>(upper + b * (lower - upper));
 }
 
 // The periodic Hann window 0.5 (1 - cos(2 pi x / N)) along each axis (not
@@ -44,31 +57,135 @@ cv::Mat periodicHann(cv::Size size) {
 
 }  // namespace
 
-MotionCompensator::MotionCompensator(MotionCompensationOptions options) : options_(options) {
+// A camera's undistortion for the compensation in undistorted coordinates;
+// its pinhole image has the model's intrinsics without the distortion.
+struct MotionCompensator::Lens {
+  PinholeModel model;
+  // Registration: for each pixel of the subsampled pinhole image, its
+  // position in the subsampled (distorted) frame (cv::remap's maps).
+  cv::Mat subsampled_x, subsampled_y;
+  // Undistorted normalized coordinates of the pixels (j kGridStep, i
+  // kGridStep), i < grid_rows, j < grid_cols, row-major (the last node of a
+  // row or column at or beyond the last pixel).
+  int grid_rows = 0, grid_cols = 0;
+  std::vector<Eigen::Vector2d> nodes;
+
+  Lens(const PinholeModel& m, int factor) : model(m) {
+    if (m.width < 2 || m.height < 2 || !(m.fx > 0) || !(m.fy > 0))
+      throw std::invalid_argument("motion compensation: a camera model without a size or focal length");
+    const cv::Size sub = subsampledSize({m.width, m.height}, factor);
+    subsampled_x.create(sub, CV_32FC1);
+    subsampled_y.create(sub, CV_32FC1);
+    // Subsampled pixel i averages the full-resolution pixels i f .. i f + f - 1.
+    const double centre = 0.5 * (factor - 1);
+    for (int r = 0; r < sub.height; ++r)
+      for (int c = 0; c < sub.width; ++c) {
+        const Eigen::Vector2d xn(((c * factor + centre) - m.cx) / m.fx, ((r * factor + centre) - m.cy) / m.fy);
+        const Eigen::Vector2d q = m.normalizedToPixel(xn);
+        subsampled_x.at<float>(r, c) = float((q.x() - centre) / factor);
+        subsampled_y.at<float>(r, c) = float((q.y() - centre) / factor);
+      }
+    grid_cols = (m.width - 1 + kGridStep - 1) / kGridStep + 1;
+    grid_rows = (m.height - 1 + kGridStep - 1) / kGridStep + 1;
+    nodes.reserve(std::size_t(grid_rows) * std::size_t(grid_cols));
+    for (int i = 0; i < grid_rows; ++i)
+      for (int j = 0; j < grid_cols; ++j)
+        nodes.push_back(m.pixelToNormalized(Eigen::Vector2d(j * kGridStep, i * kGridStep)));
+  }
+
+  // `frame` resampled so that each pixel shows what it showed in the
+  // reference frame: from the model's pixel of its undistorted point moved
+  // by `shift` (pinhole px) along the axis, bilinear in floating point (not
+  // cv::remap, whose positions are fixed-point, 1/32 px: as large as the
+  // displacement across the axis this corrects). Pixels whose source lies
+  // even partly outside the frame are 0 and set in `lacking` (CV_8UC1).
+  cv::Mat resample(const cv::Mat& frame, bool along_x, double shift, cv::Mat& lacking) const {
+    const int width = frame.cols, height = frame.rows;
+    // The displacement (px) at the grid nodes.
+    std::vector<cv::Vec2f> displacement(nodes.size());
+    const Eigen::Vector2d step = along_x ? Eigen::Vector2d(shift / model.fx, 0) : Eigen::Vector2d(0, shift / model.fy);
+    for (std::size_t k = 0; k < nodes.size(); ++k) {
+      const Eigen::Vector2d d = model.normalizedToPixel(nodes[k] + step) - model.normalizedToPixel(nodes[k]);
+      displacement[k] = cv::Vec2f(float(d.x()), float(d.y()));
+    }
+    cv::Mat out(frame.size(), frame.type());
+    const bool wide = frame.depth() == CV_16U;
+    cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& rows) {
+      std::vector<cv::Vec2f> row_displacement(static_cast<std::size_t>(grid_cols));
+      for (int r = rows.start; r < rows.end; ++r) {
+        const int i = std::min(r / kGridStep, grid_rows - 2);
+        const float t = float(r - i * kGridStep) / kGridStep;
+        const cv::Vec2f* upper = &displacement[std::size_t(i) * std::size_t(grid_cols)];
+        const cv::Vec2f* lower = upper + grid_cols;
+        for (int j = 0; j < grid_cols; ++j) row_displacement[std::size_t(j)] = upper[j] + t * (lower[j] - upper[j]);
+        std::uint8_t* lack = lacking.ptr<std::uint8_t>(r);
+        auto* out8 = out.ptr<std::uint8_t>(r);
+        auto* out16 = out.ptr<std::uint16_t>(r);
+        for (int j = 0; j + 1 < grid_cols; ++j) {
+          const cv::Vec2f d0 = row_displacement[std::size_t(j)];
+          const cv::Vec2f slope = (row_displacement[std::size_t(j) + 1] - d0) * (1.0f / kGridStep);
+          const int c_end = std::min(width, (j + 1) * kGridStep);
+          for (int c = j * kGridStep; c < c_end; ++c) {
+            const float w = float(c - j * kGridStep);
+            const float x = float(c) + d0[0] + w * slope[0];
+            const float y = float(r) + d0[1] + w * slope[1];
+            if (!(x >= 0 && y >= 0 && x <= float(width - 1) && y <= float(height - 1))) {
+              lack[c] = 1;
+              if (wide) out16[c] = 0; else out8[c] = 0;
+              continue;
+            }
+            const int c0 = std::min(int(x), width - 2), r0 = std::min(int(y), height - 2);
+            const float a = x - float(c0), b = y - float(r0);
+            if (wide)
+              out16[c] = bilinear<std::uint16_t>(frame, r0, c0, a, b);
+            else
+              out8[c] = bilinear<std::uint8_t>(frame, r0, c0, a, b);
+          }
+        }
+      }
+    });
+    return out;
+  }
+};
+
+MotionCompensator::MotionCompensator(MotionCompensationOptions options,
+                                     const std::map<std::string, PinholeModel>& cameras)
+    : options_(options) {
   if (options_.subsample != 1 && options_.subsample != 2 && options_.subsample != 4)
     throw std::invalid_argument("motion compensation: subsample must be 1, 2 or 4");
   if (!(options_.max_shift_px > 0))
     throw std::invalid_argument("motion compensation: max_shift_px must be > 0");
+  for (const auto& [id, model] : cameras)
+    if (model.hasDistortion()) lenses_.emplace(id, std::make_shared<const Lens>(model, options_.subsample));
 }
 
-cv::Mat MotionCompensator::correlate(const cv::Mat& reference, const cv::Mat& moving) const {
-  if (reference.size() != moving.size() || reference.empty())
-    throw std::invalid_argument("motion compensation: images differ in size or are empty");
-  const bool transpose = options_.axis == MotionCompensationOptions::Axis::kY;
+cv::Mat MotionCompensator::spectrum(const cv::Mat& image, const Lens* lens) const {
   const int factor = options_.subsample;
-  cv::Mat a = prepare(reference, factor, transpose);
-  cv::Mat b = prepare(moving, factor, transpose);
-  // Remove each image's mean so the DC term does not dominate the window.
-  a -= cv::mean(a);
-  b -= cv::mean(b);
-  if (options_.window) {
-    if (window_.size() != a.size()) window_ = periodicHann(a.size());
-    a = a.mul(window_);
-    b = b.mul(window_);
+  cv::Mat f;
+  image.convertTo(f, CV_32F);
+  if (factor > 1) cv::resize(f, f, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
+  if (lens) {
+    // The pinhole image (cv::remap's 1/32 px positions: the same for every
+    // frame, so they do not bias the shift between two).
+    cv::Mat pinhole;
+    cv::remap(f, pinhole, lens->subsampled_x, lens->subsampled_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    f = pinhole;
   }
-  cv::Mat fa, fb, cross;
-  cv::dft(a, fa, cv::DFT_COMPLEX_OUTPUT);
-  cv::dft(b, fb, cv::DFT_COMPLEX_OUTPUT);
+  // The motion axis along the columns (x).
+  if (options_.axis == MotionCompensationOptions::Axis::kY) cv::transpose(f, f);
+  // Remove the image's mean so the DC term does not dominate the window.
+  f -= cv::mean(f);
+  if (options_.window) {
+    if (window_.size() != f.size()) window_ = periodicHann(f.size());
+    f = f.mul(window_);
+  }
+  cv::Mat transformed;
+  cv::dft(f, transformed, cv::DFT_COMPLEX_OUTPUT);
+  return transformed;
+}
+
+cv::Mat MotionCompensator::correlate(const cv::Mat& fa, const cv::Mat& fb) const {
+  cv::Mat cross;
   // Eq. 10: C = F_b * conj(F_a) / |F_b * conj(F_a)|; its inverse transform
   // peaks at the shift of b relative to a.
   cv::mulSpectrums(fb, fa, cross, 0, /*conjB=*/true);
@@ -162,8 +279,28 @@ constexpr double kMinPeakRatio = 0.3;
 
 }  // namespace
 
+namespace {
+
+void requireSameSize(const cv::Mat& reference, const cv::Mat& moving) {
+  if (reference.size() != moving.size() || reference.empty())
+    throw std::invalid_argument("motion compensation: images differ in size or are empty");
+}
+
+}  // namespace
+
 double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat& moving) const {
-  const cv::Mat correlation = correlate(reference, moving);
+  requireSameSize(reference, moving);
+  return peakShift(correlate(spectrum(reference, nullptr), spectrum(moving, nullptr)));
+}
+
+double MotionCompensator::estimateShiftWithin(const cv::Mat& reference, const cv::Mat& moving,
+                                              double from_px, double to_px) const {
+  requireSameSize(reference, moving);
+  return peakShiftWithin(correlate(spectrum(reference, nullptr), spectrum(moving, nullptr)), from_px,
+                         to_px);
+}
+
+double MotionCompensator::peakShift(const cv::Mat& correlation) const {
   const int cols = correlation.cols, factor = options_.subsample;
   // The peak is searched only within +-max_shift_px: a far-away false peak
   // (measured with the Hann window on unit-frequency frames: +620 px against a
@@ -176,9 +313,8 @@ double MotionCompensator::estimateShift(const cv::Mat& reference, const cv::Mat&
   return peak.shift * factor;
 }
 
-double MotionCompensator::estimateShiftWithin(const cv::Mat& reference, const cv::Mat& moving,
-                                              double from_px, double to_px) const {
-  const cv::Mat correlation = correlate(reference, moving);
+double MotionCompensator::peakShiftWithin(const cv::Mat& correlation, double from_px,
+                                          double to_px) const {
   const int factor = options_.subsample;
   const int first = static_cast<int>(std::ceil(from_px / factor));
   const int last = std::max(first, static_cast<int>(std::floor(to_px / factor)));
@@ -206,11 +342,26 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
     if (ref >= n)
       throw std::invalid_argument("motion compensation: reference frame " + std::to_string(ref) +
                                   " but the sequence has " + std::to_string(n) + " frames");
+    const auto lens_of = lenses_.find(camera.camera_id);
+    const Lens* lens = lens_of == lenses_.end() ? nullptr : lens_of->second.get();
+    for (const cv::Mat& frame : camera.frames) {
+      requireSameSize(camera.frames[ref], frame);
+      if (lens && (frame.cols != lens->model.width || frame.rows != lens->model.height))
+        throw std::invalid_argument("motion compensation: camera '" + camera.camera_id + "' frames are " +
+                                    std::to_string(frame.cols) + " x " + std::to_string(frame.rows) +
+                                    " px, its model " + std::to_string(lens->model.width) + " x " +
+                                    std::to_string(lens->model.height));
+      if (lens && frame.type() != CV_8UC1 && frame.type() != CV_16UC1)
+        throw std::invalid_argument("motion compensation: frames must be CV_8UC1 or CV_16UC1");
+    }
     std::vector<double> shifts(n, 0.0);
     std::vector<bool> within(n, true), corrected(n, false), resampled(n, false);
+    std::vector<cv::Mat> correlations(n);
+    const cv::Mat reference_spectrum = spectrum(camera.frames[ref], lens);
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
-      shifts[i] = estimateShift(camera.frames[ref], camera.frames[i]);
+      correlations[i] = correlate(reference_spectrum, spectrum(camera.frames[i], lens));
+      shifts[i] = peakShift(correlations[i]);
       within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
     }
     // Consistency along the sequence (see the options): the speed is the
@@ -235,8 +386,7 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
         const double band =
             std::max(options_.max_deviation_px, options_.max_deviation_fraction * std::abs(predicted));
         if (within[i] && std::abs(shifts[i] - predicted) <= band) continue;
-        const double again =
-            estimateShiftWithin(camera.frames[ref], camera.frames[i], predicted - band, predicted + band);
+        const double again = peakShiftWithin(correlations[i], predicted - band, predicted + band);
         shifts[i] = std::isnan(again) ? predicted : again;
         within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
         corrected[i] = true;
@@ -247,6 +397,8 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
     // even partly outside the frame).
     const int length = along_x ? camera.frames[ref].cols : camera.frames[ref].rows;
     int lacking_before = 0, lacking_from = length;
+    cv::Mat lacking;  // through the lens: pixels some frame lacks
+    if (lens) lacking = cv::Mat::zeros(camera.frames[ref].size(), CV_8UC1);
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
       if (!within[i]) {
@@ -255,6 +407,11 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
         continue;
       }
       const double shift = shifts[i];
+      if (lens) {
+        camera.frames[i] = lens->resample(camera.frames[i], along_x, shift, lacking);
+        resampled[i] = true;
+        continue;
+      }
       // Move frame i's content back onto the reference: translate by -shift.
       cv::Mat m = cv::Mat::zeros(2, 3, CV_64F);
       m.at<double>(0, 0) = m.at<double>(1, 1) = 1;
@@ -273,7 +430,13 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
     }
     // Those pixels are 0 in every frame (dimmed or missing in one frame, they
     // would decode to a wrong phase; 0 in all, they have no modulation).
-    for (int i = 0; i < n && (lacking_before > 0 || lacking_from < length); ++i) {
+    if (lens && cv::countNonZero(lacking) > 0) {
+      for (int i = 0; i < n; ++i) {
+        if (!resampled[i]) camera.frames[i] = camera.frames[i].clone();  // not the input's pixels
+        camera.frames[i].setTo(cv::Scalar(0), lacking);
+      }
+    }
+    for (int i = 0; i < n && !lens && (lacking_before > 0 || lacking_from < length); ++i) {
       if (!resampled[i]) camera.frames[i] = camera.frames[i].clone();  // not the input's pixels
       for (const auto& [from, to] : {std::pair{0, lacking_before}, std::pair{lacking_from, length}}) {
         if (to <= from) continue;

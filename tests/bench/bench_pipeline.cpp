@@ -151,7 +151,9 @@ void BM_MotionCompensation(benchmark::State& state) {
   const ImageSet set = movingSet();
   MotionCompensationOptions options;
   options.axis = MotionCompensationOptions::Axis::kY;
-  const MotionCompensator compensator(options);
+  std::map<std::string, PinholeModel> cameras;
+  if (state.range(0) == 1) cameras.emplace("camera", scan().calibration.camera);
+  const MotionCompensator compensator(options, cameras);
   MotionEstimate estimate;
   for (auto _ : state) {
     auto aligned = compensator.compensate(set, &estimate);
@@ -164,7 +166,7 @@ void BM_MotionCompensation(benchmark::State& state) {
 
 }  // namespace
 
-BENCHMARK(BM_MotionCompensation)->Arg(0)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MotionCompensation)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Decode)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Triangulate)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_DecodeAndTriangulate)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);

@@ -35,6 +35,13 @@ ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vecto
 
 namespace {
 
+// The cameras' models (motion compensation works in undistorted coordinates).
+std::map<std::string, pipeline::PinholeModel> cameraModels(const ProcessingConfig& config) {
+  std::map<std::string, pipeline::PinholeModel> models;
+  for (const auto& [id, calibration] : config.calibrations) models.emplace(id, calibration.camera);
+  return models;
+}
+
 // `config` with the calibrations and the depth limits in the clouds' unit.
 ProcessingConfig inCloudUnit(ProcessingConfig config) {
   if (!(config.cloud_unit_mm > 0 && std::isfinite(config.cloud_unit_mm)))
@@ -50,7 +57,8 @@ ProcessingConfig inCloudUnit(ProcessingConfig config) {
 }  // namespace
 
 SetProcessor::SetProcessor(const ProcessingConfig& config)
-    : loaded_(config), config_(inCloudUnit(config)), stages_(build(config_)), motion_(config.motion) {
+    : loaded_(config), config_(inCloudUnit(config)), stages_(build(config_)),
+      motion_(config.motion, cameraModels(config)) {
   warmUp();
 }
 
@@ -93,7 +101,7 @@ std::string SetProcessor::reconfigure(const ProcessingConfig& config) {
   try {
     ProcessingConfig scaled = inCloudUnit(config);
     Stages rebuilt = build(scaled);
-    pipeline::MotionCompensator motion(config.motion);
+    pipeline::MotionCompensator motion(config.motion, cameraModels(config));
     stages_ = std::move(rebuilt);
     motion_ = std::move(motion);
     config_ = std::move(scaled);
