@@ -120,6 +120,16 @@ TEST_CASE("a synthetic pass with known poses is recovered, multi-way at least as
   CHECK(worst_multiway < 0.1);
   CHECK(worst_deg < 0.05);
   CHECK(worst_multiway <= worst_pairwise + 1e-3);
+  // The multi-way result carries the pairwise chain it started from: the
+  // pairwise run's poses and edges (one run gives both, as sl_eval wall uses).
+  CHECK(pairwise.pairwise == nullptr);
+  REQUIRE(multiway.pairwise != nullptr);
+  CHECK_FALSE(multiway.pairwise->multiway);
+  REQUIRE(multiway.pairwise->poses.size() == pairwise.poses.size());
+  for (std::size_t k = 0; k < pairwise.poses.size(); ++k)
+    CHECK(multiway.pairwise->poses[k].isApprox(pairwise.poses[k], 1e-12));
+  CHECK(multiway.pairwise->edges.size() == pairwise.edges.size());
+  CHECK(multiway.pairwise->registered == pairwise.registered);
   // Skip edges were measured and used.
   int skips = 0;
   for (const auto& e : multiway.edges) skips += e.kind == sl::reg::EdgeKind::kSkip && e.accepted;

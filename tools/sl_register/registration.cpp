@@ -14,6 +14,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -102,6 +103,22 @@ std::pair<double, double> difference(const Eigen::Matrix4d& a, const Eigen::Matr
   return {d.block<3, 1>(0, 3).norm(), angleDeg(d.block<3, 3>(0, 0))};
 }
 
+// Seconds since the last lap (or construction), as text for progress lines.
+class Stopwatch {
+ public:
+  std::string lap() {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.1f", s);
+    return buffer;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
 // Measured edge with what the optimisation needs.
 struct Measured {
   EdgeReport report;
@@ -125,32 +142,52 @@ class Registrar {
   }
 
   RegisterResult run() {
-    RegisterResult result;
-    result.multiway = options_.multiway;
-    result.reference = 0;
     poses_.clear();
     for (const ScanInput& s : scans_) poses_.push_back(s.initial);
     registered_.assign(scans_.size(), false);
     registered_[0] = true;
+    Stopwatch watch;
     chain();
-    std::vector<Measured> final_edges = chain_edges_;
-    if (options_.multiway) {
-      for (int round = 0; round < std::max(1, options_.refinement_rounds); ++round) {
-        say("multi-way round " + std::to_string(round + 1));
-        std::vector<Measured> edges = measureAll(round == 0);
-        optimise(edges);
-        final_edges = std::move(edges);
-      }
+    say("pairwise chain: " + std::to_string(icp_count_) + " edges measured in " + watch.lap() + " s");
+    if (!options_.multiway) return finish(chain_edges_, false);
+    const auto pairwise = std::make_shared<const RegisterResult>(finish(chain_edges_, false));
+    std::vector<Measured> final_edges;
+    for (int round = 0; round < std::max(1, options_.refinement_rounds); ++round) {
+      say("multi-way round " + std::to_string(round + 1));
+      const int before = icp_count_;
+      std::vector<Measured> edges = measureAll(round == 0);
+      say("multi-way round " + std::to_string(round + 1) + ": " + std::to_string(edges.size()) +
+          " edges (" + std::to_string(icp_count_ - before) + " measured) in " + watch.lap() + " s");
+      optimise(edges);
+      say("multi-way round " + std::to_string(round + 1) + ": pose graph in " + watch.lap() + " s");
+      final_edges = std::move(edges);
     }
-    // Scans connected to the reference through kept edges are registered.
-    const std::vector<bool> reached = connected(final_edges);
+    RegisterResult result = finish(std::move(final_edges), true);
+    result.pairwise = pairwise;
+    return result;
+  }
+
+ private:
+  void say(const std::string& line) const {
+    if (progress_) progress_(line);
+  }
+
+  // The result under the current poses with `edges` (the current poses are
+  // left as they are): scans connected to the reference through kept edges
+  // are registered, the others keep their initial pose and are refused; the
+  // kept edges' final residuals.
+  RegisterResult finish(std::vector<Measured> edges, bool multiway) {
+    const std::vector<Pose> current = poses_;
+    RegisterResult result;
+    result.multiway = multiway;
+    result.reference = 0;
+    const std::vector<bool> reached = connected(edges);
     for (std::size_t i = 0; i < scans_.size(); ++i) {
       if (reached[i]) continue;
       poses_[i] = scans_[i].initial;
       result.refused.push_back(scans_[i].name + ": matches no other scan (no edge kept)");
     }
-    // Final residuals of the kept edges under the final poses.
-    for (Measured& m : final_edges) {
+    for (Measured& m : edges) {
       EdgeReport& e = m.report;
       if (!e.accepted) continue;
       const Eigen::Matrix4d T = relative(e.source, e.target);
@@ -159,15 +196,11 @@ class Registrar {
                             .rmse_mm;
       std::tie(e.final_error_mm, e.final_error_deg) = difference(T, e.transform);
     }
-    for (const Measured& m : final_edges) result.edges.push_back(m.report);
+    for (const Measured& m : edges) result.edges.push_back(m.report);
     result.poses = poses_;
     result.registered = reached;
+    poses_ = current;
     return result;
-  }
-
- private:
-  void say(const std::string& line) const {
-    if (progress_) progress_(line);
   }
 
   // T_target_source from the current poses.
@@ -212,7 +245,8 @@ class Registrar {
     for (double d : distances) {
       const o3r::RegistrationResult r = o3r::RegistrationICP(
           *s.cloud, *t.cloud, d, T, o3r::TransformationEstimationPointToPlane(),
-          o3r::ICPConvergenceCriteria(1e-6, 1e-6, options_.icp_iterations));
+          o3r::ICPConvergenceCriteria(options_.icp_convergence, options_.icp_convergence,
+                                      options_.icp_iterations));
       T = r.transformation_;
     }
     e.transform = T;
