@@ -322,7 +322,11 @@ std::vector<Captured> scanWall(const EvalOptions& options, const drivers::SimHei
   // requested (software trigger, one scan), the sensor moving at 12.5 mm/s
   // during it. The scans kept are every (spacing / 2.5 mm)-th of the 5 Hz
   // stream a continuous pass would give.
-  const int reference_frame = 3;         // MotionCompensator's default: the middle of 6 frames
+  // The frame the compensation aligns to (the cloud's time): the config's
+  // (config/sim-motion.yaml: 1, the middle of 3+3's fine set), -1 = the
+  // middle of the 6 frames.
+  const int reference_frame =
+      config.motion.options.reference_frame < 0 ? 3 : config.motion.options.reference_frame;
   for (std::size_t p = 0; p < plans.size(); ++p) {
     const PassPlan& plan = plans[p];
     daemon::DaemonConfig settings = engine.config();
@@ -498,17 +502,24 @@ EvalResult runWall(const EvalOptions& in) {
     rows.push_back({"true poses", "merged", statsOf(merged), 0, 0});
   }
   const double cols_mm = kWallWidth, rows_mm = kWallHeight;
+  // One multi-way registration; the pairwise chain it starts from is the
+  // pairwise result (as a separate pairwise run gives it).
+  reg::RegisterOptions ro;
+  ro.multiway = true;
+  const auto t0 = Clock::now();
+  double chain_s = 0;
+  const reg::RegisterResult multiway_result = reg::registerScans(scans, ro, [&](const std::string& line) {
+    if (line.rfind("pairwise chain", 0) == 0)
+      chain_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (line.rfind("ICP", 0) != 0) say("registration: " + line);
+  });
+  const double registration_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  say("registered in " + fmt(registration_s, 1) + " s (pairwise chain " + fmt(chain_s, 1) + " s of it)");
+  result.metrics["pairwise_registration_s"] = chain_s;
+  result.metrics["multiway_registration_s"] = registration_s;
   for (const bool multiway : {false, true}) {
     const std::string method = multiway ? "multiway" : "pairwise";
-    reg::RegisterOptions ro;
-    ro.multiway = multiway;
-    const auto t0 = Clock::now();
-    const reg::RegisterResult r = reg::registerScans(scans, ro, [&](const std::string& line) {
-      if (line.rfind("ICP", 0) != 0) say(method + ": " + line);
-    });
-    const double reg_s = std::chrono::duration<double>(Clock::now() - t0).count();
-    say(method + ": registered in " + fmt(reg_s, 1) + " s");
-    result.metrics[method + "_registration_s"] = reg_s;
+    const reg::RegisterResult& r = multiway ? multiway_result : *multiway_result.pairwise;
     for (const std::string& refused : r.refused) refused_lines.push_back(method + ": " + refused);
     // Each kept edge's measurement against the truth (the error of
     // T_target_source in the source's frame): a bias common to the edges
@@ -618,9 +629,9 @@ EvalResult runWall(const EvalOptions& in) {
         "| paper (TLS C2M), pairwise | R1 horizontal | | 0.07 | 0.71 | -2.43 | 1.83 | | | |\n"
         "| paper (TLS C2M), pairwise | R2 horizontal (printed R1) | | 0.1 | 1.06 | -2.99 | 2.87 | | | |\n";
   md << "\nScanning " << fmt(scanning_s, 0) << " s, registration "
-     << fmt(result.metrics["pairwise_registration_s"], 0) << " s pairwise + "
-     << fmt(result.metrics["multiway_registration_s"], 0) << " s multi-way, total "
-     << fmt(total_s, 0) << " s.\n";
+     << fmt(result.metrics["multiway_registration_s"], 0) << " s (multi-way, its pairwise chain "
+     << fmt(result.metrics["pairwise_registration_s"], 0) << " s of it), total " << fmt(total_s, 0)
+     << " s.\n";
   for (const std::string& line : shape_lines) md << "\nshape: " << line;
   if (!shape_lines.empty()) md << "\n";
   for (const std::string& line : edge_lines) md << "\nedges: " << line;
