@@ -7,7 +7,7 @@ target_link_libraries(test_dds PRIVATE sl_dds sl_idl)
 # End to end: sl_sensord in a child process on the simulated sensor.
 sl_add_test(test_e2e daemon/test_e2e.cpp daemon/test_bridge.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
-add_dependencies(test_e2e sl_sensord malformed_writer points_subscriber)
+add_dependencies(test_e2e sl_sensord malformed_writer points_subscriber sl_view)  # sl_view record
 
 # A client whose requests the daemon cannot deserialize (test_e2e): a
 # look-alike CommandRequest without type information, enums as int32.
