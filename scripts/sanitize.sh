@@ -34,6 +34,8 @@ run_suite() {  # name sanitizers tests
     -DSL_BUILD_BENCHMARKS=OFF "${launcher[@]}" >/dev/null || return 1
   # shellcheck disable=SC2046
   cmake --build "$dir" -j"$jobs" --target $(targets_for "$tests") || return 1
+  # Each test's TIMEOUT property is already x10 in these builds
+  # (SL_TEST_TIMEOUT_SCALE); --timeout bounds only the tests without one.
   local ctest_cmd="cd '$dir' && ctest --output-on-failure --timeout 1800 -R '^($tests)\$'"
   export CYCLONEDDS_URI=file://$root/config/cyclonedds-loopback.xml
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:detect_stack_use_after_return=0}
