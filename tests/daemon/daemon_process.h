@@ -18,6 +18,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "support/time_scale.h"
+
 extern char** environ;
 
 namespace sl::test {
@@ -88,11 +90,12 @@ class ChildProcess {
   bool started() const { return pid_ > 0; }
   void signal(int number) const { ::kill(pid_, number); }
 
-  // Sends SIGTERM and waits up to `timeout`; returns the exit status, or
-  // nullopt if the process had to be killed.
+  // Sends SIGTERM and waits up to `timeout` (x kTimeScale in sanitizer
+  // builds); returns the exit status, or nullopt if the process had to be
+  // killed.
   std::optional<int> terminate(std::chrono::milliseconds timeout) {
     ::kill(pid_, SIGTERM);
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    const auto deadline = std::chrono::steady_clock::now() + scaledBound(timeout);
     while (std::chrono::steady_clock::now() < deadline) {
       int status = 0;
       if (::waitpid(pid_, &status, WNOHANG) == pid_) {

@@ -61,6 +61,9 @@
 
 using namespace std::chrono_literals;
 using sl::daemon::Command;
+// Waits and upper bounds on time: x10 in sanitizer builds.
+using sl::test::kTimeScale;
+using sl::test::scaledBound;
 
 namespace {
 
@@ -152,7 +155,7 @@ std::unique_ptr<sl::daemon::SensorClient> connect(const std::string& ns, bool po
   options.ns = ns;
   options.subscribe_points = points;
   auto client = std::make_unique<sl::daemon::SensorClient>(options);
-  REQUIRE(client->waitForDaemon(20s));
+  REQUIRE(client->waitForDaemon(scaledBound(20s)));
   return client;
 }
 
@@ -160,7 +163,7 @@ std::unique_ptr<sl::daemon::SensorClient> connect(const std::string& ns, bool po
 // clouds stamped after it belong to this request.
 std::int64_t startScans(sl::daemon::SensorClient& client, const std::string& pattern, int count) {
   const std::int64_t t0 = sl::test::nowNs();
-  const auto reply = client.request(Command::kStart, pattern, count, 5s);
+  const auto reply = client.request(Command::kStart, pattern, count, scaledBound(5s));
   REQUIRE(reply);
   REQUIRE(reply->accepted);
   return t0;
@@ -186,7 +189,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
     const auto& gt = sim->groundTruth();
     for (int i = 0; i < 3; ++i) {
-      const auto cloud = client.receiveCloud(t0, 10s);
+      const auto cloud = client.receiveCloud(t0, scaledBound(10s));
       REQUIRE(cloud);
       CHECK(cloud->width == 1440);
       CHECK(cloud->height == 1080);
@@ -209,47 +212,47 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
       CHECK(s.outliers < 0.001 * (s.points + s.outliers));
       CHECK(s.rms_error_mm < 1.0);  // sub-millimetre
     }
-    const auto status = client.status(3s);
+    const auto status = client.status(scaledBound(3s));
     REQUIRE(status);
   }
 
   SECTION("requests are answered and rejected with reasons") {
-    auto reply = client.request(Command::kStart, "no_such_pattern", 1, 5s);
+    auto reply = client.request(Command::kStart, "no_such_pattern", 1, scaledBound(5s));
     REQUIRE(reply);
     CHECK_FALSE(reply->accepted);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kUnknownPattern);
     CHECK(reply->reason.find("no_such_pattern") != std::string::npos);
     CHECK(reply->patterns.size() == config.patterns.size());
 
-    reply = client.request(Command::kListPatterns, "", 0, 5s);
+    reply = client.request(Command::kListPatterns, "", 0, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->accepted);
     CHECK(reply->patterns == std::vector<std::string>{"3+3_horizontal", "3+3_both"});
-    reply = client.request(Command::kGetConfig, "", 0, 5s);
+    reply = client.request(Command::kGetConfig, "", 0, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->accepted);
     CHECK(reply->detail.find("namespace: " + ns) != std::string::npos);
 
-    reply = client.request(Command::kStart, "", -2, 5s);
+    reply = client.request(Command::kStart, "", -2, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kInvalidCount);
 
-    reply = client.request(Command::kStop, "", 0, 5s);
+    reply = client.request(Command::kStop, "", 0, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kNotRunning);
 
-    reply = client.request(Command::kStart, "3+3_both", 0, 5s);  // continuous
+    reply = client.request(Command::kStart, "3+3_both", 0, scaledBound(5s));  // continuous
     REQUIRE(reply);
     CHECK(reply->accepted);
-    reply = client.request(Command::kStart, "3+3_horizontal", 1, 5s);
+    reply = client.request(Command::kStart, "3+3_horizontal", 1, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kBusy);
     const auto t0 = sl::test::nowNs();
-    CHECK(client.receiveCloud(t0, 10s));  // the continuous scan delivers
-    reply = client.request(Command::kStop, "", 0, 5s);
+    CHECK(client.receiveCloud(t0, scaledBound(10s)));  // the continuous scan delivers
+    reply = client.request(Command::kStop, "", 0, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->accepted);
-    reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, 5s);
+    reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, scaledBound(5s));
     REQUIRE(reply);
     CHECK(reply->accepted);
   }
@@ -261,7 +264,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
                                                    sl_msgs_msg_CommandReply_desc);
     sl::dds::Reader<sl_msgs_msg_CommandReply> replies(participant, topic,
                                                       sl::dds::Qos().reliable().keepLast(256));
-    REQUIRE(replies.waitForWriters(1, DDS_SECS(10)));
+    REQUIRE(replies.waitForWriters(1, DDS_SECS(10) * kTimeScale));
     constexpr int kClients = 3, kRequests = 5;
     std::vector<std::unique_ptr<sl::daemon::SensorClient>> clients;
     for (int c = 0; c < kClients; ++c) clients.push_back(connect(ns, /*points=*/false));
@@ -273,7 +276,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
       threads.emplace_back([&, c] {
         for (int r = 0; r < kRequests; ++r) {
           const std::string name = "client" + std::to_string(c) + "_request" + std::to_string(r);
-          const auto reply = clients[c]->request(Command::kStart, name, 1, 5s);
+          const auto reply = clients[c]->request(Command::kStart, name, 1, scaledBound(5s));
           if (reply && reply->code == sl::daemon::CommandResult::Code::kUnknownPattern &&
               reply->reason.find("'" + name + "'") != std::string::npos)
             ++own_replies;
@@ -284,7 +287,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     // Exactly one reply per (client, request id) on the wire.
     // (Until all arrived, then a little longer to catch duplicates.)
     std::map<std::pair<std::string, std::uint64_t>, int> seen;
-    auto deadline = std::chrono::steady_clock::now() + 5s;
+    auto deadline = std::chrono::steady_clock::now() + scaledBound(5s);
     bool all = false;
     while (std::chrono::steady_clock::now() < deadline) {
       if (!all && seen.size() == std::size_t(kClients * kRequests)) {
@@ -309,7 +312,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
   const auto elapsed = std::chrono::steady_clock::now() - started;
   REQUIRE(exit_status);
   CHECK(*exit_status == 0);
-  CHECK(elapsed < 2s);
+  CHECK(elapsed < scaledBound(2s));
 }
 
 TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
@@ -325,7 +328,7 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   std::snprintf(address.sun_path, sizeof address.sun_path, "%s", socket_path.c_str());
   ::unlink(socket_path.c_str());
   REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0);
-  timeval receive_timeout{20, 0};
+  timeval receive_timeout{20 * kTimeScale, 0};
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &receive_timeout, sizeof receive_timeout);
 
   setenv("NOTIFY_SOCKET", socket_path.c_str(), 1);
@@ -340,17 +343,17 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   // Watchdog pings follow, well within the interval systemd asked for.
   int pings = 0;
   const auto watch_start = std::chrono::steady_clock::now();
-  while (pings < 5 && std::chrono::steady_clock::now() - watch_start < sl::test::scaledBound(3s)) {
+  while (pings < 5 && std::chrono::steady_clock::now() - watch_start < scaledBound(3s)) {
     const ssize_t m = ::recv(fd, buffer, sizeof buffer - 1, 0);
     if (m > 0 && std::string(buffer, m) == "WATCHDOG=1") ++pings;
   }
   const auto watch_elapsed = std::chrono::steady_clock::now() - watch_start;
   CHECK(pings == 5);
-  CHECK(watch_elapsed < sl::test::scaledBound(1500ms));  // 5 pings at 0.1 s intervals
+  CHECK(watch_elapsed < scaledBound(1500ms));  // 5 pings at 0.1 s intervals
   // The daemon answers requests once it said it is ready.
   const auto client_owner = connect(ns, /*points=*/false);
   sl::daemon::SensorClient& client = *client_owner;
-  const auto status = client.status(5s);
+  const auto status = client.status(scaledBound(5s));
   REQUIRE(status);
   CHECK(status->state == sl::daemon::ScanState::kIdle);
   const auto exit_status = daemon.terminate(5s);
@@ -387,7 +390,7 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
                                                     sl::dds::Qos().reliable().keepLast(8));
   const auto client_owner = connect(ns, /*points=*/false);
   sl::daemon::SensorClient& client = *client_owner;
-  REQUIRE(reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
 
   struct Sample {
     std::string pattern;
@@ -398,7 +401,7 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   // Collects maps until `count` samples of `pattern` arrived (bounded).
   auto collect = [&](const std::string& pattern, int count) {
     int seen = 0;
-    const auto deadline = std::chrono::steady_clock::now() + 15s;
+    const auto deadline = std::chrono::steady_clock::now() + scaledBound(15s);
     while (seen < count && std::chrono::steady_clock::now() < deadline) {
       auto loan = reader.take(4);
       if (loan.empty()) {
@@ -419,28 +422,28 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
     return seen >= count;
   };
 
-  auto reply = client.request(Command::kStart, "3+3_horizontal", 0, 5s);
+  auto reply = client.request(Command::kStart, "3+3_horizontal", 0, scaledBound(5s));
   REQUIRE(reply);
   REQUIRE(reply->accepted);
   CHECK(collect("3+3_horizontal", 2));
-  const auto incomplete_before = client.status(3s)->sets_incomplete;
+  const auto incomplete_before = client.status(scaledBound(3s))->sets_incomplete;
   // When each switch was requested, and how many samples preceded it.
   std::vector<std::pair<std::int64_t, std::size_t>> switches;
   switches.emplace_back(sl::test::nowNs(), samples.size());
-  reply = client.request(Command::kSetPattern, "3+3_both", 0, 5s);
+  reply = client.request(Command::kSetPattern, "3+3_both", 0, scaledBound(5s));
   REQUIRE(reply);
   CHECK(reply->accepted);
   CHECK(collect("3+3_both", 2));
   switches.emplace_back(sl::test::nowNs(), samples.size());
-  reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, 5s);
+  reply = client.request(Command::kSetPattern, "3+3_horizontal", 0, scaledBound(5s));
   REQUIRE(reply);
   CHECK(reply->accepted);
   std::size_t before_last = samples.size();
   CHECK(collect("3+3_horizontal", 2));
-  reply = client.request(Command::kStop, "", 0, 5s);
+  reply = client.request(Command::kStop, "", 0, scaledBound(5s));
   REQUIRE(reply);
   CHECK(reply->accepted);
-  const auto status = client.status(3s);
+  const auto status = client.status(scaledBound(3s));
   REQUIRE(status);
 
   // The sequence running at each switch request completed with the old
@@ -507,21 +510,21 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
     const auto client_owner = connect(ns);
     sl::daemon::SensorClient& client = *client_owner;
     const auto t0 = sl::test::nowNs();
-    auto reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s, "../escape");
+    auto reply = client.request(Command::kStart, "3+3_horizontal", 3, scaledBound(5s), "../escape");
     REQUIRE(reply);
     CHECK(reply->code == sl::daemon::CommandResult::Code::kInvalidCommand);
-    reply = client.request(Command::kStart, "3+3_horizontal", 3, 5s, "rec1");
+    reply = client.request(Command::kStart, "3+3_horizontal", 3, scaledBound(5s), "rec1");
     REQUIRE(reply);
     REQUIRE(reply->accepted);
     for (int i = 0; i < 3; ++i) {
-      auto cloud = client.receiveCloud(t0, 10s);
+      auto cloud = client.receiveCloud(t0, scaledBound(10s));
       REQUIRE(cloud);
       recorded.push_back(std::move(*cloud));
     }
     // The recorder writes on its own thread: wait (bounded) for all three.
     std::uint64_t sets_recorded = 0;
-    for (int i = 0; i < 50 && sets_recorded < 3; ++i) {
-      if (const auto s = client.status(2s)) sets_recorded = s->sets_recorded;
+    for (int i = 0; i < 50 * kTimeScale && sets_recorded < 3; ++i) {
+      if (const auto s = client.status(scaledBound(2s))) sets_recorded = s->sets_recorded;
     }
     CHECK(sets_recorded == 3);
     REQUIRE(daemon.terminate(5s) == 0);
@@ -547,7 +550,7 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
     sl::daemon::SensorClient& client = *client_owner;
     const auto t0 = startScans(client, "3+3_horizontal", 3);
     for (int i = 0; i < 3; ++i) {
-      const auto cloud = client.receiveCloud(t0, 10s);
+      const auto cloud = client.receiveCloud(t0, scaledBound(10s));
       REQUIRE(cloud);
       REQUIRE(cloud->points.size() == recorded[i].points.size());
       std::size_t differing = 0;
@@ -592,11 +595,11 @@ TEST_CASE("image sets recorded as MCAP by sl_view replay through the daemon into
                                ns + "_record.log 2>&1";
     auto recorder = std::async(std::launch::async, [&] { return std::system(record.c_str()); });
     for (int i = 0; i < kScans; ++i) {
-      auto cloud = client_owner->receiveCloud(t0, sl::test::scaledBound(30s));
+      auto cloud = client_owner->receiveCloud(t0, scaledBound(30s));
       REQUIRE(cloud);
       published.push_back(std::move(*cloud));
     }
-    REQUIRE(recorder.wait_for(sl::test::scaledBound(60s)) == std::future_status::ready);
+    REQUIRE(recorder.wait_for(scaledBound(60s)) == std::future_status::ready);
     const int rc = recorder.get();
     INFO("sl_view record log: /tmp/sl_test_" << ns << "_record.log");
     REQUIRE(rc == 0);
@@ -623,7 +626,7 @@ TEST_CASE("image sets recorded as MCAP by sl_view replay through the daemon into
     const auto t0 = startScans(*client_owner, "3+3_horizontal", kScans);
     for (int i = 0; i < kScans; ++i) {
       INFO("scan " << i + 1);
-      const auto cloud = client_owner->receiveCloud(t0, 20s);
+      const auto cloud = client_owner->receiveCloud(t0, scaledBound(20s));
       REQUIRE(cloud);
       REQUIRE(cloud->points.size() == published[i].points.size());
       std::size_t differing = 0;
@@ -665,7 +668,7 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
   const auto t0 = startScans(client, "3+3_horizontal", 2);
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   for (int i = 0; i < 2; ++i) {
-    const auto cloud = client.receiveCloud(t0, 10s);
+    const auto cloud = client.receiveCloud(t0, scaledBound(10s));
     REQUIRE(cloud);
     const PlaneStats s = comparePlane(*cloud, config, sim->groundTruth());
     WARN("motion compensation on, static scene, scan " << i + 1 << ": rms " << s.rms_error_mm
@@ -674,7 +677,7 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
     CHECK(std::abs(s.mean_error_mm) < 0.05);
     CHECK(s.outliers < 0.001 * (s.points + s.outliers));
   }
-  const auto status = client.status(3s);
+  const auto status = client.status(scaledBound(3s));
   REQUIRE(status);
   // A textureless scene gives the registration little to hold on to: an
   // implausible shift may be flagged (and ignored, or replaced by the
@@ -712,15 +715,15 @@ TEST_CASE("depth and shading images and camera_info accompany each cloud") {
   sl::dds::Reader<Info> info_reader(participant, info_topic, qos);
   const auto client_owner = connect(ns);
   sl::daemon::SensorClient& client = *client_owner;
-  REQUIRE(depth_reader.waitForWriters(1, DDS_SECS(10)));
-  REQUIRE(shading_reader.waitForWriters(1, DDS_SECS(10)));
-  REQUIRE(info_reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(depth_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
+  REQUIRE(shading_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
+  REQUIRE(info_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
 
   const auto t0 = startScans(client, "3+3_horizontal", 1);
-  const auto cloud = client.receiveCloud(t0, 10s);
+  const auto cloud = client.receiveCloud(t0, scaledBound(10s));
   REQUIRE(cloud);
   auto takeOne = [](auto& reader) {
-    for (int i = 0; i < 500; ++i) {
+    for (int i = 0; i < 500 * kTimeScale; ++i) {
       auto loan = reader.take(1);
       if (!loan.empty() && loan.isValid(0)) return loan;
       std::this_thread::sleep_for(10ms);
@@ -783,15 +786,15 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   sl::daemon::SensorClient& client = *client_owner;
   auto scanValid = [&] {
     const auto t0 = sl::test::nowNs();
-    REQUIRE(client.request(Command::kStart, "", 1, 5s)->accepted);
-    const auto cloud = client.receiveCloud(t0, 10s);
+    REQUIRE(client.request(Command::kStart, "", 1, scaledBound(5s))->accepted);
+    const auto cloud = client.receiveCloud(t0, scaledBound(10s));
     REQUIRE(cloud);
     return cloud->validCount();
   };
   auto lastError = [&] {
     std::string error;
-    for (int i = 0; i < 30 && error.empty(); ++i)
-      if (const auto s = client.status(1s)) error = s->last_error;
+    for (int i = 0; i < 30 * kTimeScale && error.empty(); ++i)
+      if (const auto s = client.status(scaledBound(1s))) error = s->last_error;
     return error;
   };
   const std::size_t before = scanValid();
@@ -801,7 +804,7 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   root["decoder"]["min_modulation"] = 250;
   std::ofstream(path) << root;
   daemon.signal(SIGHUP);
-  std::this_thread::sleep_for(500ms);
+  std::this_thread::sleep_for(scaledBound(500ms));
   CHECK(scanValid() < before / 100);
 
   // A change that needs a restart: refused, named, nothing applied.
@@ -817,8 +820,8 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   std::ofstream(path) << "sensor: [unclosed\n";
   daemon.signal(SIGHUP);
   std::string failed;
-  for (int i = 0; i < 30 && failed.find("reload failed") == std::string::npos; ++i)
-    if (const auto s = client.status(1s)) failed = s->last_error;
+  for (int i = 0; i < 30 * kTimeScale && failed.find("reload failed") == std::string::npos; ++i)
+    if (const auto s = client.status(scaledBound(1s))) failed = s->last_error;
   CHECK(failed.find("config reload failed") != std::string::npos);
 
   // A later good reload clears that error (it no longer holds).
@@ -826,9 +829,9 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   std::ofstream(path) << root;
   daemon.signal(SIGHUP);
   std::optional<sl::daemon::StatusInfo> after;
-  for (int i = 0; i < 30 && (!after || !after->last_error.empty()); ++i) {
+  for (int i = 0; i < 30 * kTimeScale && (!after || !after->last_error.empty()); ++i) {
     std::this_thread::sleep_for(100ms);
-    after = client.status(1s);
+    after = client.status(scaledBound(1s));
   }
   REQUIRE(after);
   CHECK(after->last_error.empty());
@@ -851,24 +854,25 @@ TEST_CASE("requests that fail to deserialize are counted, not lost without a tra
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
   sl::daemon::SensorClient& client = *client_owner;
-  const auto before = client.status(5s);
+  const auto before = client.status(scaledBound(5s));
   REQUIRE(before);
   CHECK(before->requests_malformed == 0);
   const std::string writer = std::string(SL_BINARY_DIR) + "/tests/malformed_writer " + ns + " 7";
   REQUIRE(std::system(writer.c_str()) == 0);
   std::optional<sl::daemon::StatusInfo> s;
-  for (int i = 0; i < 50 && (!s || s->requests_malformed < 7); ++i) {
+  for (int i = 0; i < 50 * kTimeScale && (!s || s->requests_malformed < 7); ++i) {
     std::this_thread::sleep_for(100ms);
-    s = client.status(1s);
+    s = client.status(scaledBound(1s));
   }
   REQUIRE(s);
   CHECK(s->requests_malformed == 7);
   CHECK(s->requests_received == before->requests_received);  // none was taken
-  const auto reply = client.request(Command::kListPatterns, "", 0, 5s);
+  const auto reply = client.request(Command::kListPatterns, "", 0, scaledBound(5s));
   REQUIRE(reply);
   CHECK(reply->accepted);
   REQUIRE(client.clientId().size() <= 100);
-  const auto refused = client.request(Command::kSetPattern, std::string(101, 'p'), 0, 5s);
+  const auto refused =
+      client.request(Command::kSetPattern, std::string(101, 'p'), 0, scaledBound(5s));
   REQUIRE(refused);
   CHECK(refused->code == sl::daemon::CommandResult::Code::kInvalidOption);
   CHECK(refused->reason.find("pattern is 101 bytes, more than 100") != std::string::npos);
@@ -902,7 +906,7 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   sl::test::ChildProcess stuck({subscriber, ns, "stuck", stuck_file});
   auto guidIn = [](const std::string& path) {
     std::string guid;
-    for (int i = 0; i < 200 && guid.empty(); ++i) {
+    for (int i = 0; i < 200 * kTimeScale && guid.empty(); ++i) {
       std::ifstream(path) >> guid;
       if (guid.empty()) std::this_thread::sleep_for(50ms);
     }
@@ -912,14 +916,14 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   REQUIRE_FALSE(reading_guid.empty());
   REQUIRE_FALSE(stuck_guid.empty());
 
-  REQUIRE(client.request(Command::kStart, "", 0, 5s)->accepted);
+  REQUIRE(client.request(Command::kStart, "", 0, scaledBound(5s))->accepted);
   std::optional<sl::daemon::StatusInfo> s;
   sl::daemon::PointsReaderInfo of_reading, of_stuck;  // as listed in s
   bool listed_reading = false, listed_stuck = false;
-  const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(30s);
+  const auto deadline = std::chrono::steady_clock::now() + scaledBound(30s);
   while (std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(200ms);
-    s = client.status(1s);
+    s = client.status(scaledBound(1s));
     if (!s) continue;
     listed_reading = listed_stuck = false;
     for (const auto& r : s->points_readers) {
@@ -943,7 +947,7 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   CHECK(of_reading.acknowledging);
   CHECK(of_reading.clouds_lost == 0);
   CHECK(s->clouds_lost_to_readers >= of_stuck.clouds_lost);
-  REQUIRE(client.request(Command::kStop, "", 0, 5s)->accepted);
+  REQUIRE(client.request(Command::kStop, "", 0, scaledBound(5s))->accepted);
   REQUIRE(daemon.terminate(5s) == 0);
 }
 
@@ -1021,15 +1025,16 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
   // that must have triangulated it.
   auto phase = [&](const std::string& pattern, bool switch_pattern) {
     const std::int64_t since = sl::test::nowNs();
-    const auto reply = switch_pattern ? client.request(Command::kSetPattern, pattern, 0, 5s)
-                                      : client.request(Command::kStart, pattern, 0, 5s);
+    const auto reply = switch_pattern
+                           ? client.request(Command::kSetPattern, pattern, 0, scaledBound(5s))
+                           : client.request(Command::kStart, pattern, 0, scaledBound(5s));
     REQUIRE(reply);
     REQUIRE(reply->accepted);
     const bool vertical = pattern == "3+3_vertical";
     for (int i = 0; i < 2; ++i) {
-      const auto cloud = client.receiveCloud(since, 10s);
+      const auto cloud = client.receiveCloud(since, scaledBound(10s));
       if (!cloud) {
-        const auto status = client.status(1s);
+        const auto status = client.status(scaledBound(1s));
         REQUIRE(status);
         FAIL("no " << pattern << " cloud " << i + 1 << " within 10 s; status: scans "
                    << status->scans_done << ", frames/s " << status->frame_rate_hz
@@ -1050,7 +1055,7 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
   phase("3+3_horizontal", false);
   phase("3+3_vertical", true);
   phase("3+3_horizontal", true);
-  REQUIRE(client.request(Command::kStop, "", 0, 5s)->accepted);
+  REQUIRE(client.request(Command::kStop, "", 0, scaledBound(5s))->accepted);
   REQUIRE(daemon.terminate(5s) == 0);
   std::filesystem::remove_all(dir);
 }
@@ -1076,14 +1081,14 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
   request.cameras = {"sim_top"};
   request.motion_compensation = false;
   const auto t0 = sl::test::nowNs();
-  const auto reply = client.start(request, 5s);
+  const auto reply = client.start(request, scaledBound(5s));
   REQUIRE(reply);
   REQUIRE(reply->accepted);
 
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   std::vector<std::int64_t> stamps;
   for (int i = 0; i < 3; ++i) {
-    const auto cloud = client.receiveCloud(t0, 10s);
+    const auto cloud = client.receiveCloud(t0, scaledBound(10s));
     REQUIRE(cloud);
     stamps.push_back(cloud->stamp_ns);
     const PlaneStats s = comparePlane(*cloud, config, sim->groundTruth());
@@ -1106,9 +1111,9 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
     WARN("software trigger: sequence period " << period_s << " s (>= " << min_period_s
          << " s; hardware trigger: " << 6 * config.synchroniser.image_interval_ns * 1e-9 << " s)");
     CHECK(period_s >= min_period_s);
-    CHECK(period_s < 4 * min_period_s);  // and not stalled
+    CHECK(period_s < 4 * kTimeScale * min_period_s);  // and not stalled
   }
-  const auto status = client.status(3s);
+  const auto status = client.status(scaledBound(3s));
   REQUIRE(status);
   CHECK(status->trigger == sl::daemon::TriggerMode::kSoftware);
   CHECK(status->cameras == std::vector<std::string>{"sim_top"});
@@ -1116,7 +1121,7 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
 
   // Options travel over DDS and are validated there too.
   request.cameras = {"left"};
-  auto rejected = client.start(request, 5s);
+  auto rejected = client.start(request, scaledBound(5s));
   REQUIRE(rejected);
   CHECK(rejected->code == sl::daemon::CommandResult::Code::kInvalidOption);
   CHECK(rejected->reason.find("unknown camera 'left'") != std::string::npos);
@@ -1153,7 +1158,7 @@ TEST_CASE("a second camera gives the cloud its intensity") {
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
   const auto t0 = startScans(*client_owner, "3+3_horizontal", 1);
-  const auto cloud = client_owner->receiveCloud(t0, 10s);
+  const auto cloud = client_owner->receiveCloud(t0, scaledBound(10s));
   REQUIRE(cloud);
   REQUIRE(daemon.terminate(5s) == 0);
 
@@ -1243,8 +1248,8 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
   sl::dds::Reader<CloudMsg> points_reader(participant, points_topic,
                                           sl::dds::Qos().reliable().keepLast(4));
   const auto client_owner = connect(ns, false);
-  REQUIRE(sets_reader.waitForWriters(1, DDS_SECS(10)));
-  REQUIRE(points_reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(sets_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
+  REQUIRE(points_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
   constexpr std::size_t kScans = 2;
   startScans(*client_owner, "3+3_horizontal", 0);  // continuous: a lost sequence is no failure
 
@@ -1260,7 +1265,7 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
   sl::pipeline::ScanProcessor processor(2);
   std::map<sl::pipeline::TimestampNs, std::vector<float>> offline;  // by stamp, metres as published
   std::map<sl::pipeline::TimestampNs, std::vector<std::uint8_t>> received;
-  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  const auto deadline = std::chrono::steady_clock::now() + scaledBound(20s);
   auto matched = [&] {
     std::size_t n = 0;
     for (const auto& entry : offline) n += received.count(entry.first);
@@ -1307,10 +1312,10 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
     }
     std::this_thread::sleep_for(20ms);
   }
-  const auto status = client_owner->status(2s);
+  const auto status = client_owner->status(scaledBound(2s));
   INFO("sets decoded " << offline.size() << ", clouds " << received.size() << ", writes timed out "
                        << (status ? status->writes_timed_out : 0));
-  REQUIRE(client_owner->request(Command::kStop, "", 0, 5s));
+  REQUIRE(client_owner->request(Command::kStop, "", 0, scaledBound(5s)));
   REQUIRE(matched() >= kScans);
   for (const auto& [stamp, metres] : offline) {
     INFO("set stamped " << stamp);
