@@ -3,6 +3,7 @@
 #include <thread>
 
 #include "sl/drivers/camera_stamp_trigger.h"
+#include "support/time_scale.h"
 
 using namespace sl::drivers;
 using namespace std::chrono_literals;
@@ -105,9 +106,9 @@ TEST_CASE("trigger source fed by a camera tap, sequence length from a projector 
     source->stop();
   });
   const auto t0 = std::chrono::steady_clock::now();
-  CHECK_FALSE(source->next(5000ms));
+  CHECK_FALSE(source->next(sl::test::scaledBound(5000ms)));
   t.join();
-  CHECK(std::chrono::steady_clock::now() - t0 < 2000ms);
+  CHECK(std::chrono::steady_clock::now() - t0 < sl::test::scaledBound(2000ms));
 }
 
 TEST_CASE("the taps pass software triggering through; its frames start no sequence") {

@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "sl/drivers/versavis.h"
+#include "support/time_scale.h"
 
 using namespace sl::drivers;
 namespace rs = sl::drivers::rosserial;
@@ -66,9 +67,9 @@ class Board {
     }
     return out;
   }
-  // Next packet from the host within `timeout`.
+  // Next packet from the host within `timeout` (x10 in sanitizer builds).
   std::optional<rs::Frame> receive(std::chrono::milliseconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(timeout);
     for (;;) {
       if (auto f = parser_.next()) return f;
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -119,10 +120,11 @@ VersavisConfig testConfig(const std::string& device) {
   return c;
 }
 
-// Calls next() until an event arrives or `timeout` passes.
+// Calls next() until an event arrives or `timeout` (x10 in sanitizer builds)
+// passes.
 std::optional<TriggerEvent> nextEvent(VersavisTriggerSource& src,
                                       std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(timeout);
   while (std::chrono::steady_clock::now() < deadline)
     if (auto e = src.next(50ms)) return e;
   return std::nullopt;
@@ -316,14 +318,14 @@ TEST_CASE("VersaVIS: wrong message type, triggers per sequence, stop, missing de
     std::atomic<bool> returned{false};
     const auto t0 = std::chrono::steady_clock::now();
     std::thread t([&] {
-      src.next(5000ms);
+      src.next(sl::test::scaledBound(5000ms));
       returned = true;
     });
     std::this_thread::sleep_for(50ms);
     src.stop();
     t.join();
     CHECK(returned);
-    CHECK(std::chrono::steady_clock::now() - t0 < 2000ms);
+    CHECK(std::chrono::steady_clock::now() - t0 < sl::test::scaledBound(2000ms));
     CHECK_FALSE(src.next(10ms));
   }
   SECTION("missing device") {
