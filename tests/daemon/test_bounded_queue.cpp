@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "sl/daemon/bounded_queue.h"
+#include "support/time_scale.h"
 
 using namespace std::chrono_literals;
 using sl::daemon::BoundedQueue;
@@ -16,7 +17,7 @@ namespace {
 
 template <typename T>
 bool finishes(std::future<T>& f) {
-  return f.wait_for(10s) == std::future_status::ready;
+  return f.wait_for(sl::test::scaledBound(10s)) == std::future_status::ready;
 }
 
 }  // namespace

@@ -115,8 +115,8 @@ TEST_CASE("several bridges in one process each count their own malformed request
   CHECK(sa->requests_malformed == 4);
   CHECK(sb->requests_malformed == 5);
   // Both still answer.
-  CHECK(client_a->request(sl::daemon::Command::kListPatterns, "", 0, 5s));
-  CHECK(client_b->request(sl::daemon::Command::kListPatterns, "", 0, 5s));
+  CHECK(client_a->request(sl::daemon::Command::kListPatterns, "", 0, sl::test::scaledBound(5s)));
+  CHECK(client_b->request(sl::daemon::Command::kListPatterns, "", 0, sl::test::scaledBound(5s)));
 }
 
 // The request reader keeps at most 256 unread requests; what it refuses

@@ -391,9 +391,9 @@ TEST_CASE("a source that drops and delays frames costs exactly the sequences it 
   });
   REQUIRE(engine.start("3+3_horizontal", 0).accepted());
   constexpr std::size_t kSequences = 20;
-  for (int i = 0; i < 200 && trigger->stamps().size() < kSequences + 3; ++i)
+  for (int i = 0; i < 200 * sl::test::kTimeScale && trigger->stamps().size() < kSequences + 3; ++i)
     std::this_thread::sleep_for(50ms);
-  std::this_thread::sleep_for(500ms);  // the last sequences processed
+  std::this_thread::sleep_for(sl::test::scaledBound(500ms));  // the last sequences processed
   const sl::pipeline::TimestampNs snapshot_ns = sl::pipeline::systemClockNs();
   const sl::daemon::EngineStatus status = engine.status();
   REQUIRE(engine.stop().accepted());
@@ -781,7 +781,7 @@ TEST_CASE("software trigger: only the request's cameras are triggered") {
   };
   while (got() < 1 && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(5ms);
   REQUIRE(got() == 1);
-  for (int i = 0; i < 400 && engine.status().state != ScanState::kIdle; ++i)
+  for (int i = 0; i < 400 * sl::test::kTimeScale && engine.status().state != ScanState::kIdle; ++i)
     std::this_thread::sleep_for(5ms);
   CHECK(cameras[0] == "sim_left");
   // 6 frames of the one camera, none of sim_top.
@@ -807,7 +807,8 @@ TEST_CASE("the status says where each scan's latency went: waiting, processing, 
   while (published < 4 && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(20ms);
   REQUIRE(published >= 4);
   CHECK(engine.stop().accepted());
-  std::this_thread::sleep_for(100ms);  // the stages are stored after the callback returns
+  // The stages are stored after the callback returns.
+  std::this_thread::sleep_for(sl::test::scaledBound(100ms));
   const sl::daemon::EngineStatus s = engine.status();
   CHECK(s.publish_ms >= 40.0);
   CHECK(s.processing_ms > 0.0);
