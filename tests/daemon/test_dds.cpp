@@ -251,11 +251,11 @@ TEST_CASE("full-size PointCloud2 round trip between two participants", "[dds]") 
   Topic<Cloud> sub_topic(sub_participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
   Writer<Cloud> writer(pub_participant, pub_topic, cloudWriterQos());
   Reader<Cloud> reader(sub_participant, sub_topic, cloudReaderQos(1));
-  REQUIRE(writer.waitForReaders(1, DDS_SECS(10)));
+  REQUIRE(writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
 
   const CloudSample sent(7);
   REQUIRE(writer.write(sent.msg));
-  REQUIRE(waitForData(sub_participant, reader, DDS_SECS(10)));
+  REQUIRE(waitForData(sub_participant, reader, DDS_SECS(10) * sl::test::kTimeScale));
 
   auto loan = reader.take(4);
   REQUIRE(loan.size() == 1);
@@ -277,7 +277,7 @@ TEST_CASE("writers publish XCDR1 (ROS 2 compatible)", "[dds]") {
 
   Reader<Cloud> xcdr2_reader(participant, topic, xcdr2_only);
   Reader<Cloud> xcdr1_reader(participant, topic, Qos().reliable().xcdr1());
-  REQUIRE(xcdr1_reader.waitForWriters(1, DDS_SECS(10)));
+  REQUIRE(xcdr1_reader.waitForWriters(1, DDS_SECS(10) * sl::test::kTimeScale));
   // Matching is decided when the reader is created, so this cannot change.
   CHECK(xcdr2_reader.matchedWriters() == 0);
   CHECK(writer.matchedReaders() == 1);
@@ -303,8 +303,8 @@ TEST_CASE("request/reply round trip", "[dds]") {
   Reader<sl_msgs_msg_CommandRequest> request_reader(server, server_rq, qos);
   Writer<sl_msgs_msg_CommandReply> reply_writer(server, server_rr, qos);
 
-  REQUIRE(request_writer.waitForReaders(1, DDS_SECS(10)));
-  REQUIRE(reply_writer.waitForReaders(1, DDS_SECS(10)));
+  REQUIRE(request_writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
+  REQUIRE(reply_writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
 
   // Client: a stack sample pointing at literals (the writer only reads it).
   sl_msgs_msg_CommandRequest request = {};
@@ -317,7 +317,7 @@ TEST_CASE("request/reply round trip", "[dds]") {
 
   // Server: take the request, answer with a heap sample built with Cyclone's
   // allocator and freed with the generated free function.
-  REQUIRE(waitForData(server, request_reader, DDS_SECS(10)));
+  REQUIRE(waitForData(server, request_reader, DDS_SECS(10) * sl::test::kTimeScale));
   {
     auto requests = request_reader.take(8);
     REQUIRE(requests.size() == 1);
@@ -346,7 +346,7 @@ TEST_CASE("request/reply round trip", "[dds]") {
     REQUIRE(written);
   }
 
-  REQUIRE(waitForData(client, reply_reader, DDS_SECS(10)));
+  REQUIRE(waitForData(client, reply_reader, DDS_SECS(10) * sl::test::kTimeScale));
   auto replies = reply_reader.take(8);
   REQUIRE(replies.size() == 1);
   REQUIRE(replies.isValid(0));
@@ -391,17 +391,18 @@ TEST_CASE("GuardCondition wakes a thread waiting on a WaitSet", "[dds]") {
   auto waiter = std::async(std::launch::async, [&waitset] {
     std::vector<dds_attach_t> triggered;
     const auto start = Clock::now();
-    const bool woke = waitset.wait(DDS_SECS(10), &triggered);
+    const bool woke = waitset.wait(DDS_SECS(10) * sl::test::kTimeScale, &triggered);
     return std::make_tuple(woke, triggered, Clock::now() - start);
   });
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   stop.trigger();
-  REQUIRE(waiter.wait_for(std::chrono::seconds(5)) == std::future_status::ready);
+  REQUIRE(waiter.wait_for(sl::test::scaledBound(std::chrono::seconds(5))) ==
+          std::future_status::ready);
   const auto [woke, triggered, elapsed] = waiter.get();
   CHECK(woke);
   REQUIRE(triggered.size() == 1);
   CHECK(triggered[0] == 77);
-  CHECK(elapsed < std::chrono::seconds(5));
+  CHECK(elapsed < sl::test::scaledBound(std::chrono::seconds(5)));
   CHECK(stop.triggered());
   stop.reset();
   CHECK_FALSE(stop.triggered());
@@ -459,11 +460,11 @@ TEST_CASE("full-size clouds between two processes", "[dds][process]") {
   waitset.attach(has_data);
 
   ChildProcess child("[.dds_child_publisher]");
-  REQUIRE(reader.waitForWriters(1, DDS_SECS(20)));
+  REQUIRE(reader.waitForWriters(1, DDS_SECS(20) * sl::test::kTimeScale));
 
   int received = 0;
   Clock::time_point first, last;
-  const auto deadline = Clock::now() + std::chrono::seconds(60);
+  const auto deadline = Clock::now() + sl::test::scaledBound(std::chrono::seconds(60));
   while (received < kClouds && Clock::now() < deadline) {
     if (!waitset.wait(DDS_SECS(1))) continue;
     auto loan = reader.take(4);
@@ -479,7 +480,7 @@ TEST_CASE("full-size clouds between two processes", "[dds][process]") {
     }
   }
   REQUIRE(received == kClouds);
-  CHECK(child.wait(std::chrono::seconds(20)) == 0);
+  CHECK(child.wait(sl::test::scaledBound(std::chrono::seconds(20))) == 0);
   const double seconds = std::chrono::duration<double>(last - first).count();
   std::printf("two processes: %d clouds of %.1f MB, %.1f clouds/s (%.0f MB/s) after the first\n",
               received, expected[0].size() / 1e6, (received - 1) / seconds,
@@ -500,10 +501,11 @@ TEST_CASE("child: publish full-size clouds", "[.dds_child_publisher]") {
   // Keep-all so that every cloud arrives and the count is deterministic; the
   // writer blocks while the reader catches up.
   Writer<Cloud> writer(participant, topic, Qos().reliable(DDS_SECS(10)).keepAll().xcdr1());
-  REQUIRE(writer.waitForReaders(1, DDS_SECS(20)));
+  REQUIRE(writer.waitForReaders(1, DDS_SECS(20) * sl::test::kTimeScale));
   // Prepare the clouds first so that the reader measures transport only.
   std::vector<std::unique_ptr<CloudSample>> clouds;
   for (int i = 0; i < 4; ++i) clouds.push_back(std::make_unique<CloudSample>(i));
   for (int i = 0; i < count; ++i) REQUIRE(writer.write(clouds[i % 4]->msg));
-  REQUIRE(dds_wait_for_acks(writer.handle(), DDS_SECS(30)) == DDS_RETCODE_OK);
+  REQUIRE(dds_wait_for_acks(writer.handle(), DDS_SECS(30) * sl::test::kTimeScale) ==
+          DDS_RETCODE_OK);
 }

@@ -14,6 +14,7 @@
 
 #include "sl/drivers/recording.h"
 #include "sl/drivers/replay.h"
+#include "support/time_scale.h"
 
 using namespace std::chrono_literals;
 using sl::pipeline::ImageSet;
@@ -159,7 +160,7 @@ TEST_CASE("the replay sensor plays sets with their recorded timing") {
   projector->start(0);  // all sets of pattern "p" (0 and 2), no loop
   std::vector<sl::drivers::TriggerEvent> triggers;
   for (int k = 0; k < 2; ++k) {
-    auto t = trigger->next(2s);
+    auto t = trigger->next(sl::test::scaledBound(2s));
     REQUIRE(t);
     triggers.push_back(*t);
   }
@@ -168,7 +169,7 @@ TEST_CASE("the replay sensor plays sets with their recorded timing") {
     for (int k = 0; k < 2; ++k) {
       const ImageSet& original = originals[k == 0 ? 0 : 2];
       for (int i = 0; i < 6; ++i) {
-        auto frame = cameras[c]->grab(2s);
+        auto frame = cameras[c]->grab(sl::test::scaledBound(2s));
         REQUIRE(frame);
         CHECK(identical(frame->image, original.cameras[c].frames[i]));
         // Recorded offset from the trigger is kept exactly.
@@ -195,8 +196,8 @@ TEST_CASE("a replayed set of another size or depth than the first is refused, na
   auto projector = replay->projector();
   projector->select("p");
   projector->start(0);
-  for (int i = 0; i < 3; ++i) REQUIRE(cameras[0]->grab(2s));
-  CHECK_THROWS_WITH(cameras[0]->grab(2s),
+  for (int i = 0; i < 3; ++i) REQUIRE(cameras[0]->grab(sl::test::scaledBound(2s)));
+  CHECK_THROWS_WITH(cameras[0]->grab(sl::test::scaledBound(2s)),
                     Catch::Contains("set_000002/top_00.png: 64x48 16-bit frame, the recording's "
                                     "camera 'top' is 64x48 8-bit"));
   projector->stop();
@@ -216,7 +217,7 @@ TEST_CASE("a meta.yml that hangs OpenCV's YAML parser is refused at once, naming
     std::ofstream(meta, std::ios::binary | std::ios::trunc) << text;
     const auto start = std::chrono::steady_clock::now();
     CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()), Catch::Contains(meta + ": "));
-    CHECK(std::chrono::steady_clock::now() - start < 10s);
+    CHECK(std::chrono::steady_clock::now() - start < sl::test::scaledBound(10s));
   }
   // Other malformed values are named too.
   sl::drivers::writeRecordedSet(dir, 1, makeSet(1, "p", 3, 8));

@@ -21,6 +21,7 @@
 #include "replay/mcap_image_sets.h"
 #include "sl/drivers/recording.h"
 #include "sl/drivers/replay.h"
+#include "support/time_scale.h"
 
 using namespace std::chrono_literals;
 using sl::pipeline::ImageSet;
@@ -207,14 +208,14 @@ TEST_CASE("the replay sensor plays an MCAP file's image sets") {
   projector->start(2);
   std::vector<sl::drivers::TriggerEvent> triggers;
   for (int k = 0; k < 2; ++k) {
-    auto t = trigger->next(2s);
+    auto t = trigger->next(sl::test::scaledBound(2s));
     REQUIRE(t);
     triggers.push_back(*t);
   }
   for (std::size_t c = 0; c < 2; ++c)
     for (int k = 0; k < 2; ++k)
       for (int i = 0; i < 6; ++i) {
-        auto frame = cameras[c]->grab(2s);
+        auto frame = cameras[c]->grab(sl::test::scaledBound(2s));
         REQUIRE(frame);
         CHECK(identical(frame->image, sets[k].cameras[c].frames[i]));
         CHECK(frame->stamp_ns - triggers[k].stamp_ns ==

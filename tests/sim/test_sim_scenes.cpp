@@ -10,6 +10,7 @@
 
 #include "sl/drivers/sim.h"
 #include "support/sim_rig.h"
+#include "support/time_scale.h"
 
 namespace {
 
@@ -91,7 +92,7 @@ TEST_CASE("moving sensor: each image sees the scene through the inverse motion",
       kImages;
   WARN("render per 1440x1080 image (plane + sphere): moving sensor " << ms << " ms, static "
                                                                      << static_ms << " ms");
-  CHECK(ms < 500);
+  CHECK(ms < 500 * sl::test::kTimeScale);
 }
 
 TEST_CASE("moving sensor: per-image poses", "[sim][motion]") {

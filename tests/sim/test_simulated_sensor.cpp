@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "sl/drivers/sim.h"
+#include "support/time_scale.h"
 
 namespace {
 
@@ -487,8 +488,8 @@ TEST_CASE("live: two 3+3 sequences arrive on schedule, then nothing", "[sim][liv
   CHECK_THROWS_AS(projector->start(1), std::logic_error);
 
   // The futures end by their own timeouts; the watchdog only reports.
-  REQUIRE(frames_future.wait_for(5s) == std::future_status::ready);
-  REQUIRE(triggers_future.wait_for(5s) == std::future_status::ready);
+  REQUIRE(frames_future.wait_for(sl::test::scaledBound(5s)) == std::future_status::ready);
+  REQUIRE(triggers_future.wait_for(sl::test::scaledBound(5s)) == std::future_status::ready);
   const auto frames = frames_future.get();
   const auto events = triggers_future.get();
 
@@ -539,7 +540,7 @@ TEST_CASE("live: stop wakes blocked calls; restart begins a new schedule", "[sim
     const auto stopped_at = std::chrono::steady_clock::now();
     camera->stop();
     REQUIRE(grabbed.wait_for(3500ms) == std::future_status::ready);
-    CHECK(std::chrono::steady_clock::now() - stopped_at < 100ms);
+    CHECK(std::chrono::steady_clock::now() - stopped_at < sl::test::scaledBound(100ms));
     CHECK_FALSE(grabbed.get().has_value());
     CHECK_FALSE(camera->grab(10ms).has_value());  // disarmed
   }
@@ -549,7 +550,7 @@ TEST_CASE("live: stop wakes blocked calls; restart begins a new schedule", "[sim
     const auto stopped_at = std::chrono::steady_clock::now();
     triggers->stop();
     REQUIRE(next.wait_for(3500ms) == std::future_status::ready);
-    CHECK(std::chrono::steady_clock::now() - stopped_at < 100ms);
+    CHECK(std::chrono::steady_clock::now() - stopped_at < sl::test::scaledBound(100ms));
     CHECK_FALSE(next.get().has_value());
   }
   SECTION("projector stop ends an endless schedule; start begins a new one") {
