@@ -11,6 +11,8 @@ sl_enter_netns "$0" "$@"
 sl_init "$1" "$2"
 
 ns="cli_$$"
+# slctl's and the listener's waits (x10 in a sanitizer build, sl_init).
+wait_s=$(( 20 * time_scale )) listen_s=$(( 30 * time_scale ))
 sl_sim_config "$ns" "$work/sim.yaml"
 
 # 1. A bad config: exit code 2, one line naming file, line and key.
@@ -45,7 +47,7 @@ kill -TERM "$early"
 t0=$(date +%s%N)
 wait "$early" || true
 ms=$(( ($(date +%s%N) - t0) / 1000000 ))
-[ "$ms" -lt 1500 ] || fail "SIGTERM during start-up: exit after $ms ms"
+[ "$ms" -lt $(( 1500 * time_scale )) ] || fail "SIGTERM during start-up: exit after $ms ms"
 grep -q "during start-up, exiting" "$work/early.log" || fail "early signal: $(cat "$work/early.log")"
 echo "ok: SIGTERM during start-up -> exit after $ms ms"
 
@@ -63,11 +65,11 @@ done
 
 # 3. The daemon, the C listener and slctl.
 sl_start_daemon "$work/sim.yaml" "$work/daemon.log"
-"$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 3 --timeout 30 \
+"$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 3 --timeout "$listen_s" \
   > "$work/listener.log" 2>&1 &
 listener_pid=$!
 sl_track "$listener_pid"
-"$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 3 --out "$work/scans" | tee "$work/slctl.log"
+"$bin/tools/slctl" --ns "$ns" --timeout "$wait_s" scan --count 3 --out "$work/scans" | tee "$work/slctl.log"
 [ "$(grep -c '^scan [123]/3: 1440x1080' "$work/slctl.log")" -eq 3 ] || fail "slctl did not report 3 scans"
 for i in 1 2 3; do
   f="$work/scans/scan_000$i.ply"
@@ -79,7 +81,7 @@ cat "$work/listener.log"
 [ "$(grep -c '1440 x 1080' "$work/listener.log")" -ge 3 ] || fail "C listener output unexpected"
 
 # One organized PCD scan: header fields and exact payload size.
-"$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 1 --format pcd --units m --out "$work/pcd"
+"$bin/tools/slctl" --ns "$ns" --timeout "$wait_s" scan --count 1 --format pcd --units m --out "$work/pcd"
 pcd="$work/pcd/scan_0001.pcd"
 head -c 400 "$pcd" | grep -q "^WIDTH 1440$" || fail "pcd: no WIDTH 1440"
 head -c 400 "$pcd" | grep -q "^HEIGHT 1080$" || fail "pcd: no HEIGHT 1080"
@@ -103,7 +105,7 @@ grep -q "scans: *1 of 1" "$work/status.log" || fail "status does not show 1 of 1
 
 # Start options: software trigger with a camera subset; a rejected option
 # (exit code 4, reason printed); a delayed start shown as waiting, then stopped.
-"$bin/tools/slctl" --ns "$ns" --timeout 20 scan --count 2 --trigger software --cameras sim_top \
+"$bin/tools/slctl" --ns "$ns" --timeout "$wait_s" scan --count 2 --trigger software --cameras sim_top \
   --motion off --out "$work/sw" | tee "$work/sw.log"
 [ "$(grep -c '^scan [12]/2: 1440x1080' "$work/sw.log")" -eq 2 ] || fail "software-trigger scans"
 "$bin/tools/slctl" --ns "$ns" status > "$work/status.log"
@@ -150,7 +152,7 @@ echo "ok: rates, stops not counted as incomplete sequences"
 # A second daemon on the same domain and namespace refuses to start (exit 2,
 # one line naming the topic); one with its own namespace starts.
 set +e
-msg=$(timeout 20 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" 2>&1)
+msg=$(timeout "$wait_s" "$bin/daemon/sl_sensord" --config "$work/sim.yaml" 2>&1)
 rc=$?
 set -e
 [ "$rc" -eq 2 ] || fail "second daemon: exit code $rc, expected 2 ($msg)"
@@ -161,7 +163,7 @@ sed "s/^  namespace: $ns$/  namespace: ${ns}_b/" "$work/sim.yaml" > "$work/sim_b
 "$bin/daemon/sl_sensord" --config "$work/sim_b.yaml" > "$work/daemon_b.log" 2>&1 &
 pid_b=$!
 sl_track "$pid_b"
-"$bin/tools/slctl" --ns "${ns}_b" --timeout 20 patterns > /dev/null || fail "daemon with its own namespace"
+"$bin/tools/slctl" --ns "${ns}_b" --timeout "$wait_s" patterns > /dev/null || fail "daemon with its own namespace"
 sl_stop_daemon "$pid_b"
 echo "ok: a daemon with its own namespace runs beside the first"
 

@@ -10,6 +10,10 @@
 #   sl_wait_ready "$work/daemon.log"
 #   sl_stop_daemon                   # SIGTERM, exit within 2 s, exit code 0
 #
+# In a sanitizer build (SL_SANITIZE in the build's CMakeCache.txt) sl_init
+# sets time_scale=10 (else 1), and the waits above are multiplied by it, as
+# tests/support/time_scale.h does for the C++ tests.
+#
 # SL_TEST_NETNS=1 makes sl_enter_netns re-run the script in a private
 # network namespace (unshare -rn, else -n) with only loopback, so that its
 # DDS traffic meets no other process's.
@@ -29,12 +33,14 @@ sl_enter_netns() {
   echo "note: no private network namespace available; running in the current one" >&2
 }
 
-# sl_init SOURCE_DIR BINARY_DIR: sets src, bin, work (a fresh scratch folder)
-# and pids (processes killed on exit), installs the cleanup trap and points
-# Cyclone at the loopback config unless CYCLONEDDS_URI is set.
+# sl_init SOURCE_DIR BINARY_DIR: sets src, bin, work (a fresh scratch folder),
+# pids (processes killed on exit) and time_scale, installs the cleanup trap
+# and points Cyclone at the loopback config unless CYCLONEDDS_URI is set.
 sl_init() {
   src=$1
   bin=$2
+  time_scale=1
+  if grep -Eq '^SL_SANITIZE:STRING=.+' "$bin/CMakeCache.txt" 2> /dev/null; then time_scale=10; fi
   export CYCLONEDDS_URI=${CYCLONEDDS_URI:-file://$src/config/cyclonedds-loopback.xml}
   work=$(mktemp -d)
   pids=()
@@ -85,25 +91,26 @@ sl_start_daemon() {
   sl_track "$daemon_pid"
 }
 
-# sl_wait_ready LOG [SECONDS=15]: until the daemon logged that it is ready.
+# sl_wait_ready LOG [SECONDS=15]: until the daemon logged that it is ready
+# (SECONDS x time_scale).
 sl_wait_ready() {
-  local log=$1 tenths=$(( ${2:-15} * 10 ))
+  local log=$1 tenths=$(( ${2:-15} * ${time_scale:-1} * 10 ))
   local _
   for _ in $(seq "$tenths"); do
     grep -q "ready" "$log" && return 0
     kill -0 "$daemon_pid" 2>/dev/null || fail "the daemon exited during start-up"
     sleep 0.1
   done
-  fail "the daemon did not get ready within ${2:-15} s"
+  fail "the daemon did not get ready within $(( tenths / 10 )) s"
 }
 
 # sl_stop_daemon [PID=daemon_pid] [SECONDS=2]: SIGTERM; it must be gone
-# within SECONDS and exit 0.
+# within SECONDS (x time_scale) and exit 0.
 sl_stop_daemon() {
-  local pid=${1:-$daemon_pid} steps=$(( ${2:-2} * 20 )) _ rc=0
+  local pid=${1:-$daemon_pid} steps=$(( ${2:-2} * ${time_scale:-1} * 20 )) _ rc=0
   kill -TERM "$pid"
   for _ in $(seq 1 "$steps"); do kill -0 "$pid" 2>/dev/null || break; sleep 0.05; done
-  kill -0 "$pid" 2>/dev/null && fail "daemon $pid still running ${2:-2} s after SIGTERM"
+  kill -0 "$pid" 2>/dev/null && fail "daemon $pid still running $(( steps / 20 )) s after SIGTERM"
   wait "$pid" || rc=$?
   [ "$rc" -eq 0 ] || fail "daemon $pid exit code $rc"
   [ "$pid" = "$daemon_pid" ] && daemon_pid=""
