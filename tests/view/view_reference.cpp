@@ -79,6 +79,11 @@ Json::Value imageJson(const Image& m) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A reader of full clouds keeps their memory (README, "Memory of large
+  // samples"): with glibc's defaults each cloud was page-faulted in again,
+  // this keep-all reader fell behind the daemon's history of 4 and lost
+  // samples that sl_view got.
+  sl::dds::retainLargeSampleMemory();
   std::string ns = "sl", out;
   int count = 1;
   double timeout_s = 60;
