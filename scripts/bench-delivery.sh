@@ -379,7 +379,8 @@ elif [ -x "$fastdds" ]; then
   n=$((secs_5hz * 5))
   # The Fast DDS subscriber stands for a ROS 2 node: it runs with the
   # allocator settings the README recommends for subscribers of full clouds
-  # (sl::dds::kGlibcTunables), unless SL_DEFAULT_MALLOC=1.
+  # (README, "Memory of large samples": the values retainLargeSampleMemory
+  # sets with mallopt), unless SL_DEFAULT_MALLOC=1.
   tunables=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=2147483647:glibc.malloc.top_pad=67108864
   [ "${SL_DEFAULT_MALLOC:-0}" = 1 ] && tunables=${GLIBC_TUNABLES:-}
   timeout $((secs + 60)) env GLIBC_TUNABLES="$tunables" "$fastdds" --topic "rt/$ns/points" --count "$n" --timeout $((secs + 50)) --rx-times \

@@ -59,13 +59,11 @@ dds_return_t check(dds_return_t rc, const std::string& call);
 // The cost is that the peak stays resident (bounded by the peak, as the
 // writers' and readers' histories are bounded). Call once at the start of
 // main, before threads allocate; the same settings can be given to any
-// other process as GLIBC_TUNABLES (kGlibcTunables). Returns false if glibc
+// other process as GLIBC_TUNABLES (README, "Memory of large samples").
+// Returns false if glibc
 // refused one of them. SL_DEFAULT_MALLOC=1 in the environment leaves glibc's
 // defaults (to measure the difference).
 bool retainLargeSampleMemory();
-inline constexpr const char* kGlibcTunables =
-    "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=2147483647:"
-    "glibc.malloc.top_pad=67108864";
 
 // Owning, copyable QoS policy set. An empty Qos leaves every policy at
 // Cyclone's default. Builders return *this so they chain:
