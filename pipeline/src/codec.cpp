@@ -15,7 +15,7 @@
 
 #include "codec_families.h"
 #include "frame_layout.h"
-#include "multiversion.h"
+#include "sl/pipeline/multiversion.h"
 #include "sl/pipeline/projector_response.h"
 
 namespace sl::pipeline {

@@ -20,7 +20,7 @@
 #include "fast_atan2.h"
 #include "phase_response.h"
 #include "frame_layout.h"
-#include "multiversion.h"
+#include "sl/pipeline/multiversion.h"
 #include "two_three_step_row.h"
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "multiversion.h"
+#include "sl/pipeline/multiversion.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>

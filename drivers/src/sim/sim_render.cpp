@@ -1,13 +1,18 @@
 #include "sim_render.h"
 
+#include "sl/pipeline/multiversion.h"
+
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <vector>
 
 namespace sl::drivers::sim {
+
+static_assert(std::endian::native == std::endian::little, "NormalSource reads hashes as 16-bit halves");
 
 namespace {
 
@@ -39,6 +44,27 @@ const std::array<float, kTableSize>& normalTable() {
     return t;
   }();
   return table;
+}
+
+// The splitmix64 stream: out[k] = mix64(state + (k + 1) * golden), the
+// same values the scalar stream gives one after another.
+SL_MULTIVERSION void hashStream(std::uint64_t state, int words, std::uint64_t* __restrict out) {
+  for (int k = 0; k < words; ++k) {
+    std::uint64_t x = state + static_cast<std::uint64_t>(k + 1) * kGolden;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+    out[k] = x ^ (x >> 31);
+  }
+}
+
+// The hashes read as 16-bit halves (x86-64 is little-endian: the low half of
+// each hash first); may_alias makes reading uint64_t storage this way defined.
+using AliasingU16 = std::uint16_t __attribute__((may_alias));
+
+SL_MULTIVERSION void lookUpNormals(const float* __restrict table,
+                                   const AliasingU16* __restrict index, int count,
+                                   float* __restrict out) {
+  for (int i = 0; i < count; ++i) out[i] = table[index[i]];
 }
 
 // Noise-free signal (8-bit DN, before exposure and gain) of one row, from
@@ -75,8 +101,8 @@ void signalRow(const RenderMaps& maps, const Texel* texture, const float* light,
 // Noise, exposure and gain, ADC scale, rounding and saturation of one row
 // (no branches, vectorisable). z: standard normal variates (kNoise only).
 template <typename Pixel, bool kNoise>
-void finishRow(const float* signal, const float* z, const SensorResponse& r, int width,
-               Pixel* dst) {
+SL_MULTIVERSION void finishRow(const float* __restrict signal, const float* __restrict z,
+                               const SensorResponse& r, int width, Pixel* __restrict dst) {
   const float scale = static_cast<float>(r.signal_scale);
   const float shot_gain = static_cast<float>(r.gain_dn_per_electron);
   const float read_variance = static_cast<float>(r.read_noise_dn * r.read_noise_dn);
@@ -199,22 +225,18 @@ std::uint64_t mix64(std::uint64_t x) {
 
 NormalSource::NormalSource(std::uint64_t seed) : state_(mix64(seed + kGolden)) {}
 
+float normalQuantile(std::uint16_t index) { return normalTable()[index]; }
+
 void NormalSource::fill(float* out, int count) {
-  const float* table = normalTable().data();
-  int i = 0;
-  for (; i + 4 <= count; i += 4) {
-    state_ += kGolden;
-    const std::uint64_t bits = mix64(state_);
-    out[i] = table[bits & 0xffff];
-    out[i + 1] = table[(bits >> 16) & 0xffff];
-    out[i + 2] = table[(bits >> 32) & 0xffff];
-    out[i + 3] = table[bits >> 48];
-  }
-  if (i < count) {
-    state_ += kGolden;
-    std::uint64_t bits = mix64(state_);
-    for (; i < count; ++i, bits >>= 16) out[i] = table[bits & 0xffff];
-  }
+  if (count <= 0) return;
+  // Each hash gives four 16-bit table indices, low half first.
+  const int words = (count + 3) / 4;
+  thread_local std::vector<std::uint64_t> bits;
+  if (bits.size() < static_cast<std::size_t>(words)) bits.resize(static_cast<std::size_t>(words));
+  hashStream(state_, words, bits.data());
+  state_ += kGolden * static_cast<std::uint64_t>(words);
+  lookUpNormals(normalTable().data(), reinterpret_cast<const AliasingU16*>(bits.data()), count,
+                out);
 }
 
 ProjectorResponse makeProjectorResponse(double gamma, const std::vector<double>& samples) {

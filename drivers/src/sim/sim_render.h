@@ -37,6 +37,13 @@ class NormalSource {
 // splitmix64 finaliser: a well-mixed 64-bit hash of x.
 std::uint64_t mix64(std::uint64_t x);
 
+// NormalSource's table: the standard normal quantile at (index + 0.5) / 2^16,
+// rescaled to unit variance. Variate i of a fill() is normalQuantile of the
+// (i % 4)-th 16-bit half (lowest first) of mix64(s + (i / 4 + 1) * 0x9e3779b97f4a7c15),
+// s the source's state before the call, mix64(seed + 0x9e3779b97f4a7c15) for a new one;
+// each fill() advances the state by one step per started group of four.
+float normalQuantile(std::uint16_t index);
+
 // Light emitted by the projector per 8-bit pattern level, on the 0..255 scale
 // (SimConfig::projector_gamma / projector_response); identity when linear.
 struct ProjectorResponse {

@@ -1,6 +1,7 @@
-// Run-time dispatch of the decoder's and triangulator's row kernels
-// (private). The shipped build targets baseline x86-64 (SSE2); a kernel
-// marked SL_MULTIVERSION is also compiled for AVX2 and for x86-64-v4
+// Run-time dispatch of the row kernels of the decoder, the triangulator and
+// the simulator's noise (an implementation detail of sl_pipeline and
+// sl_driver_sim, not an API). The shipped build targets baseline x86-64
+// (SSE2); a kernel marked SL_MULTIVERSION is also compiled for AVX2 and for x86-64-v4
 // (AVX-512) and the loader picks the best variant the CPU supports (GCC
 // function multiversioning, glibc ifunc). The variants do the same IEEE
 // operations in the same order: the kernels' files are compiled with
