@@ -136,6 +136,9 @@ if command -v iox-roudi > /dev/null; then
     roudi_pid=$!
     sleep 2
     kill -0 "$roudi_pid" 2> /dev/null || { cat "$work/roudi.log" >&2; roudi_pid=""; }
+    # As systemd/iceoryx-roudi.service does: every page of the segments
+    # allocated before the first chunk is written.
+    [ -z "$roudi_pid" ] || sh "$src/scripts/iceoryx-prefault.sh" "$roudi_pid" | sed 's/^/bench-delivery: /'
   fi
   [ -n "$roudi_pid" ] || pgrep -x iox-roudi > /dev/null && configs+=("shm:$src/config/cyclonedds-shm.xml")
 else
@@ -206,10 +209,18 @@ ns=""
 start_daemon() {  # FPS [extra sed expression]
   local fps=$1 extra=${2:-}
   ns="bench_$$_$RANDOM"
+  # runtime.prefault_memory (README: recommended from ~15 scans/s): on for
+  # the high-rate scenarios unless SL_BENCH_PREFAULT says 0 or 1 for all.
+  local prefault=${SL_BENCH_PREFAULT:-auto}
+  [ "$prefault" = auto ] && prefault=$([ "$fps" -ge 90 ] && echo 1 || echo 0)
+  prefault=$([ "$prefault" = 1 ] && echo true || echo false)
   sed -e "s/^  camera_fps: 30 /  camera_fps: $fps /" -e "s/^  namespace: sl$/  namespace: $ns/" \
+      -e "s/^runtime:$/runtime:\n  prefault_memory: $prefault/" \
       ${extra:+-e "$extra"} "$src/config/sim.yaml" > "$work/sim.yaml"
-  grep -q "camera_fps: $fps " "$work/sim.yaml" && grep -q "namespace: $ns" "$work/sim.yaml" ||
+  grep -q "camera_fps: $fps " "$work/sim.yaml" && grep -q "namespace: $ns" "$work/sim.yaml" &&
+    grep -q "prefault_memory: $prefault" "$work/sim.yaml" ||
     { echo "bench-delivery: could not edit config/sim.yaml" >&2; exit 2; }
+  echo "  daemon: camera_fps $fps, runtime.prefault_memory $prefault"
   "${daemon_prefix[@]}" "$daemon" --config "$work/sim.yaml" > "$work/daemon.log" 2>&1 &
   daemon_pid=$!
   pids+=("$daemon_pid")

@@ -222,6 +222,7 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   r.stall_timeout_s = m.get<double>("stall_timeout_s", r.stall_timeout_s);
   if (!(r.stall_timeout_s >= 0.1 && r.stall_timeout_s <= 3600))
     m.fail("stall_timeout_s", "must be in [0.1, 3600] seconds");
+  r.prefault_memory = m.get<bool>("prefault_memory", r.prefault_memory);
   r.last_error_hold_s = m.get<double>("last_error_hold_s", r.last_error_hold_s);
   if (!(r.last_error_hold_s >= 0 && r.last_error_hold_s <= 1e6))
     m.fail("last_error_hold_s", "must be in [0, 1e6] seconds (0 = until cleared)");

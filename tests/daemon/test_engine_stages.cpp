@@ -1,17 +1,25 @@
 // The scan engine's stages without its threads: start-request validation (a
 // pure function), set processing (errors as values) and its reloads, device
-// health.
+// health, the stage threads' memory prefault.
+#include <sys/resource.h>
+
 #include <catch2/catch.hpp>
 
+#include <cstdlib>
 #include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
 #include "engine/device_health.h"
+#include "engine/memory_prefault.h"
 #include "engine/set_processor.h"
 #include "engine/stage_latency.h"
 #include "engine/start_validation.h"
 #include "sl/daemon/config.h"
+#include "sl/daemon/dds.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/scan_processor.h"
@@ -290,3 +298,58 @@ TEST_CASE("device health: silent devices named with their last error; a delivery
         "trigger source: no trigger for 3.0 s (serial port closed)");
   CHECK(health.triggerDelivered(15 * kS));
 }
+
+TEST_CASE("memory prefault: the plan follows the cameras, patterns and queue depth; off by default") {
+  sl::daemon::DaemonConfig config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  CHECK_FALSE(config.runtime.prefault_memory);
+  CHECK(sl::daemon::prefaultPlanOf(config, 64).totalBytes(1) == 0);
+
+  config.runtime.prefault_memory = true;
+  config.runtime.queue_depth = 3;
+  const auto plan = sl::daemon::prefaultPlanOf(config, 64);
+  const std::size_t pixels = std::size_t(config.calibration.camera.width) * config.calibration.camera.height;
+  CHECK(pixels == 1440 * 1080);
+  CHECK(plan.frame_bytes == pixels);         // 8-bit simulated camera
+  CHECK(plan.frames == 12 * (3 + 2) + 64);  // the longest pattern, 3+3_both: 12 images
+  CHECK(plan.cloud_bytes == pixels * 16);
+  CHECK(plan.process_clouds == 3 + 3);
+  CHECK(plan.output_clouds == 3 + 3);
+  config.sim.bit_depth = 12;
+  CHECK(sl::daemon::prefaultPlanOf(config, 64).frame_bytes == 2 * pixels);
+}
+
+#ifndef SL_SANITIZER_BUILD  // the sanitizers' allocators ignore mallopt
+namespace {
+long minorFaults() {
+  rusage usage{};
+  getrusage(RUSAGE_THREAD, &usage);
+  return usage.ru_minflt;
+}
+}  // namespace
+
+TEST_CASE("memory prefault: a thread's first clouds after it touch no fresh pages", "[memory]") {
+  REQUIRE(sl::dds::retainLargeSampleMemory());
+  constexpr std::size_t kCloud = std::size_t(1440) * 1080 * 16;  // 6,075 pages
+  long fresh = -1, prefaulted = -1;
+  // Each in its own thread, so each gets its own malloc arena, as the stage
+  // threads do: four clouds alive at once, touched page by page.
+  auto firstClouds = [&](bool prefault, long& faults) {
+    std::thread([&] {
+      if (prefault) sl::daemon::prefaultThreadHeap(kCloud, 4);
+      const long before = minorFaults();
+      std::vector<unsigned char*> clouds;
+      for (int i = 0; i < 4; ++i) {
+        clouds.push_back(static_cast<unsigned char*>(std::malloc(kCloud)));
+        std::memset(clouds.back(), i, kCloud);
+      }
+      faults = minorFaults() - before;
+      for (unsigned char* c : clouds) std::free(c);
+    }).join();
+  };
+  firstClouds(false, fresh);
+  firstClouds(true, prefaulted);
+  INFO("minor page faults for 4 clouds: fresh thread " << fresh << ", prefaulted " << prefaulted);
+  CHECK(fresh > 4 * 5000);
+  CHECK(prefaulted < 300);
+}
+#endif

@@ -35,7 +35,8 @@ struct ReferenceStream {
 
 }  // namespace
 
-TEST_CASE("NormalSource gives the splitmix64 stream of table quantiles, four per hash", "[sim][noise]") {
+TEST_CASE("NormalSource gives the splitmix64 stream of table quantiles, four per hash",
+          "[sim][noise]") {
   for (const std::uint64_t seed : {0ull, 1ull, 0xdeadbeefcafef00dull}) {
     NormalSource source(seed);
     ReferenceStream reference(seed);

@@ -2,14 +2,19 @@
 // one stage (engine/*.h, pipeline stages) and owns it.
 #include "sl/daemon/scan_engine.h"
 
+#include <pthread.h>
+
 #include <algorithm>
 #include <chrono>
+#include <latch>
+#include <string>
 #include <thread>
 #include <utility>
 #include <variant>
 
 #include "engine/control_loop.h"
 #include "engine/device_health.h"
+#include "engine/memory_prefault.h"
 #include "engine/request_control.h"
 #include "engine/schedule_events.h"
 #include "engine/set_processor.h"
@@ -27,6 +32,11 @@ using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
 namespace {
+
+// The thread's name as ps -L and top -H show it (Linux: up to 15 characters).
+void nameThisThread(const std::string& name) {
+  pthread_setname_np(pthread_self(), name.substr(0, 15).c_str());
+}
 
 // What the camera and trigger threads hand to the grouping thread, tagged
 // with the request generation current when it arrived.
@@ -153,6 +163,9 @@ struct ScanEngine::Impl {
   ControlLoop control_loop;  // control thread
 
   std::atomic<bool> running{true};
+  // Counted down by the stage threads when their memory is prefaulted; the
+  // constructor returns (and the daemon says ready) after that.
+  std::latch prefaulted{static_cast<std::ptrdiff_t>(devices.cameras.size()) + 2};
   std::vector<Heartbeat> heartbeats;  // sized before threads start
   std::vector<std::thread> threads;
 
@@ -312,12 +325,42 @@ ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, Output
   Impl& d = *impl_;
   const std::size_t k = d.devices.cameras.size();
   d.heartbeats = std::vector<Heartbeat>(k + 5);
-  for (std::size_t i = 0; i < k; ++i) d.threads.emplace_back([&d, i] { d.cameraLoop(i, d.heartbeats[i]); });
-  d.threads.emplace_back([&d, k] { d.triggerLoop(d.heartbeats[k]); });
-  d.threads.emplace_back([&d, k] { d.groupLoop(d.heartbeats[k + 1]); });
-  d.threads.emplace_back([&d, k] { d.processLoop(d.heartbeats[k + 2]); });
-  d.threads.emplace_back([&d, k] { d.outputLoop(d.heartbeats[k + 3]); });
-  d.threads.emplace_back([&d, k] { d.control_loop.run(d.running, d.heartbeats[k + 4]); });
+  // Named for ps -L / top -H (at most 15 characters). The stages that
+  // allocate images and clouds first touch the memory they will recycle
+  // (engine/memory_prefault.h).
+  const PrefaultPlan plan = prefaultPlanOf(d.config, kInputQueueCapacity);
+  for (std::size_t i = 0; i < k; ++i)
+    d.threads.emplace_back([&d, i, plan] {
+      nameThisThread("sl-camera" + std::to_string(i));
+      prefaultThreadHeap(plan.frame_bytes, plan.frames);
+      d.prefaulted.count_down();
+      d.cameraLoop(i, d.heartbeats[i]);
+    });
+  d.threads.emplace_back([&d, k] {
+    nameThisThread("sl-trigger");
+    d.triggerLoop(d.heartbeats[k]);
+  });
+  d.threads.emplace_back([&d, k] {
+    nameThisThread("sl-group");
+    d.groupLoop(d.heartbeats[k + 1]);
+  });
+  d.threads.emplace_back([&d, k, plan] {
+    nameThisThread("sl-process");
+    prefaultThreadHeap(plan.cloud_bytes, plan.process_clouds);
+    d.prefaulted.count_down();
+    d.processLoop(d.heartbeats[k + 2]);
+  });
+  d.threads.emplace_back([&d, k, plan] {
+    nameThisThread("sl-output");
+    prefaultThreadHeap(plan.cloud_bytes, plan.output_clouds);
+    d.prefaulted.count_down();
+    d.outputLoop(d.heartbeats[k + 3]);
+  });
+  d.threads.emplace_back([&d, k] {
+    nameThisThread("sl-control");
+    d.control_loop.run(d.running, d.heartbeats[k + 4]);
+  });
+  d.prefaulted.wait();
 }
 
 ScanEngine::~ScanEngine() {

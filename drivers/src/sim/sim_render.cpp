@@ -1,7 +1,5 @@
 #include "sim_render.h"
 
-#include "sl/pipeline/multiversion.h"
-
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -10,9 +8,12 @@
 #include <stdexcept>
 #include <vector>
 
+#include "sl/pipeline/multiversion.h"
+
 namespace sl::drivers::sim {
 
-static_assert(std::endian::native == std::endian::little, "NormalSource reads hashes as 16-bit halves");
+static_assert(std::endian::native == std::endian::little,
+              "NormalSource reads hashes as 16-bit halves");
 
 namespace {
 
@@ -165,8 +166,8 @@ void signalInto(const RenderMaps& maps, const ProjectorFrame& frame,
     else if (projector.linear)
       signalRow<std::uint8_t, true>(maps, frame.image.ptr<std::uint8_t>(), nullptr, row, out);
     else
-      signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(),
-                                     projector.light.data(), row, out);
+      signalRow<std::uint8_t, false>(maps, frame.image.ptr<std::uint8_t>(), projector.light.data(),
+                                     row, out);
   }
   if (camera_blur_passes > 0) blurCameraImage(maps, camera_blur_passes, signal);
 }

@@ -87,6 +87,11 @@ struct RuntimeConfig {
   // triggers or a request without a published scan for this long makes the
   // status `degraded` with the cause (scan rate 0); it recovers by itself.
   double stall_timeout_s = 2.0;
+  // Each stage thread touches, at start-up, the memory it recycles for
+  // images and clouds, so that the first scans after START do not pay for
+  // it (engine/memory_prefault.h): ~440 MB with config/sim.yaml, resident from
+  // then on, and a few seconds more before the daemon is ready.
+  bool prefault_memory = false;
   // last_error is dropped from the status this long after it was reported
   // (0 = kept until cleared by a recovery, a good reload or a new start).
   double last_error_hold_s = 300.0;

@@ -1,0 +1,41 @@
+// Fresh memory for the stage threads before the first scan
+// (runtime.prefault_memory). On a machine whose free memory is handed back
+// to the hypervisor (free page reporting), the first touch of a page costs
+// far more than on bare metal: ~5 ms per MB on the VM this project is
+// measured on (README, "Measured: delivery"), 125 ms for one 25 MB cloud.
+// Without this, the first second after START paid for every image, cloud
+// and serialized sample the stages allocate for the first time (measured at
+// 30 scans/s: 31,500 page faults in the camera thread and 18,200 in each of
+// the processing and output threads, ~270 MB, all within that second). Each stage thread touches
+// and frees, at its start, what its steady state recycles; sl::dds::retainLargeSampleMemory's
+// allocator settings keep that memory with the thread's malloc arena.
+#pragma once
+
+#include <cstddef>
+
+#include "sl/daemon/config.h"
+
+namespace sl::daemon {
+
+struct PrefaultPlan {
+  std::size_t frame_bytes = 0;     // one camera image (the largest camera)
+  std::size_t frames = 0;          // images per camera thread
+  std::size_t cloud_bytes = 0;     // one full-resolution cloud (16 bytes a point), largest camera
+  std::size_t process_clouds = 0;  // clouds of the processing thread
+  std::size_t output_clouds = 0;   // messages and serialized copies of the output thread
+
+  std::size_t totalBytes(std::size_t cameras) const {
+    return cameras * frames * frame_bytes + (process_clouds + output_clouds) * cloud_bytes;
+  }
+};
+
+// Sizes from the cameras' calibrations and image depth, the longest
+// pattern, runtime.queue_depth and the input queue's capacity; all zero when
+// runtime.prefault_memory is off.
+PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_capacity);
+
+// Touches `count` blocks of `block_bytes` in the calling thread's heap and
+// frees them (see above). No-op for a zero count or block.
+void prefaultThreadHeap(std::size_t block_bytes, std::size_t count);
+
+}  // namespace sl::daemon
