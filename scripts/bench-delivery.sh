@@ -252,9 +252,12 @@ scenario() {
   period=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 6e9 / f }')
   offset=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 5e9 / f }')
   local sub_pids=()
+  # The subscribers prefault their heaps as the daemon does (same rule).
+  local prefault=${SL_BENCH_PREFAULT:-auto}
+  [ "$prefault" = auto ] && prefault=$([ "$fps" -ge 90 ] && echo 1 || echo 0)
   for i in $(seq 1 "$subs"); do
     timeout $((duration + 90)) "$bench" listen --topic "rt/$ns/points" --duration "$duration" \
-      --timeout 30 > "$work/sub$i.log" 2> "$work/sub$i.err" &
+      --timeout 30 --prefault-clouds $((prefault * 8)) > "$work/sub$i.log" 2> "$work/sub$i.err" &
     sub_pids+=($!)
     pids+=($!)
   done

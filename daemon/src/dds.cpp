@@ -1,13 +1,19 @@
 #include "sl/daemon/dds.h"
 
 #include <malloc.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <climits>
 #include <cstdlib>
 #include <cstring>
 #include <chrono>
+#include <fstream>
+#include <sstream>
+#include <string>
 #include <thread>
+#include <vector>
 
 namespace sl::dds {
 
@@ -27,6 +33,41 @@ bool retainLargeSampleMemory() {
   ok = mallopt(M_TRIM_THRESHOLD, INT_MAX) == 1 && ok;
   ok = mallopt(M_TOP_PAD, 64 << 20) == 1 && ok;
   return ok;
+}
+
+void prefaultHeap(std::size_t block_bytes, std::size_t count) {
+  constexpr std::size_t kLargestHeapBlock = std::size_t{32} << 20;  // the mmap threshold
+  if (block_bytes == 0 || count == 0 || block_bytes >= kLargestHeapBlock) return;
+  const std::size_t page = static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
+  std::vector<unsigned char*> blocks;
+  blocks.reserve(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    auto* block = static_cast<unsigned char*>(std::malloc(block_bytes));
+    if (!block) break;  // what was touched still helps
+    for (std::size_t offset = 0; offset < block_bytes; offset += page)
+      static_cast<volatile unsigned char*>(block)[offset] = 0;
+    blocks.push_back(block);
+  }
+  for (auto it = blocks.rbegin(); it != blocks.rend(); ++it) std::free(*it);
+}
+
+std::size_t populateSharedMemoryMappings() {
+  std::ifstream maps("/proc/self/maps");
+  std::size_t populated = 0;
+  for (std::string line; std::getline(maps, line);) {
+    // start-end perms offset dev inode path
+    std::istringstream fields(line);
+    std::string range, perms, offset, dev, inode, path;
+    fields >> range >> perms >> offset >> dev >> inode >> path;
+    if (path.rfind("/dev/shm/", 0) != 0 || perms.size() < 2) continue;
+    const std::size_t dash = range.find('-');
+    if (dash == std::string::npos) continue;
+    const auto start = static_cast<std::uintptr_t>(std::stoull(range.substr(0, dash), nullptr, 16));
+    const auto end = static_cast<std::uintptr_t>(std::stoull(range.substr(dash + 1), nullptr, 16));
+    const int advice = perms[1] == 'w' ? MADV_POPULATE_WRITE : MADV_POPULATE_READ;
+    if (madvise(reinterpret_cast<void*>(start), end - start, advice) == 0) populated += end - start;
+  }
+  return populated;
 }
 
 // --- Qos ---

@@ -5,6 +5,8 @@
 #include "support/time_scale.h"
 #include <signal.h>
 #include <spawn.h>
+#include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -241,6 +243,37 @@ TEST_CASE("retainLargeSampleMemory keeps freed clouds' memory for the next ones"
   CHECK(faults < 300);
 }
 #endif
+
+TEST_CASE("populateSharedMemoryMappings fills in the page tables of /dev/shm mappings", "[dds][memory]") {
+  // A shared-memory segment as iceoryx maps it: a /dev/shm file, allocated
+  // (as iceoryx-prefault leaves RouDi's) and mapped shared, read-write.
+  constexpr std::size_t kBytes = std::size_t{32} << 20;  // one chunk of the cloud pool
+  const std::string name = "/sl_test_populate_" + std::to_string(getpid());
+  const int fd = shm_open(name.c_str(), O_CREAT | O_RDWR | O_EXCL, 0600);
+  REQUIRE(fd >= 0);
+  REQUIRE(posix_fallocate(fd, 0, kBytes) == 0);
+  auto touchAll = [&](unsigned char* p) {
+    const long before = minorFaults();
+    for (std::size_t i = 0; i < kBytes; i += 4096) p[i] = 1;
+    return minorFaults() - before;
+  };
+  auto* fresh = static_cast<unsigned char*>(mmap(nullptr, kBytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0));
+  REQUIRE(fresh != MAP_FAILED);
+  const long fresh_faults = touchAll(fresh);
+  munmap(fresh, kBytes);
+
+  auto* populated = static_cast<unsigned char*>(mmap(nullptr, kBytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0));
+  REQUIRE(populated != MAP_FAILED);
+  CHECK(sl::dds::populateSharedMemoryMappings() >= kBytes);
+  const long populated_faults = touchAll(populated);
+  munmap(populated, kBytes);
+  close(fd);
+  shm_unlink(name.c_str());
+  INFO("minor page faults writing 32 MiB of /dev/shm: fresh mapping " << fresh_faults
+                                                                       << ", populated " << populated_faults);
+  CHECK(fresh_faults > 4000);
+  CHECK(populated_faults < 100);
+}
 
 TEST_CASE("full-size PointCloud2 round trip between two participants", "[dds]") {
   useLoopbackConfig();

@@ -5,13 +5,18 @@
 //   sl_dds_bench sub [--topic T] [--count N] [--timeout S]
 //   sl_dds_bench pub [--topic T] [--count N] [--rate HZ] [--width W] [--height H]
 //   sl_dds_bench listen [--topic T] [--duration S] [--timeout S] [--depth N] [--best-effort 1]
+//                       [--prefault-clouds N]
 //
 // listen: a subscriber to the daemon's clouds (scripts/bench-delivery.sh):
 // waits at most --timeout S (default 60) for the first cloud, then takes
 // clouds for --duration S (default 30), reader reliable (or best effort)
 // keep-last --depth (default 4), and prints one line per cloud,
 // "rx <header.stamp ns> <take time ns>" (CLOCK_REALTIME after the take), then
-// "listen: done <clouds>". Exits 1 if no cloud came.
+// "listen: done <clouds>". Exits 1 if no cloud came. --prefault-clouds N
+// first touches the heap memory of N full-size (1440 x 1080) clouds, so that
+// the first samples taken do not page-fault (sl::dds::prefaultHeap; default
+// 0); shared-memory mappings are always populated
+// (sl::dds::populateSharedMemoryMappings).
 //
 // The publisher waits (at most 10 s) for a reader, then writes N organized
 // clouds of W x H points x 16 bytes (default 1440 x 1080, the sensor's) at
@@ -59,6 +64,7 @@ struct Args {
   double duration_s = 30;
   int depth = 4;
   bool best_effort = false;
+  long prefault_clouds = 0;
 };
 
 [[noreturn]] void usage(const std::string& why) {
@@ -68,7 +74,7 @@ struct Args {
                "       sl_dds_bench pub [--topic T] [--count N] [--rate HZ] [--width W] "
                "[--height H]\n"
                "       sl_dds_bench listen [--topic T] [--duration S] [--timeout S] [--depth N] "
-               "[--best-effort 1]\n",
+               "[--best-effort 1] [--prefault-clouds N]\n",
                why.c_str());
   std::exit(2);
 }
@@ -107,6 +113,8 @@ Args parse(int argc, char** argv) {
       a.depth = static_cast<int>(number);
     else if (opt == "--best-effort")
       a.best_effort = number != 0;
+    else if (opt == "--prefault-clouds" && number <= 64)
+      a.prefault_clouds = static_cast<long>(number);
     else
       usage("bad option or value: " + opt + " " + v);
   }
@@ -264,6 +272,9 @@ int listen(const Args& a) {
     qos.reliable();
   qos.keepLast(a.depth);
   dds::Reader<Cloud> reader(participant, topic, qos);
+  sl::dds::populateSharedMemoryMappings();  // as the daemon does (no-op without shared memory)
+  // Samples are deserialized into memory of the thread that takes them.
+  sl::dds::prefaultHeap(std::size_t{1440} * 1080 * 16 + 4096, static_cast<std::size_t>(a.prefault_clouds));
   dds::ReadCondition has_data(reader);
   dds::WaitSet waitset(participant);
   waitset.attach(has_data);

@@ -1,18 +1,12 @@
 #include "engine/memory_prefault.h"
 
-#include <unistd.h>
+#include "sl/daemon/dds.h"
 
 #include <algorithm>
-#include <cstdlib>
-#include <vector>
 
 namespace sl::daemon {
 
 namespace {
-
-// retainLargeSampleMemory's mmap threshold: larger blocks are mapped for
-// each allocation and unmapped when freed, so touching them ahead is useless.
-constexpr std::size_t kLargestHeapBlock = std::size_t{32} << 20;
 
 std::size_t bytesPerPixel(const DaemonConfig& config) {
   if (config.sensor == SensorKind::kSim) return config.sim.bit_depth > 8 ? 2 : 1;
@@ -48,18 +42,7 @@ PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_
 }
 
 void prefaultThreadHeap(std::size_t block_bytes, std::size_t count) {
-  if (block_bytes == 0 || count == 0 || block_bytes >= kLargestHeapBlock) return;
-  const std::size_t page = static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
-  std::vector<unsigned char*> blocks;
-  blocks.reserve(count);
-  for (std::size_t i = 0; i < count; ++i) {
-    auto* block = static_cast<unsigned char*>(std::malloc(block_bytes));
-    if (!block) break;  // what was touched still helps
-    for (std::size_t offset = 0; offset < block_bytes; offset += page)
-      static_cast<volatile unsigned char*>(block)[offset] = 0;
-    blocks.push_back(block);
-  }
-  for (auto it = blocks.rbegin(); it != blocks.rend(); ++it) std::free(*it);
+  dds::prefaultHeap(block_bytes, count);
 }
 
 }  // namespace sl::daemon

@@ -65,6 +65,25 @@ dds_return_t check(dds_return_t rc, const std::string& call);
 // defaults (to measure the difference).
 bool retainLargeSampleMemory();
 
+// Touches `count` blocks of `block_bytes` (each below retainLargeSampleMemory's
+// 32 MiB mmap threshold, else nothing is done) in the calling thread's heap
+// and frees them: with retainLargeSampleMemory's settings the memory stays
+// with the thread's malloc arena, so the thread's first large buffers
+// (clouds, images, samples taken) do not page-fault. On a VM that hands
+// free memory back to the host a first touch costs ~5 ms per MB here.
+void prefaultHeap(std::size_t block_bytes, std::size_t count);
+
+// Fills in the page tables of the process's shared-memory mappings
+// (/dev/shm: iceoryx's segments when the Cyclone DDS configuration enables
+// shared memory), writable where the mapping is, without touching their
+// contents (madvise MADV_POPULATE_WRITE / _READ, Linux >= 5.14). Without it
+// each page of a 32 MiB chunk faults when the process first writes or reads
+// it: ~140 ms per chunk on this project's VM, for each of the first ~20
+// clouds after START, in the writer and in every local reader. Call after
+// the participant's readers and writers exist (the segments are mapped by
+// then). Returns the bytes populated: 0 without shared memory.
+std::size_t populateSharedMemoryMappings();
+
 // Owning, copyable QoS policy set. An empty Qos leaves every policy at
 // Cyclone's default. Builders return *this so they chain:
 //   Qos().reliable(DDS_MSECS(500)).keepLast(1).xcdr1()
