@@ -182,16 +182,21 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
       if (c.generation != generation_) {
         c.generation = generation_;
         c.next = std::max<std::int64_t>(0, lastStampAtOrBefore(c.armed_ns - 1) + 1);
+        c.sequence_from = -1;
       }
       if (frameExists(c.next)) {
         const std::int64_t last_due = lastFrameAtOrBefore(now);
-        if (last_due >= c.next) {
+        const std::int64_t n = frames_per_sequence_;
+        // A sequence whose first frame this camera delivered is delivered to
+        // its end: drops start at a sequence start (or within a sequence the
+        // camera joined late). Dropping the rest of a sequence in progress
+        // would lose every sequence once rendering a frame takes longer
+        // than about kLiveBufferDepth / n frame intervals.
+        const bool in_sequence = c.next % n != 0 && c.sequence_from == c.next - c.next % n;
+        if (last_due >= c.next && !in_sequence) {
           const std::int64_t behind = last_due - c.next + 1;
           if (behind > kLiveBufferDepth) {
-            // Drop the oldest, up to the next sequence start: a consumer
-            // (or a renderer) that falls behind loses whole sequences, so
-            // the frames it does get complete theirs.
-            const std::int64_t n = frames_per_sequence_;
+            // Drop the oldest, up to the next sequence start.
             const std::int64_t keep_from = last_due - kLiveBufferDepth + 1;
             const std::int64_t dropped = (keep_from + n - 1) / n * n - c.next;
             c.next += dropped;
@@ -203,6 +208,7 @@ std::optional<pipeline::Frame> LiveSchedule::grab(int camera, std::chrono::milli
         // beyond the end of the schedule.
         if (frameExists(c.next) && c.next <= last_due) {
           const std::int64_t j = c.next++;
+          if (j % n == 0) c.sequence_from = j;
           pipeline::Frame frame;
           frame.frame_id = c.next_frame_id++;
           frame.stamp_ns = frameStamp(j);

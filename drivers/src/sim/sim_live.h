@@ -30,7 +30,10 @@ using RenderFunction = std::function<cv::Mat(int camera, std::size_t pattern_ind
 // Frames and triggers a slow consumer may fall behind by before the oldest
 // are dropped (like the buffer pool of a camera driver). The camera then
 // drops up to the next sequence start (whole sequences: what it delivers
-// completes sequences, so a slow consumer loses scans in proportion).
+// completes sequences, so a slow consumer loses scans in proportion). It
+// decides so at a sequence start: a sequence it began to deliver is
+// delivered to its end, however slowly the consumer (or the renderer) takes
+// its frames.
 inline constexpr std::int64_t kLiveBufferDepth = 8;
 // Delay between Projector::start() and the first trigger.
 inline constexpr std::int64_t kStartDelayNs = 20'000'000;
@@ -132,6 +135,7 @@ class LiveSchedule {
     std::int64_t armed_ns = 0;
     std::uint64_t generation = 0;  // schedule the camera follows (0: none yet)
     std::int64_t next = 0;         // next frame index of that schedule
+    std::int64_t sequence_from = -1;  // first frame of the sequence being delivered (-1: none)
     std::uint64_t next_frame_id = 0;
     std::uint64_t stop_epoch = 0;  // bumped by disarmCamera() to wake grab()
     std::vector<Exposure> triggered;  // software triggers, oldest first
