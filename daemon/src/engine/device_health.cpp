@@ -77,8 +77,14 @@ std::string degradedCause(const RequestControl::Health& h, const DeviceHealth& d
   if (!h.scanning) return "";
   const std::int64_t since_ns =
       std::chrono::duration_cast<std::chrono::nanoseconds>(h.since.time_since_epoch()).count();
+  // A finite request's schedule ends after its sequences (the projector
+  // stops): silence after that is no fault, so it is measured up to the end.
+  std::int64_t until_ns = steadyNowNs();
+  if (h.scans_requested > 0)
+    until_ns = std::min(until_ns, since_ns + static_cast<std::int64_t>(1e9 * h.sequence_s *
+                                                                       static_cast<double>(h.scans_requested)));
   std::string cause =
-      h.trigger == TriggerMode::kHardware ? devices.silentDevices(since_ns, steadyNowNs(), stall_s) : "";
+      h.trigger == TriggerMode::kHardware ? devices.silentDevices(since_ns, until_ns, stall_s) : "";
   const std::optional<Clock::time_point> last = statistics.lastScan(generation);
   const double no_scan_s =
       std::chrono::duration<double>(Clock::now() - std::max(last.value_or(h.since), h.since)).count();

@@ -43,7 +43,8 @@ class DeviceHealth {
 
 // Why the scan `h` describes is degraded ("" = it is not, or no scan runs):
 // with the trigger board, a camera without frames or a trigger source
-// without triggers for `stall_s`; in either mode, no scan of `generation`
+// without triggers for `stall_s` (within a finite request's schedule: after
+// its last sequence the devices are silent by design); in either mode, no scan of `generation`
 // published for `stall_s` plus a sequence's time (since the start or the
 // last scan).
 std::string degradedCause(const RequestControl::Health& h, const DeviceHealth& devices,

@@ -220,9 +220,9 @@ void RequestControl::finishIfComplete(std::uint64_t generation) {
     finishLocked("");
 }
 
-void RequestControl::checkDeadline() {
+void RequestControl::checkDeadline(bool sets_in_flight) {
   std::lock_guard lock(mutex_);
-  if (state_ == ScanState::kScanning && Clock::now() > deadline_)
+  if (state_ == ScanState::kScanning && !sets_in_flight && Clock::now() > deadline_)
     finishLocked("request ended with " + std::to_string(scans_done_) + " of " +
                  std::to_string(scans_requested_) +
                  " scans: image sets were lost (see the drop counters)");
@@ -260,7 +260,7 @@ void RequestControl::clearError(const std::string& source_prefix) {
 
 RequestControl::Health RequestControl::health() const {
   std::lock_guard lock(mutex_);
-  return {state_ == ScanState::kScanning, trigger_, scanning_since_, sequence_s_};
+  return {state_ == ScanState::kScanning, trigger_, scanning_since_, sequence_s_, scans_requested_};
 }
 
 void RequestControl::setDegraded(const std::string& cause) {

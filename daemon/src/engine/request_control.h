@@ -77,8 +77,10 @@ class RequestControl {
   std::optional<std::uint64_t> countScan(std::uint64_t generation);
   // Ends the request of `generation` once its last scan was published.
   void finishIfComplete(std::uint64_t generation);
-  // Ends a finite request that missed its deadline (image sets were lost).
-  void checkDeadline();
+  // Ends a finite request that missed its deadline (image sets were lost),
+  // unless `sets_in_flight`: sets grouped but not yet published (queued or
+  // being processed) are late, not lost, and may still complete it.
+  void checkDeadline(bool sets_in_flight);
   // Ends the request of `generation` (if still current) with an error.
   void endRequest(std::uint64_t generation, const std::string& error);
 
@@ -94,6 +96,7 @@ class RequestControl {
     TriggerMode trigger = TriggerMode::kHardware;
     Clock::time_point since;  // when the scan began
     double sequence_s = 0;    // expected time per sequence
+    std::uint64_t scans_requested = 0;  // 0 = continuous
   };
   Health health() const;
   // Output thread: the cause of a degraded scan ("" = healthy). A change is

@@ -5,6 +5,7 @@
 #include <pthread.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <latch>
 #include <string>
@@ -51,15 +52,42 @@ struct InputEvent {
   std::uint64_t generation = 0;
   std::variant<FrameEvent, TriggerEvent> payload;
 };
+
+// Counts an image set from its grouping until its scan was published or the
+// set was dropped (a full queue, a stopped request, a processing error):
+// carried by SetItem, then by its ResultItem; move-only.
+class InFlight {
+ public:
+  explicit InFlight(std::atomic<int>& count) : count_(&count) { ++count; }
+  InFlight(InFlight&& other) noexcept : count_(std::exchange(other.count_, nullptr)) {}
+  InFlight& operator=(InFlight&& other) noexcept {
+    release();
+    count_ = std::exchange(other.count_, nullptr);
+    return *this;
+  }
+  InFlight(const InFlight&) = delete;
+  InFlight& operator=(const InFlight&) = delete;
+  ~InFlight() { release(); }
+
+ private:
+  void release() {
+    if (count_) --*count_;
+    count_ = nullptr;
+  }
+  std::atomic<int>* count_;
+};
+
 struct SetItem {
   std::uint64_t generation = 0;
   std::shared_ptr<const pipeline::ImageSet> set;
+  InFlight in_flight;
 };
 struct ResultItem {
   std::uint64_t generation = 0;
   std::vector<ScanResult> results;  // one per triangulating camera, same scan
   // System clock: the sequence's last exposure, processing start and end.
   pipeline::TimestampNs exposed_ns = 0, processing_ns = 0, processed_ns = 0;
+  InFlight in_flight;
 };
 
 // Queue sizes and policies. Frames and triggers: enough for a few sequences
@@ -104,7 +132,7 @@ struct ScanEngine::Impl {
         control(config, linksOf(config)),
         control_loop(control, software, gate, statistics,
                      [this](std::uint64_t generation, std::shared_ptr<const pipeline::ImageSet> set) {
-                       sets.push({generation, std::move(set)});
+                       sets.push({generation, std::move(set), InFlight(sets_in_flight)});
                      }) {
     for (auto& camera : this->devices.cameras) camera->start();
   }
@@ -133,6 +161,10 @@ struct ScanEngine::Impl {
   EngineDevices devices;
   OutputCallback output;
   const std::vector<std::string> camera_ids;  // in synchroniser order
+
+  // Image sets between grouping and publication (InFlight): a finite
+  // request is not ended for lost sets while one is still on its way.
+  std::atomic<int> sets_in_flight{0};
 
   // --- queues between the threads (policies above) ---
   BoundedQueue<InputEvent> events;        // camera + trigger threads -> grouping
@@ -239,7 +271,7 @@ void ScanEngine::Impl::groupLoop(Heartbeat& hb) {
       } else {
         grouping.pushTrigger(std::get<TriggerEvent>(event->payload).stamp_ns);
       }
-      for (auto& set : grouping.takeCompleted()) sets.push({active, std::move(set)});
+      for (auto& set : grouping.takeCompleted()) sets.push({active, std::move(set), InFlight(sets_in_flight)});
     }
     last_trigger_ns = grouping.lastTriggerNs();
     const pipeline::ScheduleCounters counts = grouping.counters();
@@ -265,7 +297,8 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
       control.reportError(outcome.error);
       continue;
     }
-    ResultItem result{item->generation, {}, lastExposureNs(set), processing_ns, pipeline::systemClockNs()};
+    ResultItem result{item->generation, {}, lastExposureNs(set), processing_ns, pipeline::systemClockNs(),
+                      std::move(item->in_flight)};
     for (CameraScan& scan : outcome.scans)
       result.results.push_back({0, set.pattern_name, scan.camera_id, scan.bit_depth,
                                 std::move(scan.maps), std::move(scan.cloud),
@@ -289,7 +322,7 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
     std::optional<ResultItem> item = results.pop(50ms);
     checkHealth();
     if (!item) {
-      control.checkDeadline();
+      control.checkDeadline(sets_in_flight.load() > 0);
       continue;
     }
     const std::optional<std::uint64_t> index = control.countScan(item->generation);
