@@ -5,6 +5,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <string>
@@ -353,3 +354,34 @@ TEST_CASE("memory prefault: a thread's first clouds after it touch no fresh page
   CHECK(prefaulted < 300);
 }
 #endif
+
+// A finite request's schedule ends after its sequences and the projector
+// stops: its trigger source and cameras are silent by design then, while a
+// scan may still be on its way; a continuous one's are not.
+TEST_CASE("device health: silence after a finite request's schedule is no fault") {
+  using Clock = std::chrono::steady_clock;
+  sl::daemon::DeviceHealth devices({"top"});
+  sl::daemon::EngineStatistics statistics;
+  sl::daemon::RequestControl::Health h;
+  h.scanning = true;
+  h.trigger = TriggerMode::kHardware;
+  h.since = Clock::now() - std::chrono::seconds(5);  // nothing delivered since
+  h.sequence_s = 0.2;
+  h.scans_requested = 1;  // its schedule ended after 0.2 s
+  std::string cause = sl::daemon::degradedCause(h, devices, statistics, 1, 2.0);
+  INFO("finite: " << cause);
+  CHECK(cause.find("no trigger") == std::string::npos);
+  CHECK(cause.find("no frame") == std::string::npos);
+  CHECK(cause.find("no scan published for") != std::string::npos);  // that is still true
+
+  h.scans_requested = 20;  // 4 s of schedule: silent for 4 s of it
+  cause = sl::daemon::degradedCause(h, devices, statistics, 1, 2.0);
+  INFO("finite, longer: " << cause);
+  CHECK(cause.find("trigger source: no trigger for 4.0 s") != std::string::npos);
+
+  h.scans_requested = 0;  // continuous: silent for all 5 s
+  cause = sl::daemon::degradedCause(h, devices, statistics, 1, 2.0);
+  INFO("continuous: " << cause);
+  CHECK(cause.find("camera 'top': no frame for 5.0 s") != std::string::npos);
+  CHECK(cause.find("trigger source: no trigger for 5.0 s") != std::string::npos);
+}
