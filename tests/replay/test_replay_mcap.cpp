@@ -287,6 +287,38 @@ TEST_CASE("a truncated or corrupt MCAP file is refused, naming the file and reco
   std::filesystem::remove(bad);
 }
 
+// A chunk may declare up to 2 GB of records, but no more than its compressed
+// bytes can expand to: a small file declaring a huge chunk is refused before
+// the reader allocates (fuzz_recording: a 407-byte file made it allocate and
+// clear 1.9 GB, over 10 s under ASan).
+TEST_CASE("a compressed chunk declaring more than its bytes can hold is refused before allocating") {
+  const std::string compression = GENERATE(std::string("zstd"), std::string("lz4"));
+  INFO("compression '" << compression << "'");
+  const std::string good = tempPath("ratio_good") + ".mcap", bad = tempPath("ratio_bad") + ".mcap";
+  writeMcap(good, {makeSet(1, "p", 2, 8)}, compression);
+  std::string bytes = readFile(good);
+  // Records after the 8-byte magic: opcode, u64 length, body. A chunk's body
+  // begins with start and end times, then the uncompressed size.
+  std::size_t at = 8, chunks = 0;
+  while (at + 9 <= bytes.size() - 8) {
+    std::uint64_t length = 0;
+    std::memcpy(&length, &bytes[at + 1], 8);
+    if (bytes[at] == 0x06) {
+      const std::uint64_t declared = 1'900'000'000;
+      std::memcpy(&bytes[at + 9 + 16], &declared, 8);
+      ++chunks;
+    }
+    at += 9 + length;
+  }
+  REQUIRE(chunks >= 1);
+  writeFile(bad, bytes);
+  CHECK_THROWS_WITH(sl::drivers::RecordingReader::open(bad),
+                    Catch::StartsWith(bad + ": ") && Catch::Contains("uncompressed size 1900000000 cannot come from") &&
+                        Catch::Contains("bytes of " + compression));
+  std::filesystem::remove(good);
+  std::filesystem::remove(bad);
+}
+
 TEST_CASE("an image set message that contradicts itself is refused, naming the message") {
   const ImageSet set = makeSet(1, "p", 2, 8);
   const std::string good = encode(set);

@@ -25,6 +25,11 @@ enum Op : std::uint8_t {
 constexpr std::uint64_t kRecordHeader = 1 + 8;       // opcode, length
 constexpr std::uint64_t kFooterBody = 8 + 8 + 4;     // summary start, offset start, crc
 constexpr std::uint64_t kMaxChunkBytes = 1ull << 31; // uncompressed records of one chunk
+// The most a compressed byte can expand to, with a margin, so that a chunk's
+// declared size is checked against its compressed bytes before allocating
+// for it: an LZ4 match length grows by 255 per extra byte; a zstd RLE block
+// of 4 bytes gives at most 128 KiB.
+constexpr std::uint64_t kMaxLz4Ratio = 256, kMaxZstdRatio = 32768, kRatioSlack = 1 << 16;
 constexpr std::uint64_t kMaxSmallRecord = 16 << 20;  // schema, channel (text)
 constexpr std::uint64_t kMessagePrefix = 2 + 4 + 8 + 8;  // channel, sequence, log, publish time
 
@@ -176,6 +181,10 @@ std::string chunkRecords(std::string_view body, const std::string& what) {
   if (uncompressed_size > kMaxChunkBytes)
     f.fail("uncompressed size " + std::to_string(uncompressed_size) + " is more than " +
            std::to_string(kMaxChunkBytes));
+  const std::uint64_t ratio = compression == "lz4" ? kMaxLz4Ratio : compression == "zstd" ? kMaxZstdRatio : 0;
+  if (ratio > 0 && uncompressed_size > records.size() * ratio + kRatioSlack)
+    f.fail("uncompressed size " + std::to_string(uncompressed_size) + " cannot come from " +
+           std::to_string(records.size()) + " bytes of " + compression);
   std::string out;
   if (compression.empty()) {
     if (records.size() != uncompressed_size)
