@@ -20,4 +20,11 @@ constexpr auto scaledBound(std::chrono::duration<Rep, Period> d) {
   return d * kTimeScale;
 }
 
+// The frame rate for a simulated camera that runs in real time (tests of the
+// engine and the daemon): slowed by kTimeScale in sanitizer builds. Under
+// TSan a live 1440 x 1080 frame takes ~130 ms to render, four frame
+// intervals at 30 Hz: the simulator would lose most sequences for want of
+// CPU, and the tests would measure the renderer, not the code under test.
+constexpr double scaledCameraFps(double fps) { return fps / kTimeScale; }
+
 }  // namespace sl::test
