@@ -6,6 +6,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "parallel_rows.h"
+
 namespace sl::pipeline {
 
 void transferIntensity(PointCloud& cloud, const CameraProjectorCalibration& own,
@@ -31,7 +33,7 @@ void transferIntensity(PointCloud& cloud, const CameraProjectorCalibration& own,
   const Eigen::Vector3d translation = own_to_other.translation();
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const int w = size.width, h = size.height;
-  cv::parallel_for_(cv::Range(0, cloud.height), [&](const cv::Range& rows) {
+  parallelRows(cloud.height, [&](const cv::Range& rows) {
     for (int r = rows.start; r < rows.end; ++r) {
       for (int c = 0; c < cloud.width; ++c) {
         pipeline::PointXYZI& p = cloud.points[std::size_t(r) * cloud.width + c];

@@ -10,6 +10,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "parallel_rows.h"
+
 namespace sl::pipeline {
 
 namespace {
@@ -110,7 +112,7 @@ struct MotionCompensator::Lens {
     }
     cv::Mat out(frame.size(), frame.type());
     const bool wide = frame.depth() == CV_16U;
-    cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& rows) {
+    parallelRows(height, [&](const cv::Range& rows) {
       std::vector<cv::Vec2f> row_displacement(static_cast<std::size_t>(grid_cols));
       for (int r = rows.start; r < rows.end; ++r) {
         const int i = std::min(r / kGridStep, grid_rows - 2);
