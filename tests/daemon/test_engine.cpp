@@ -35,12 +35,13 @@ namespace {
 using sl::drivers::ForwardingCamera;
 
 // `config` with the simulated camera at sl::test::scaledCameraFps (the
-// shipped rate outside sanitizer builds) and the grouping's image interval
-// to match.
+// shipped rate outside sanitizer builds), the grouping's image interval to
+// match and its wait for late frames (max_age) stretched by the same factor.
 sl::daemon::DaemonConfig atTestRate(sl::daemon::DaemonConfig config) {
   config.sim.camera_fps = sl::test::scaledCameraFps(config.sim.camera_fps);
   config.synchroniser.image_interval_ns =
       static_cast<sl::pipeline::TimestampNs>(std::llround(1e9 / config.sim.camera_fps));
+  config.synchroniser.max_age_ns *= sl::test::kTimeScale;
   return config;
 }
 

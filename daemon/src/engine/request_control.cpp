@@ -205,11 +205,11 @@ std::optional<std::uint64_t> RequestControl::countScan(std::uint64_t generation)
   if (generation != generation_.load() || state_ != ScanState::kScanning) return std::nullopt;
   ++scans_done_;
   // Software-triggered sets come as fast as the devices allow: the deadline
-  // follows progress (as long as a scan arrives every sequence_s + 2 s,
+  // follows progress (as long as a scan arrives every sequence_s + lateS(),
   // nothing is lost).
   if (trigger_ == TriggerMode::kSoftware && scans_requested_ > scans_done_)
     deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
-                                   (scans_requested_ - scans_done_) * sequence_s_ + 2.0));
+                                   (scans_requested_ - scans_done_) * sequence_s_ + lateS()));
   ++status_version_;
   return scans_done_;
 }
@@ -371,7 +371,7 @@ void RequestControl::beginLocked() {
                            config_.software_trigger.settle_s + config_.software_trigger.grab_timeout_s);
   deadline_ = count == 0 ? Clock::time_point::max()
                          : Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                              std::chrono::duration<double>(count * sequence_s_ + 2.0));
+                                              std::chrono::duration<double>(count * sequence_s_ + lateS()));
   state_ = ScanState::kScanning;
   scanning_since_ = Clock::now();
   degraded_reason_.clear();

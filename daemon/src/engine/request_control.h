@@ -121,6 +121,10 @@ class RequestControl {
   void launchLocked(const std::string& name, int frame_count, int count);
   void switchLocked();
   void finishLocked(const std::string& error);
+  // How late a finite request's last images may come before its sets count
+  // as lost: as long as the grouping waits for a sequence's frames
+  // (synchroniser.max_age_s, 2 s by default).
+  double lateS() const { return config_.synchroniser.max_age_ns * 1e-9; }
   void tellSchedule(ScheduleEvent event) { links_.schedule->push(std::move(event)); }
 
   const DaemonConfig& config_;
