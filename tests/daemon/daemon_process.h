@@ -46,10 +46,14 @@ inline std::int64_t nowNs() {
       .count();
 }
 
-// config/sim.yaml with dds.namespace set to `ns`, for further edits.
+// config/sim.yaml with dds.namespace set to `ns`, for further edits; the
+// simulated camera at scaledCameraFps (30 Hz outside sanitizer builds) and
+// the grouping's wait for late frames stretched by the same factor.
 inline YAML::Node simConfig(const std::string& ns) {
   YAML::Node root = YAML::LoadFile(sourcePath("config/sim.yaml"));
   root["dds"]["namespace"] = ns;
+  root["sim"]["camera_fps"] = scaledCameraFps(root["sim"]["camera_fps"].as<double>());
+  root["synchroniser"]["max_age_s"] = root["synchroniser"]["max_age_s"].as<double>() * kTimeScale;
   return root;
 }
 
