@@ -206,14 +206,19 @@ first() { awk -v o="$2" -v w="$warmup_ns" '$1 == "rx" { l = ($3 - $2 - o) / 1e6
 # --- the daemon ---
 daemon_pid=""
 ns=""
+# prefault_at FPS -> 1 or 0: runtime.prefault_memory for the daemon and
+# --prefault-clouds for its readers (README: recommended from ~15 scans/s),
+# on for the high-rate scenarios unless SL_BENCH_PREFAULT says 0 or 1 for all.
+prefault_at() {
+  local p=${SL_BENCH_PREFAULT:-auto}
+  [ "$p" = auto ] && p=$([ "$1" -ge 90 ] && echo 1 || echo 0)
+  echo "$p"
+}
 start_daemon() {  # FPS [extra sed expression]
   local fps=$1 extra=${2:-}
   ns="bench_$$_$RANDOM"
-  # runtime.prefault_memory (README: recommended from ~15 scans/s): on for
-  # the high-rate scenarios unless SL_BENCH_PREFAULT says 0 or 1 for all.
-  local prefault=${SL_BENCH_PREFAULT:-auto}
-  [ "$prefault" = auto ] && prefault=$([ "$fps" -ge 90 ] && echo 1 || echo 0)
-  prefault=$([ "$prefault" = 1 ] && echo true || echo false)
+  local prefault
+  prefault=$([ "$(prefault_at "$fps")" = 1 ] && echo true || echo false)
   sed -e "s/^  camera_fps: 30 /  camera_fps: $fps /" -e "s/^  namespace: sl$/  namespace: $ns/" \
       -e "s/^runtime:$/runtime:\n  prefault_memory: $prefault/" \
       ${extra:+-e "$extra"} "$src/config/sim.yaml" > "$work/sim.yaml"
@@ -253,8 +258,8 @@ scenario() {
   offset=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 5e9 / f }')
   local sub_pids=()
   # The subscribers prefault their heaps as the daemon does (same rule).
-  local prefault=${SL_BENCH_PREFAULT:-auto}
-  [ "$prefault" = auto ] && prefault=$([ "$fps" -ge 90 ] && echo 1 || echo 0)
+  local prefault
+  prefault=$(prefault_at "$fps")
   for i in $(seq 1 "$subs"); do
     timeout $((duration + 90)) "$bench" listen --topic "rt/$ns/points" --duration "$duration" \
       --timeout 30 --prefault-clouds $((prefault * 8)) > "$work/sub$i.log" 2> "$work/sub$i.err" &
