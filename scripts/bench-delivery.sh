@@ -6,6 +6,9 @@
 #
 #   bash scripts/bench-delivery.sh [BUILD_DIR]        (default: build; a Release build)
 #
+# SL_BENCH_READER_DEPTH (default 4, the daemon's writer depth) sets the
+# subscribers' keep-last history; SL_BENCH_QUEUE_DEPTH sets the daemon's
+# runtime.queue_depth (default: config/sim.yaml's 2).
 # SL_BENCH_KEEP_LOGS=DIR copies the run's scratch files (daemon, RouDi and
 # subscriber logs) to DIR at the end (a path outside /tmp: as root the run has
 # a private /tmp).
@@ -221,6 +224,7 @@ start_daemon() {  # FPS [extra sed expression]
   prefault=$([ "$(prefault_at "$fps")" = 1 ] && echo true || echo false)
   sed -e "s/^  camera_fps: 30 /  camera_fps: $fps /" -e "s/^  namespace: sl$/  namespace: $ns/" \
       -e "s/^runtime:$/runtime:\n  prefault_memory: $prefault/" \
+      ${SL_BENCH_QUEUE_DEPTH:+-e "s/^  queue_depth: 2$/  queue_depth: $SL_BENCH_QUEUE_DEPTH/"} \
       ${extra:+-e "$extra"} "$src/config/sim.yaml" > "$work/sim.yaml"
   grep -q "camera_fps: $fps " "$work/sim.yaml" && grep -q "namespace: $ns" "$work/sim.yaml" &&
     grep -q "prefault_memory: $prefault" "$work/sim.yaml" ||
@@ -262,7 +266,7 @@ scenario() {
   prefault=$(prefault_at "$fps")
   for i in $(seq 1 "$subs"); do
     timeout $((duration + 90)) "$bench" listen --topic "rt/$ns/points" --duration "$duration" \
-      --timeout 30 --prefault-clouds $((prefault * 8)) > "$work/sub$i.log" 2> "$work/sub$i.err" &
+      --timeout 30 --prefault-clouds $((prefault * 8)) --depth "${SL_BENCH_READER_DEPTH:-4}" > "$work/sub$i.log" 2> "$work/sub$i.err" &
     sub_pids+=($!)
     pids+=($!)
   done
@@ -350,6 +354,8 @@ for entry in "${configs[@]}"; do
     wait "$csub" || true
     line=$(grep '^sub: received' "$work/csub.log" || echo "sub: no result")
     echo "  ceiling/$cfg $([ "$rate" = 0 ] && echo "back to back" || echo "5 Hz"): $line"
+    # The writer's repair traffic (Cyclone's writer statistics).
+    grep '^pub: retransmitted' "$work/cpub.log" | sed "s|^pub: |  ceiling/$cfg writer: |" || true
     if [ "$rate" = 0 ]; then
       ceiling_rate[$cfg]=$(echo "$line" | sed -n 's/.* \([0-9.]*\) clouds\/s delivered.*/\1/p')
     else

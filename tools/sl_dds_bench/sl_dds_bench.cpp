@@ -45,6 +45,8 @@
 
 #include <sys/resource.h>
 
+#include <dds/ddsc/dds_statistics.h>
+
 #include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/dds.h"
 
@@ -192,6 +194,22 @@ int publish(const Args& a) {
       "%ld not sent (write blocked > 200 ms)\n",
       a.count, a.width, a.height, data.size() * 4 / 1e6, elapsed,
       elapsed > 0 ? a.count / elapsed : 0.0, not_sent);
+  // The repair traffic behind those figures: bytes the writer sent again
+  // for NACKs, and how often and how long it waited for acknowledgements.
+  if (dds_statistics* stats = dds_create_statistics(writer.handle())) {
+    dds_refresh_statistics(stats);
+    auto value = [stats](const char* name) -> std::uint64_t {
+      const dds_stat_keyvalue* kv = dds_lookup_statistic(stats, name);
+      if (!kv) return 0;
+      return kv->kind == DDS_STAT_KIND_UINT32 ? kv->u.u32 : kv->u.u64;
+    };
+    std::printf("pub: retransmitted %.1f MB (%.1f%% of the data), throttled %" PRIu64
+                " times for %.1f ms in all, %.1f ms retransmitting\n",
+                value("rexmit_bytes") / 1e6,
+                100.0 * value("rexmit_bytes") / (static_cast<double>(a.count) * data.size() * 4),
+                value("throttle_count"), value("time_throttle") / 1e6, value("time_rexmit") / 1e6);
+    dds_delete_statistics(stats);
+  }
   return 0;
 }
 
