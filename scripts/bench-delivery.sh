@@ -187,15 +187,17 @@ stats() {
       expected = int((s1 - s0) / p + 0.5) + 1
       span = (r1 - r0) / 1e9
       printf "clouds_per_s=%.2f lost=%d", (n > 1 && span > 0 ? (n - 1) / span : 0), expected - u }' "$file")
-  local lat
-  # Latencies of the clouds taken after the reader's warm-up (warmup_ns
-  # from its first take); the warm-up's own are in warmup() below.
-  lat=$(awk -v o="$offset" -v w="$warmup_ns" '$1 == "rx" { if (!(n++)) t0 = $3
-      if ($3 - t0 >= w) printf "%.3f\n", ($3 - $2 - o) / 1e6 }' "$file" | sort -g |
+  echo "$head $(latencies "$file" "$offset")"
+}
+# latencies FILE OFFSET_NS -> "p50_ms=.. p99_ms=.. max_ms=.." over the clouds
+# taken after the reader's warm-up (warmup_ns from its first take); the
+# warm-up's own are in first() below.
+latencies() {
+  awk -v o="$2" -v w="$warmup_ns" '$1 == "rx" { if (!(n++)) t0 = $3
+      if ($3 - t0 >= w) printf "%.3f\n", ($3 - $2 - o) / 1e6 }' "$1" | sort -g |
     awk '{ v[NR] = $1 } END {
       i50 = int(0.50 * (NR - 1) + 0.5) + 1; i99 = int(0.99 * (NR - 1) + 0.5) + 1
-      printf "p50_ms=%.1f p99_ms=%.1f max_ms=%.1f", v[i50], v[i99], v[NR] }')
-  echo "$head $lat"
+      printf "p50_ms=%.1f p99_ms=%.1f max_ms=%.1f", v[i50], v[i99], v[NR] }'
 }
 field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
 # first FILE OFFSET_NS -> "first_ms=<the first two clouds' latencies>
@@ -338,30 +340,40 @@ echo "bench-delivery: daemon scheduling: ${daemon_prefix[*]:-ordinary (SCHED_OTH
 echo "bench-delivery: allocator: $([ "${SL_DEFAULT_MALLOC:-0}" = 1 ] && echo "glibc's defaults (SL_DEFAULT_MALLOC=1)" || echo "large samples retained (sl::dds::retainLargeSampleMemory)")"
 
 # --- bare DDS ceiling: sl_dds_bench pub -> sub, no daemon ---
-declare -A ceiling_rate ceiling_p50
+# At 5 Hz: pub -> listen over the 5 Hz scenarios' window, latency = take -
+# write time (header.stamp), the same warm-up rule as the daemon's readers:
+# what the transport alone gives a subscriber, to hold the 5hz lines against.
+declare -A ceiling_rate ceiling_p50 ceiling_p99
 for entry in "${configs[@]}"; do
   wanted ceiling || break
   cfg=${entry%%:*}
   export CYCLONEDDS_URI=file://${entry#*:}
-  for rate in 5 0; do
-    count=$([ "$rate" = 0 ] && echo 120 || echo 50)
-    topic="rt/ceiling_$$_${cfg}_$rate/points"
-    timeout 90 "$bench" sub --topic "$topic" --count "$count" --timeout 60 > "$work/csub.log" 2>&1 &
-    csub=$!
-    pids+=("$csub")
-    sleep 1
-    timeout 90 "$bench" pub --topic "$topic" --count "$count" --rate "$rate" > "$work/cpub.log" 2>&1 || true
-    wait "$csub" || true
-    line=$(grep '^sub: received' "$work/csub.log" || echo "sub: no result")
-    echo "  ceiling/$cfg $([ "$rate" = 0 ] && echo "back to back" || echo "5 Hz"): $line"
-    # The writer's repair traffic (Cyclone's writer statistics).
-    grep '^pub: retransmitted' "$work/cpub.log" | sed "s|^pub: |  ceiling/$cfg writer: |" || true
-    if [ "$rate" = 0 ]; then
-      ceiling_rate[$cfg]=$(echo "$line" | sed -n 's/.* \([0-9.]*\) clouds\/s delivered.*/\1/p')
-    else
-      ceiling_p50[$cfg]=$(echo "$line" | sed -n 's/.*latency median \([0-9.]*\) ms.*/\1/p')
-    fi
-  done
+  topic="rt/ceiling_$$_${cfg}_listen/points"
+  timeout $((secs_5hz + 90)) "$bench" listen --topic "$topic" --duration "$((secs_5hz + 5))" --timeout 30 \
+    > "$work/clisten.log" 2>&1 &
+  clisten=$!
+  pids+=("$clisten")
+  sleep 2
+  timeout $((secs_5hz + 60)) "$bench" pub --topic "$topic" --count $((secs_5hz * 5)) --rate 5 > "$work/cpub.log" 2>&1 || true
+  wait "$clisten" || true
+  line=$(latencies "$work/clisten.log" 0)
+  echo "  ceiling/$cfg 5 Hz, $(grep -c '^rx ' "$work/clisten.log") of $((secs_5hz * 5)) clouds: $line $(first "$work/clisten.log" 0)"
+  grep '^pub: retransmitted' "$work/cpub.log" | sed "s|^pub: |  ceiling/$cfg writer: |" || true
+  ceiling_p50[$cfg]=$(field "$line" p50_ms)
+  ceiling_p99[$cfg]=$(field "$line" p99_ms)
+  # Back to back: sl_dds_bench pub -> sub, 120 clouds as fast as they go.
+  topic="rt/ceiling_$$_${cfg}_b2b/points"
+  timeout 90 "$bench" sub --topic "$topic" --count 120 --timeout 60 > "$work/csub.log" 2>&1 &
+  csub=$!
+  pids+=("$csub")
+  sleep 1
+  timeout 90 "$bench" pub --topic "$topic" --count 120 --rate 0 > "$work/cpub.log" 2>&1 || true
+  wait "$csub" || true
+  line=$(grep '^sub: received' "$work/csub.log" || echo "sub: no result")
+  echo "  ceiling/$cfg back to back: $line"
+  # The writer's repair traffic (Cyclone's writer statistics).
+  grep '^pub: retransmitted' "$work/cpub.log" | sed "s|^pub: |  ceiling/$cfg writer: |" || true
+  ceiling_rate[$cfg]=$(echo "$line" | sed -n 's/.* \([0-9.]*\) clouds\/s delivered.*/\1/p')
 done
 
 # --- the daemon in the loop ---
@@ -430,11 +442,18 @@ fi
 echo
 for entry in "${configs[@]}"; do
   cfg=${entry%%:*}
-  echo "bench-delivery: bare DDS ceiling ($cfg, sl_dds_bench, 25 MB clouds): ${ceiling_rate[$cfg]:-?} clouds/s back to back, median ${ceiling_p50[$cfg]:-?} ms at 5 Hz"
+  echo "bench-delivery: bare DDS ceiling ($cfg, sl_dds_bench, 25 MB clouds): ${ceiling_rate[$cfg]:-?} clouds/s back to back; at 5 Hz p50 ${ceiling_p50[$cfg]:-?} ms, p99 ${ceiling_p99[$cfg]:-?} ms"
   for r in "${results[@]}"; do
-    case "$r" in "delivery: $cfg max "*)
-      awk -v got="$(field "$r" clouds_per_s)" -v bare="${ceiling_rate[$cfg]:-0}" -v c="$cfg" \
-        'BEGIN { if (bare > 0) printf "bench-delivery: %s max / bare ceiling = %.2f\n", c, got / bare }' ;;
+    case "$r" in
+      "delivery: $cfg max "*)
+        awk -v got="$(field "$r" clouds_per_s)" -v bare="${ceiling_rate[$cfg]:-0}" -v c="$cfg" \
+          'BEGIN { if (bare > 0) printf "bench-delivery: %s max / bare ceiling = %.2f\n", c, got / bare }' ;;
+      "delivery: $cfg 5hz "*)
+        # What the daemon adds to the transport's own latency at 5 Hz (the
+        # bare figure is from the write, the daemon's from the last trigger).
+        awk -v p50="$(field "$r" p50_ms)" -v p99="$(field "$r" p99_ms)" -v b50="${ceiling_p50[$cfg]:-nan}" \
+          -v b99="${ceiling_p99[$cfg]:-nan}" -v c="$cfg" 'BEGIN { if (b50 != "nan" && b50 != "")
+            printf "bench-delivery: %s 5hz over the bare ceiling: p50 +%.1f ms, p99 +%.1f ms\n", c, p50 - b50, p99 - b99 }' ;;
     esac
   done
 done
