@@ -29,9 +29,12 @@ inline std::string sourcePath(const std::string& relative) {
 }
 
 // Points Cyclone DDS at the loopback-only configuration (call before any
-// participant exists; children inherit it).
+// participant exists; children inherit it), with the participants' lease
+// scaled in sanitizer builds (scaledDdsLeaseXml).
 inline void useLoopbackDds() {
-  setenv("CYCLONEDDS_URI", ("file://" + sourcePath("config/cyclonedds-loopback.xml")).c_str(), 1);
+  setenv("CYCLONEDDS_URI",
+         ("file://" + sourcePath("config/cyclonedds-loopback.xml") + scaledDdsLeaseXml()).c_str(),
+         1);
 }
 
 // A namespace no other test process uses.

@@ -52,11 +52,13 @@ constexpr std::uint32_t kPointStep = 16;  // x, y, z, intensity as float32
 
 // Must run before the first participant is created: Cyclone reads the
 // variable when it initialises the domain. SL_TEST_CYCLONEDDS_URI, if set,
-// replaces the loopback configuration (to measure another one).
+// replaces the loopback configuration (to measure another one). The lease is
+// scaled in sanitizer builds (scaledDdsLeaseXml).
 void useLoopbackConfig() {
   const char* other = std::getenv("SL_TEST_CYCLONEDDS_URI");
-  setenv("CYCLONEDDS_URI",
-         other != nullptr ? other : "file://" SL_SOURCE_DIR "/config/cyclonedds-loopback.xml", 1);
+  const std::string uri =
+      other != nullptr ? other : "file://" SL_SOURCE_DIR "/config/cyclonedds-loopback.xml";
+  setenv("CYCLONEDDS_URI", (uri + sl::test::scaledDdsLeaseXml()).c_str(), 1);
 }
 
 std::string uniqueTopic(const std::string& name) {
@@ -533,7 +535,9 @@ TEST_CASE("child: publish full-size clouds", "[.dds_child_publisher]") {
   Topic<Cloud> topic(participant, topic_name, sensor_msgs_msg_dds__PointCloud2__desc);
   // Keep-all so that every cloud arrives and the count is deterministic; the
   // writer blocks while the reader catches up.
-  Writer<Cloud> writer(participant, topic, Qos().reliable(DDS_SECS(10)).keepAll().xcdr1());
+  // The writer blocks at most 10 s (x10 in sanitizer builds, like the lease).
+  Writer<Cloud> writer(participant, topic,
+                       Qos().reliable(DDS_SECS(10) * sl::test::kTimeScale).keepAll().xcdr1());
   REQUIRE(writer.waitForReaders(1, DDS_SECS(20) * sl::test::kTimeScale));
   // Prepare the clouds first so that the reader measures transport only.
   std::vector<std::unique_ptr<CloudSample>> clouds;

@@ -35,13 +35,19 @@ sl_enter_netns() {
 
 # sl_init SOURCE_DIR BINARY_DIR: sets src, bin, work (a fresh scratch folder),
 # pids (processes killed on exit) and time_scale, installs the cleanup trap
-# and points Cyclone at the loopback config unless CYCLONEDDS_URI is set.
+# and points Cyclone at the loopback config unless CYCLONEDDS_URI is set (in
+# a sanitizer build with the participants' lease x time_scale).
 sl_init() {
   src=$1
   bin=$2
   time_scale=1
   if grep -Eq '^SL_SANITIZE:STRING=.+' "$bin/CMakeCache.txt" 2> /dev/null; then time_scale=10; fi
   export CYCLONEDDS_URI=${CYCLONEDDS_URI:-file://$src/config/cyclonedds-loopback.xml}
+  # The participants' lease (Cyclone's 10 s) x time_scale, as the C++ tests
+  # do (scaledDdsLeaseXml in tests/support/time_scale.h).
+  if [ "$time_scale" -ne 1 ]; then
+    CYCLONEDDS_URI="$CYCLONEDDS_URI,<Discovery><LeaseDuration>$((10 * time_scale))s</LeaseDuration></Discovery>"
+  fi
   work=$(mktemp -d)
   pids=()
   daemon_pid=""

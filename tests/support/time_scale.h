@@ -6,6 +6,7 @@
 #pragma once
 
 #include <chrono>
+#include <string>
 
 namespace sl::test {
 
@@ -26,5 +27,19 @@ constexpr auto scaledBound(std::chrono::duration<Rep, Period> d) {
 // intervals at 30 Hz: the simulator would lose most sequences for want of
 // CPU, and the tests would measure the renderer, not the code under test.
 constexpr double scaledCameraFps(double fps) { return fps / kTimeScale; }
+
+// Appended to CYCLONEDDS_URI (after a comma) by the tests that use DDS: the
+// participants' lease, Cyclone's 10 s by default, x kTimeScale. A process
+// that does not run for longer than its lease (starved at nice 19 on a
+// loaded machine, or stopped) is taken for gone by its peers, which delete
+// its writers and readers and match them again when it resumes; a volatile
+// reliable reader then misses what was written in between, and the writer
+// counts it as acknowledged. In a sanitizer build that is the machine, not
+// the code under test. Empty outside sanitizer builds.
+inline std::string scaledDdsLeaseXml() {
+  if (kTimeScale == 1) return "";
+  return ",<Discovery><LeaseDuration>" + std::to_string(10 * kTimeScale) +
+         "s</LeaseDuration></Discovery>";
+}
 
 }  // namespace sl::test
