@@ -42,7 +42,18 @@ echo "ok: no daemon -> $msg"
 "$bin/daemon/sl_sensord" --config "$work/sim.yaml" > "$work/early.log" 2>&1 &
 early=$!
 sl_track "$early"
-sleep 1  # past exec and loading (slow under load), within the 1 s probe or opening the devices
+# The signal goes once the daemon's main thread blocks SIGTERM (SigBlk in
+# /proc/PID/status, bit 15): from then on it takes the signals itself, and the
+# look for another daemon alone lasts 1 s. (A fixed 1 s wait for exec and
+# loading was too short under ASan on a loaded machine: the daemon had not
+# reached main, and SIGTERM's default action ended it without a word.)
+blocked=0
+for _ in $(seq $(( 150 * time_scale ))); do
+  sigblk=$(awk '/^SigBlk:/ { print $2 }' "/proc/$early/status" 2>/dev/null || true)
+  if [ -n "$sigblk" ] && (( 0x$sigblk & 0x4000 )); then blocked=1; break; fi
+  sleep 0.1
+done
+[ "$blocked" = 1 ] || fail "the daemon did not block SIGTERM within $(( 15 * time_scale )) s of its start"
 kill -TERM "$early"
 t0=$(date +%s%N)
 wait "$early" || true
