@@ -78,11 +78,23 @@ fail() {
 
 # sl_sim_config NAMESPACE OUT [SED_EXPRESSION...]: config/sim.yaml with
 # dds.namespace set (and the further sed expressions applied) written to OUT;
-# fails unless the namespace took.
+# fails unless the namespace took. In a sanitizer build (time_scale 10) the
+# simulated camera runs at camera_fps / time_scale and synchroniser.max_age_s
+# is x time_scale, as simConfig() in tests/daemon/daemon_process.h does: at
+# 30 Hz the renderer falls behind there and whole sequences arrive too late
+# to be grouped (counted as incomplete sets), which measures the machine.
 sl_sim_config() {
   local ns=$1 out=$2
   shift 2
   local args=(-e "s/^  namespace: sl$/  namespace: $ns/")
+  if [ "${time_scale:-1}" -ne 1 ]; then
+    local fps age
+    fps=$(sed -n 's/^  camera_fps: *\([0-9.]*\).*/\1/p' "$src/config/sim.yaml")
+    age=$(sed -n 's/^  max_age_s: *\([0-9.]*\).*/\1/p' "$src/config/sim.yaml")
+    fps=$(awk -v v="$fps" -v s="$time_scale" 'BEGIN { print v / s }')
+    age=$(awk -v v="$age" -v s="$time_scale" 'BEGIN { print v * s }')
+    args+=(-e "s/^\(  camera_fps: *\)[0-9.]*/\1$fps/" -e "s/^\(  max_age_s: *\)[0-9.]*/\1$age/")
+  fi
   local e
   for e in "$@"; do args+=(-e "$e"); done
   sed "${args[@]}" "$src/config/sim.yaml" > "$out"
