@@ -203,6 +203,17 @@ long minorFaults() {
   return usage.ru_minflt;
 }
 
+// Writes one byte to each 4 KiB page of [p, p + bytes); returns the minor
+// page faults that took. Not instrumented by ThreadSanitizer: each write
+// would also touch TSan's shadow of the page, whose first touch faults as
+// well, and those faults are TSan's, not the mapping's (under TSan the
+// populated mapping counted 8,191 faults and the fresh one 16,399).
+__attribute__((no_sanitize_thread)) long faultsWritingPages(unsigned char* p, std::size_t bytes) {
+  const long before = minorFaults();
+  for (std::size_t i = 0; i < bytes; i += 4096) p[i] = 1;
+  return minorFaults() - before;
+}
+
 // A writer's keep-last history of 25 MB clouds as Cyclone keeps it: the
 // writing thread allocates each cloud's serialized copy, and another thread
 // (the one processing acknowledgements) frees the oldest when a fifth
@@ -254,11 +265,7 @@ TEST_CASE("populateSharedMemoryMappings fills in the page tables of /dev/shm map
   const int fd = shm_open(name.c_str(), O_CREAT | O_RDWR | O_EXCL, 0600);
   REQUIRE(fd >= 0);
   REQUIRE(posix_fallocate(fd, 0, kBytes) == 0);
-  auto touchAll = [&](unsigned char* p) {
-    const long before = minorFaults();
-    for (std::size_t i = 0; i < kBytes; i += 4096) p[i] = 1;
-    return minorFaults() - before;
-  };
+  auto touchAll = [&](unsigned char* p) { return faultsWritingPages(p, kBytes); };
   auto* fresh = static_cast<unsigned char*>(mmap(nullptr, kBytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0));
   REQUIRE(fresh != MAP_FAILED);
   const long fresh_faults = touchAll(fresh);
