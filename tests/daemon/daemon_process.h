@@ -57,6 +57,9 @@ inline YAML::Node simConfig(const std::string& ns) {
   root["dds"]["namespace"] = ns;
   root["sim"]["camera_fps"] = scaledCameraFps(root["sim"]["camera_fps"].as<double>());
   root["synchroniser"]["max_age_s"] = root["synchroniser"]["max_age_s"].as<double>() * kTimeScale;
+  // The health check's "no scan published" bound (stall_timeout_s plus a
+  // sequence), likewise: under TSan a 3+3 set takes longer than 2 s to process.
+  root["runtime"]["stall_timeout_s"] = 2.0 * kTimeScale;
   return root;
 }
 
