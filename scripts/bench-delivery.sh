@@ -229,6 +229,7 @@ start_daemon() {  # FPS [extra sed expression]
       ${SL_BENCH_QUEUE_DEPTH:+-e "s/^  queue_depth: 2$/  queue_depth: $SL_BENCH_QUEUE_DEPTH/"} \
       ${extra:+-e "$extra"} "$src/config/sim.yaml" > "$work/sim.yaml"
   grep -q "camera_fps: $fps " "$work/sim.yaml" && grep -q "namespace: $ns" "$work/sim.yaml" &&
+    { [ -z "${SL_BENCH_QUEUE_DEPTH:-}" ] || grep -q "^  queue_depth: $SL_BENCH_QUEUE_DEPTH$" "$work/sim.yaml"; } &&
     grep -q "prefault_memory: $prefault" "$work/sim.yaml" ||
     { echo "bench-delivery: could not edit config/sim.yaml" >&2; exit 2; }
   echo "  daemon: camera_fps $fps, runtime.prefault_memory $prefault"

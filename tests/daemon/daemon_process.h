@@ -18,6 +18,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "sl/daemon/config.h"
 #include "support/time_scale.h"
 
 extern char** environ;
@@ -59,7 +60,7 @@ inline YAML::Node simConfig(const std::string& ns) {
   root["synchroniser"]["max_age_s"] = root["synchroniser"]["max_age_s"].as<double>() * kTimeScale;
   // The health check's "no scan published" bound (stall_timeout_s plus a
   // sequence), likewise: under TSan a 3+3 set takes longer than 2 s to process.
-  root["runtime"]["stall_timeout_s"] = 2.0 * kTimeScale;
+  root["runtime"]["stall_timeout_s"] = sl::daemon::RuntimeConfig{}.stall_timeout_s * kTimeScale;
   return root;
 }
 
