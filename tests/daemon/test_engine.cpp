@@ -429,11 +429,20 @@ TEST_CASE("a source that drops and delays frames costs exactly the sequences it 
   // the time of the status snapshot (800 ms in all at 30 Hz).
   const sl::pipeline::TimestampNs counted_before =
       snapshot_ns - config.synchroniser.max_age_ns - 6 * dt - 600'000'000;
-  std::size_t expected = 0, spoiled_old = 0, spoiled_old_frames = 0, got = 0;
+  // Whether the simulator delivered the frame at all (passed on or dropped).
+  auto renderedAt = [&](sl::pipeline::TimestampNs t) {
+    const auto it = passed.lower_bound(t - dt / 10);
+    return it != passed.end() && it->first <= t + dt / 10;
+  };
+  std::size_t expected = 0, spoiled_old = 0, spoiled_old_frames = 0, got = 0, rendered = 0;
   for (std::size_t k = 0; k < kSequences; ++k) {
-    int passed_frames = 0;
-    for (int i = 0; i < 6; ++i) passed_frames += passedAt(triggers[k] + i * dt);
+    int passed_frames = 0, rendered_frames = 0;
+    for (int i = 0; i < 6; ++i) {
+      passed_frames += passedAt(triggers[k] + i * dt);
+      rendered_frames += renderedAt(triggers[k] + i * dt);
+    }
     const bool complete = passed_frames == 6;
+    rendered += rendered_frames == 6;
     std::lock_guard lock(mutex);
     const bool published = delivered.count(triggers[k]) > 0;
     INFO("sequence " << k << " complete " << complete);
@@ -449,9 +458,15 @@ TEST_CASE("a source that drops and delays frames costs exactly the sequences it 
   CHECK(got + status.sets_overflow >= expected);
   CHECK(got <= expected);
   CHECK(status.frames_overflow == 0);
-  // 3 of 5 sequences survive the drop rule (fewer if the simulator dropped too).
+  // 3 of 5 sequences survive the drop rule. The simulator drops whole
+  // sequences when it falls behind, and frame ids count those too, so the
+  // rule spoils at most 2 in 5 consecutive sequences (+1 at the ends) of
+  // those it rendered whole. Under TSan on a loaded machine the simulator
+  // loses more of them; the case asks for enough to mean something.
+  INFO("rendered whole " << rendered << ", complete " << expected);
   CHECK(expected <= kSequences * 3 / 5 + 1);
-  CHECK(expected >= kSequences / 2 - 2);
+  CHECK(rendered >= (sl::test::kTimeScale == 1 ? kSequences / 2 : kSequences / 4));
+  CHECK(expected + kSequences * 2 / 5 + 1 >= rendered);
   // The spoiled ones are counted as incomplete, their frames as unmatched.
   CHECK(status.sets_incomplete >= spoiled_old);
   CHECK(status.frames_unmatched >= spoiled_old_frames);
