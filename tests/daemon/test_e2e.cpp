@@ -450,9 +450,13 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   // pattern: its sample (stamped with its first trigger) is less than one
   // sequence period (frame count x image interval) older than the request. Frames or sets dropped by a
   // full queue (a loaded machine) would excuse a miss, so the checks hold
-  // when none were.
+  // when none were. In a sanitizer build a frame that came after its set was
+  // given up (unmatched) excuses it too: under TSan on a loaded machine the
+  // simulated camera falls behind by seconds. Not in a release build, where
+  // an unmatched frame at a switch is what this case is looking for.
   const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(config_path);
-  const bool nothing_lost = status->frames_overflow == 0 && status->sets_overflow == 0;
+  const bool nothing_lost = status->frames_overflow == 0 && status->sets_overflow == 0 &&
+                            (sl::test::kTimeScale == 1 || status->frames_unmatched == 0);
   for (const auto& [requested_ns, index] : switches) {
     REQUIRE(index >= 1);
     std::size_t last = index - 1;  // the last sample of the old pattern
