@@ -11,7 +11,10 @@
 // waits at most --timeout S (default 60) for the first cloud, then takes
 // clouds for --duration S (default 30), reader reliable (or best effort)
 // keep-last --depth (default 4), and prints one line per cloud,
-// "rx <header.stamp ns> <take time ns>" (CLOCK_REALTIME after the take), then
+// "rx <stamp> <take> <written> <faults> <woken>": header.stamp; CLOCK_REALTIME
+// after the take; the source timestamp (the writer's clock at dds_write);
+// the minor page faults of the take that returned the cloud; CLOCK_REALTIME
+// before that take (after the wait-set woke), all in ns, then
 // "listen: done <clouds>". Exits 1 if no cloud came. --prefault-clouds N
 // first touches the heap memory of N full-size (1440 x 1080) clouds, so that
 // the first samples taken do not page-fault (sl::dds::prefaultHeap; default
@@ -290,7 +293,9 @@ int listen(const Args& a) {
     qos.reliable();
   qos.keepLast(a.depth);
   dds::Reader<Cloud> reader(participant, topic, qos);
-  sl::dds::populateSharedMemoryMappings();  // as the daemon does (no-op without shared memory)
+  // As the daemon does (no-op without shared memory).
+  if (const std::size_t shm = sl::dds::populateSharedMemoryMappings())
+    std::fprintf(stderr, "listen: page tables of %zu MiB of shared memory filled in\n", shm >> 20);
   // Samples are deserialized into memory of the thread that takes them.
   sl::dds::prefaultHeap(std::size_t{1440} * 1080 * 16 + 4096, static_cast<std::size_t>(a.prefault_clouds));
   dds::ReadCondition has_data(reader);
@@ -301,27 +306,41 @@ int listen(const Args& a) {
       Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(a.timeout_s));
   Clock::time_point end = Clock::time_point::max();
   long received = 0;
-  std::vector<std::pair<std::int64_t, std::int64_t>> rx;  // stamp, take time
+  // Per cloud: stamp, take time, the writer's source timestamp (when the
+  // daemon called dds_write) and the minor page faults of its take.
+  struct Rx {
+    std::int64_t stamp, take, written, before;
+    long faults;
+  };
+  std::vector<Rx> rx;
   rx.reserve(4096);
+  auto minorFaults = [] {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return usage.ru_minflt;
+  };
   while (Clock::now() < (received == 0 ? give_up : end)) {
     if (!waitset.wait(DDS_MSECS(100))) continue;
     for (;;) {
+      const long faults_before = minorFaults();
+      const std::int64_t before = realtimeNs();
       dds::Loan<Cloud> loan = reader.take(8);
       if (loan.empty()) break;
       const std::int64_t now = realtimeNs();
+      const long faults = minorFaults() - faults_before;
       for (std::size_t i = 0; i < loan.size(); ++i) {
         if (!loan.isValid(i)) continue;
         const Cloud& c = loan[i];
-        rx.emplace_back(static_cast<std::int64_t>(c.header.stamp.sec) * 1000000000 +
-                            c.header.stamp.nanosec,
-                        now);
+        rx.push_back({static_cast<std::int64_t>(c.header.stamp.sec) * 1000000000 + c.header.stamp.nanosec,
+                      now, loan.info(i).source_timestamp, before, faults});
         if (received++ == 0)
           end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                    std::chrono::duration<double>(a.duration_s));
       }
     }
   }
-  for (const auto& [stamp, take] : rx) std::printf("rx %" PRId64 " %" PRId64 "\n", stamp, take);
+  for (const Rx& r : rx)
+    std::printf("rx %" PRId64 " %" PRId64 " %" PRId64 " %ld %" PRId64 "\n", r.stamp, r.take, r.written, r.faults, r.before);
   // Page faults are what a reader's fresh 25 MB buffers cost (README, DDS
   // deployment): printed so that the benchmark can report them per cloud.
   rusage usage{};

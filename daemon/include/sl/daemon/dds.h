@@ -73,15 +73,21 @@ bool retainLargeSampleMemory();
 // free memory back to the host a first touch costs ~5 ms per MB here.
 void prefaultHeap(std::size_t block_bytes, std::size_t count);
 
-// Fills in the page tables of the process's shared-memory mappings
-// (/dev/shm: iceoryx's segments when the Cyclone DDS configuration enables
-// shared memory), writable where the mapping is, without touching their
-// contents (madvise MADV_POPULATE_WRITE / _READ, Linux >= 5.14). Without it
-// each page of a 32 MiB chunk faults when the process first writes or reads
-// it: ~140 ms per chunk on this project's VM, for each of the first ~20
-// clouds after START, in the writer and in every local reader. Call after
-// the participant's readers and writers exist (the segments are mapped by
-// then). Returns the bytes populated: 0 without shared memory.
+// Makes the process's shared-memory mappings (/dev/shm: iceoryx's segments
+// when the Cyclone DDS configuration enables shared memory) cheap to use:
+// fills in their page tables, writable where the mapping is (madvise
+// MADV_POPULATE_WRITE / _READ, Linux >= 5.14), then reads one byte of every
+// page. Contents are not changed. Both steps are needed on this project's
+// VM: without the first, each page faults at its first use (~140 ms per
+// 32 MiB chunk); after it, the first access of each page by each process
+// still costs the hypervisor ~6 us (shadow page tables filled in on
+// access, invisible to the guest's fault counters): ~40 ms per 25 MB cloud
+// written into, or taken from, a chunk this process had not used. Chunks
+// come into use long after START (when a reader stops taking and holds
+// some), so a local reader's clouds were 70-100 ms late then. The read pass
+// costs ~1.4 ms per MB once (~1.2 s for the shipped 885 MB of segments).
+// Call after the participant's readers and writers exist (the segments are
+// mapped by then). Returns the bytes populated: 0 without shared memory.
 std::size_t populateSharedMemoryMappings();
 
 // Owning, copyable QoS policy set. An empty Qos leaves every policy at
