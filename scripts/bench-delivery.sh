@@ -199,6 +199,21 @@ latencies() {
       i50 = int(0.50 * (NR - 1) + 0.5) + 1; i99 = int(0.99 * (NR - 1) + 0.5) + 1
       printf "p50_ms=%.1f p99_ms=%.1f max_ms=%.1f", v[i50], v[i99], v[NR] }'
 }
+# split FILE OFFSET_NS -> where the latency went, over the same clouds as
+# latencies(): "trigger->write p50/p99" up to the daemon's dds_write (the
+# sample's source timestamp: wait + processing in the daemon) and
+# "write->take p50/p99" from there to the reader holding it (serialization,
+# transport, the reader's wake-up and deserialization).
+split() {
+  local col
+  for col in 1 2; do
+    awk -v o="$2" -v w="$warmup_ns" -v c="$col" '$1 == "rx" && NF >= 4 { if (!(n++)) t0 = $3
+        if ($3 - t0 >= w) printf "%.3f\n", (c == 1 ? ($4 - $2 - o) : ($3 - $4)) / 1e6 }' "$1" | sort -g |
+      awk -v c="$col" '{ v[NR] = $1 } END { if (!NR) exit
+        i50 = int(0.50 * (NR - 1) + 0.5) + 1; i99 = int(0.99 * (NR - 1) + 0.5) + 1
+        printf "%s p50 %.1f p99 %.1f ms%s", (c == 1 ? "trigger->write" : "write->take"), v[i50], v[i99], (c == 1 ? ", " : "") }'
+  done
+}
 field() { echo "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
 # first FILE OFFSET_NS -> "first_ms=<the first two clouds' latencies>
 # warmup_clouds=<n> warmup_max_ms=<the worst latency within the warm-up>"
@@ -307,6 +322,7 @@ scenario() {
   for f in "${measured[@]}"; do
     line=$(stats "$f" "$period" "$offset")
     echo "  $name/$cfg $(basename "$f" .log): $line $(first "$f" "$offset")"
+    echo "  $name/$cfg $(basename "$f" .log) split: $(split "$f" "$offset")"
     lines+=("$line")
   done
   local worst
