@@ -322,7 +322,9 @@ scenario() {
   for f in "${measured[@]}"; do
     line=$(stats "$f" "$period" "$offset")
     echo "  $name/$cfg $(basename "$f" .log): $line $(first "$f" "$offset")"
-    echo "  $name/$cfg $(basename "$f" .log) split: $(split "$f" "$offset")"
+    local where
+    where=$(split "$f" "$offset")
+    [ -z "$where" ] || echo "  $name/$cfg $(basename "$f" .log) split: $where"
     lines+=("$line")
   done
   local worst
