@@ -467,7 +467,10 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
                                    config.synchroniser.image_interval_ns;
     INFO("switch requested " << (requested_ns - last_old) * 1e-6
                              << " ms after the last old-pattern sequence began");
-    if (nothing_lost) CHECK(requested_ns - last_old < period_ns);
+    // In a sanitizer build the simulated camera can skip a whole sequence
+    // when rendering falls behind (its own drop, not in the daemon's
+    // counters), so the last old one may be one period earlier.
+    if (nothing_lost) CHECK(requested_ns - last_old < period_ns * (kTimeScale == 1 ? 1 : 2));
   }
   INFO("frames dropped " << status->frames_overflow << " (queue), " << status->frames_unmatched
                           << " (unmatched); sets dropped " << status->sets_overflow << " (queue)");
