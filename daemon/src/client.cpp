@@ -75,7 +75,9 @@ struct SensorClient::Impl {
         reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
         status_topic(participant, names.status, sl_msgs_msg_Status_desc),
         request_writer(participant, request_topic, dds::Qos().reliable().keepLast(16).xcdr1()),
-        reply_reader(participant, reply_topic, dds::Qos().reliable().keepLast(64)),
+        // Transient-local: gets a reply the daemon wrote before its writer
+        // had matched this reader (the history's other replies are ignored).
+        reply_reader(participant, reply_topic, dds::Qos().reliable().transientLocal().keepLast(64)),
         status_reader(participant, status_topic,
                       dds::Qos().reliable().transientLocal().keepLast(1)) {
     if (options.subscribe_points) {

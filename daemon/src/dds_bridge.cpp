@@ -88,7 +88,12 @@ struct DdsBridge::Impl {
         // unread requests without a trace.
         request_reader(participant, request_topic,
                        dds::Qos().reliable().keepAll().resourceLimits(256, -1, -1)),
-        reply_writer(participant, reply_topic, dds::Qos().reliable().keepLast(64).xcdr1()),
+        // Replies: transient-local, so that a reply written before this
+        // writer has matched the client's reader (discovery of the client's
+        // reader can lag its request, most under load) is delivered when it
+        // matches instead of being lost.
+        reply_writer(participant, reply_topic,
+                     dds::Qos().reliable().transientLocal().keepLast(64).xcdr1()),
         depth_writer(participant, depth_topic, writerQos(config.images_qos)),
         shading_writer(participant, shading_topic, writerQos(config.images_qos)),
         info_writer(participant, info_topic, writerQos(config.images_qos)),

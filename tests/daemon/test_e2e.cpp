@@ -49,6 +49,7 @@
 #include "sl/daemon/client.h"
 #include "sl/daemon/dds.h"
 #include "sl_msgs/msg/CommandReply.h"
+#include "sl_msgs/msg/CommandRequest.h"
 #include "sl_msgs/msg/ImageSet.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
 #include "sl/pipeline/codec.h"
@@ -304,6 +305,52 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
       INFO("client " << key.first << " request " << key.second);
       CHECK(count == 1);
     }
+  }
+
+  SECTION("a reply written before the client's reader was matched still reaches it") {
+    // A request from a participant with no reply reader at all: the daemon
+    // answers it while no reader of the reply topic is matched (what happens
+    // to a client whose reader the daemon discovers after its request).
+    sl::dds::Participant participant(0);
+    sl::dds::Topic<sl_msgs_msg_CommandRequest> request_topic(
+        participant, "rq/" + ns + "/commandRequest", sl_msgs_msg_CommandRequest_desc);
+    sl::dds::Writer<sl_msgs_msg_CommandRequest> writer(
+        participant, request_topic, sl::dds::Qos().reliable().keepLast(16).xcdr1());
+    REQUIRE(writer.waitForReaders(1, DDS_SECS(10) * kTimeScale));
+    const auto before = client.status(scaledBound(5s));
+    REQUIRE(before);
+    std::string client_id = "late_reader", empty;
+    sl_msgs_msg_CommandRequest request{};
+    request.client_id = client_id.data();
+    request.request_id = 7;
+    request.command = sl_msgs_msg_COMMAND_LIST_PATTERNS;
+    request.pattern = empty.data();
+    request.recording = empty.data();
+    REQUIRE(writer.write(request));
+    std::optional<sl::daemon::StatusInfo> s;
+    for (int i = 0; i < 50 * kTimeScale && (!s || s->requests_answered == before->requests_answered);
+         ++i) {
+      std::this_thread::sleep_for(100ms);
+      s = client.status(scaledBound(1s));
+    }
+    REQUIRE(s);
+    REQUIRE(s->requests_answered == before->requests_answered + 1);
+    // Only now a reader of the replies, as a client's: it gets that reply.
+    sl::dds::Topic<sl_msgs_msg_CommandReply> reply_topic(
+        participant, "rr/" + ns + "/commandReply", sl_msgs_msg_CommandReply_desc);
+    sl::dds::Reader<sl_msgs_msg_CommandReply> replies(
+        participant, reply_topic, sl::dds::Qos().reliable().transientLocal().keepLast(64));
+    REQUIRE(replies.waitForWriters(1, DDS_SECS(10) * kTimeScale));
+    bool found = false;
+    const auto deadline = std::chrono::steady_clock::now() + scaledBound(5s);
+    while (!found && std::chrono::steady_clock::now() < deadline) {
+      auto loan = replies.take(64);
+      for (std::size_t i = 0; i < loan.size(); ++i)
+        found = found || (loan.isValid(i) && loan[i].client_id == client_id &&
+                          loan[i].request_id == 7 && loan[i].accepted);
+      if (loan.empty()) std::this_thread::sleep_for(20ms);
+    }
+    CHECK(found);
   }
 
   // SIGTERM: a clean exit within 2 s.
