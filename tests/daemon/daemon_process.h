@@ -18,6 +18,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "sl/daemon/client.h"
 #include "sl/daemon/config.h"
 #include "support/time_scale.h"
 
@@ -129,5 +130,20 @@ class DaemonProcess : public ChildProcess {
   explicit DaemonProcess(const std::string& config_path)
       : ChildProcess({std::string(SL_BINARY_DIR) + "/daemon/sl_sensord", "--config", config_path}) {}
 };
+
+// The first status satisfying `done`, polling for at most `timeout` (the
+// last one read if none did).
+template <typename Done>
+std::optional<sl::daemon::StatusInfo> statusWhen(sl::daemon::SensorClient& client, Done done,
+                                                 std::chrono::milliseconds timeout) {
+  std::optional<sl::daemon::StatusInfo> s;
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    s = client.status(std::chrono::seconds(1));
+    if (s && done(*s)) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return s;
+}
 
 }  // namespace sl::test

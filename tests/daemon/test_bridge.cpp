@@ -64,20 +64,6 @@ std::unique_ptr<sl::daemon::SensorClient> connectTo(const std::string& ns) {
   return client;
 }
 
-// The first status satisfying `done`, polling for at most `timeout`.
-template <typename Done>
-std::optional<sl::daemon::StatusInfo> statusWhen(sl::daemon::SensorClient& client, Done done,
-                                                 std::chrono::milliseconds timeout) {
-  std::optional<sl::daemon::StatusInfo> s;
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    s = client.status(1s);
-    if (s && done(*s)) break;
-    std::this_thread::sleep_for(100ms);
-  }
-  return s;
-}
-
 }  // namespace
 
 // Cyclone has one log sink per process; each bridge counts the samples of
@@ -106,9 +92,9 @@ TEST_CASE("several bridges in one process each count their own malformed request
   write(ns_a, 1);
   const auto client_a = connectTo(ns_a);
   const auto client_b = connectTo(ns_b);
-  const auto sa = statusWhen(
+  const auto sa = sl::test::statusWhen(
       *client_a, [](const auto& s) { return s.requests_malformed >= 4; }, sl::test::scaledBound(5s));
-  const auto sb = statusWhen(
+  const auto sb = sl::test::statusWhen(
       *client_b, [](const auto& s) { return s.requests_malformed >= 5; }, sl::test::scaledBound(5s));
   REQUIRE(sa);
   REQUIRE(sb);
@@ -148,7 +134,7 @@ TEST_CASE("requests refused by the full request reader are counted") {
   CHECK(written == 256);  // the reader's limit; the rest timed out at the writer
   daemon.serve();
   const auto client = connectTo(ns);
-  const auto s = statusWhen(
+  const auto s = sl::test::statusWhen(
       *client, [](const auto& s) { return s.requests_received >= 256; }, sl::test::scaledBound(10s));
   REQUIRE(s);
   CHECK(s->requests_received == 256);
@@ -208,7 +194,7 @@ TEST_CASE("a flooding client neither starves another client nor loses requests u
   CHECK(flood_outlasted);
   CHECK(honest_answered == honest_sent);
 
-  const auto s = statusWhen(
+  const auto s = sl::test::statusWhen(
       *honest,
       [&](const auto& s) {
         return s.requests_answered + s.requests_rate_limited + s.replies_timed_out ==

@@ -327,12 +327,9 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     request.pattern = empty.data();
     request.recording = empty.data();
     REQUIRE(writer.write(request));
-    std::optional<sl::daemon::StatusInfo> s;
-    for (int i = 0; i < 50 * kTimeScale && (!s || s->requests_answered == before->requests_answered);
-         ++i) {
-      std::this_thread::sleep_for(100ms);
-      s = client.status(scaledBound(1s));
-    }
+    const auto s = sl::test::statusWhen(
+        client, [&](const auto& s) { return s.requests_answered != before->requests_answered; },
+        scaledBound(5s));
     REQUIRE(s);
     REQUIRE(s->requests_answered == before->requests_answered + 1);
     // Only now a reader of the replies, as a client's: it gets that reply.
