@@ -14,6 +14,7 @@
 #include <iterator>
 
 #include "common/cdr.h"
+#include "common/point_cloud2_cdr.h"
 #include "common/mcap_writer.h"
 #include "common/ros2_schemas.h"
 #include "preview.h"
@@ -123,6 +124,42 @@ TEST_CASE("decimateCloud keeps every step-th point of each row and column") {
   broken.resize(broken.size() - 40);
   CHECK_THROWS_AS(sl::view::decimateCloud(std::string_view(reinterpret_cast<const char*>(broken.data()), broken.size()), 4),
                   CdrError);
+}
+
+TEST_CASE("parsePointCloud2 reads a cloud in place; a short or absurd one is an error") {
+  const auto in = cloud(10, 7);
+  const sl::tools::PointCloud2View v = sl::tools::parsePointCloud2(in.data(), in.size(), "rt/x/points sample");
+  CHECK(v.stampNs() == 12 * 1000000000LL + 34);
+  CHECK(v.frame_id == "frame");
+  CHECK(v.height == 7);
+  CHECK(v.width == 10);
+  REQUIRE(v.fields.size() == 4);
+  CHECK(v.fields[3].name == "intensity");
+  CHECK(v.fields[3].offset == 12);
+  CHECK(v.fields[3].datatype == 7);
+  CHECK(v.fields[3].count == 1);
+  CHECK_FALSE(v.is_bigendian);
+  CHECK(v.point_step == 16);
+  CHECK(v.row_step == 160);
+  CHECK(v.is_dense);
+  // The data is a view into the sample, not a copy.
+  REQUIRE(v.data.size() == 16 * 70);
+  CHECK(reinterpret_cast<const std::uint8_t*>(v.data.data()) > in.data());
+  CHECK(reinterpret_cast<const std::uint8_t*>(v.data.data()) + v.data.size() < in.data() + in.size());
+  float p[4];
+  std::memcpy(p, v.data.data() + 16 * (3 * 10 + 2), 16);
+  CHECK(p[2] == 3002.f);
+
+  auto truncated = in;
+  truncated.resize(truncated.size() - 40);
+  CHECK_THROWS_WITH(sl::tools::parsePointCloud2(truncated.data(), truncated.size(), "rt/x/points sample"),
+                    Catch::Contains("rt/x/points sample"));
+  // A field count the sample cannot hold is refused before anything is allocated.
+  auto absurd = in;
+  const std::uint32_t huge = 0x40000000;
+  const std::size_t count_at = 4 + 8 + 4 + 6 + 2 + 8;  // after stamp, frame_id "frame", pad, height, width
+  std::memcpy(absurd.data() + count_at, &huge, 4);
+  CHECK_THROWS_AS(sl::tools::parsePointCloud2(absurd.data(), absurd.size()), CdrError);
 }
 
 TEST_CASE("ros2Schema: the standard fields and their dependencies; unknown types named") {

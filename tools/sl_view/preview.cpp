@@ -4,40 +4,32 @@
 #include <string>
 
 #include "common/cdr.h"
+#include "common/point_cloud2_cdr.h"
 
 namespace sl::view {
 
 std::vector<std::uint8_t> decimateCloud(std::string_view cdr, int step) {
   if (step < 1) throw tools::CdrError("decimation step must be >= 1");
-  tools::CdrReader in(reinterpret_cast<const std::uint8_t*>(cdr.data()), cdr.size(),
-                      "PointCloud2 sample");
+  const tools::PointCloud2View in = tools::parsePointCloud2(
+      reinterpret_cast<const std::uint8_t*>(cdr.data()), cdr.size());
   tools::CdrWriter out;
-  out.i32(in.i32());      // header.stamp.sec
-  out.u32(in.u32());      // header.stamp.nanosec
-  out.string(in.string());  // header.frame_id
-  const std::uint32_t height = in.u32(), width = in.u32();
+  out.i32(in.stamp_sec);
+  out.u32(in.stamp_nanosec);
+  out.string(in.frame_id);
+  const std::uint32_t height = in.height, width = in.width;
   const std::uint32_t out_h = (height + step - 1) / step, out_w = (width + step - 1) / step;
   out.u32(out_h);
   out.u32(out_w);
-  const std::uint32_t nfields = in.u32();
-  out.u32(nfields);
-  for (std::uint32_t i = 0; i < nfields; ++i) {
-    out.string(in.string());
-    out.u32(in.u32());  // offset
-    out.u8(in.u8());    // datatype
-    out.u32(in.u32());  // count
+  out.u32(static_cast<std::uint32_t>(in.fields.size()));
+  for (const tools::PointFieldCdr& f : in.fields) {
+    out.string(f.name);
+    out.u32(f.offset);
+    out.u8(f.datatype);
+    out.u32(f.count);
   }
-  const bool big = in.boolean();
-  const std::uint32_t point_step = in.u32(), row_step = in.u32();
-  const std::string_view data = in.bytes();
-  const bool dense = in.boolean();
-  if (row_step < std::uint64_t{width} * point_step ||
-      data.size() < std::uint64_t{row_step} * height)
-    throw tools::CdrError("PointCloud2 sample: " + std::to_string(data.size()) +
-                          " data bytes for " + std::to_string(width) + " x " +
-                          std::to_string(height) + " points of " + std::to_string(point_step) +
-                          " bytes (row_step " + std::to_string(row_step) + ")");
-  out.boolean(big);
+  const std::uint32_t point_step = in.point_step, row_step = in.row_step;
+  const std::string_view data = in.data;
+  out.boolean(in.is_bigendian);
   out.u32(point_step);
   out.u32(out_w * point_step);
   std::uint8_t* dst = out.bytes(std::size_t{out_w} * out_h * point_step);
@@ -46,7 +38,7 @@ std::vector<std::uint8_t> decimateCloud(std::string_view cdr, int step) {
     for (std::uint32_t c = 0; c < out_w; ++c, dst += point_step)
       std::memcpy(dst, row + std::size_t{c} * step * point_step, point_step);
   }
-  out.boolean(dense);
+  out.boolean(in.is_dense);
   return std::move(out.finish());
 }
 
