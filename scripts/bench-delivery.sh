@@ -19,6 +19,10 @@
 #            SL_BENCH_3SUBS_FPS (default 90 fps = 15 scans/s: the rate the
 #            issue asks each of three subscribers to get without loss; at
 #            180 fps three full-cloud readers need more CPU than 2 cores have)
+#   5hz-inplace (SL_BENCH_SCENARIOS name: inplace) as 5hz, same daemon, with
+#            a subscriber that takes each cloud serialized and reads it in
+#            place (sl_dds_bench listen --in-place 1, as sl_view does)
+#            instead of deserializing it (loopback only)
 #   5hz-sets as 5hz with dds.publish_image_sets on (loopback only): what
 #            publishing the raw image sets costs the clouds
 #   stalled  camera 30 fps, two subscribers, the second SIGSTOPped for 30 s
@@ -157,7 +161,10 @@ if [ -n "${SL_BENCH_CONFIGS:-}" ]; then
   done
   configs=("${kept[@]}")
 fi
-scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz stalled sets max 3subs fastdds}
+scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz inplace stalled sets max 3subs fastdds}
+# Subscribers deserialize each cloud (dds_take into the generated struct, as
+# a ROS 2 node's subscription does) except in 5hz-inplace.
+in_place=0
 wanted() { case " $scenarios " in *" $1 "*) return 0 ;; esac; return 1; }
 
 # slctl always talks over the loopback config (which the shm config extends):
@@ -284,7 +291,7 @@ scenario() {
   prefault=$(prefault_at "$fps")
   for i in $(seq 1 "$subs"); do
     timeout $((duration + 90)) "$bench" listen --topic "rt/$ns/points" --duration "$duration" \
-      --timeout 30 --prefault-clouds $((prefault * 8)) --depth "${SL_BENCH_READER_DEPTH:-4}" > "$work/sub$i.log" 2> "$work/sub$i.err" &
+      --timeout 30 --prefault-clouds $((prefault * 8)) --depth "${SL_BENCH_READER_DEPTH:-4}" --in-place "$in_place" > "$work/sub$i.log" 2> "$work/sub$i.err" &
     sub_pids+=($!)
     pids+=($!)
   done
@@ -346,8 +353,13 @@ scenario() {
   local scans
   scans=$(echo "$status" | grep -o 'scans: [0-9]*' | head -n 1 | cut -d' ' -f2)
   echo "  $name/$cfg: page faults per scan: daemon $(awk -v f="$faults" -v n="${scans:-0}" 'BEGIN { printf "%.0f", (n > 0 ? f / n : 0) }')$(for i in $(seq 1 "$subs"); do
-    sed -n 's/^listen: done \([0-9]*\), minor page faults \([0-9]*\)/\1 \2/p' "$work/sub$i.log" |
+    sed -n 's/^listen: done \([0-9]*\), minor page faults \([0-9]*\).*/\1 \2/p' "$work/sub$i.log" |
       awk -v i="$i" '$1 > 0 { printf ", sub%d %.0f", i, $2 / $1 }'; done); UDP datagrams dropped (receive buffer full): $drops"
+  for i in $(seq 1 "$subs"); do
+    local bad
+    bad=$(sed -n 's/^listen: done .*, malformed \([0-9]*\)$/\1/p' "$work/sub$i.log")
+    [ "${bad:-0}" = 0 ] || echo "  $name/$cfg: sub$i took $bad malformed clouds (see its stderr)"
+  done
   # Where the time went inside the daemon (its status: last 64 scans).
   echo "  $name/$cfg: daemon $(echo "$status" | grep -o 'latency: [^)]*)' || echo 'latency: not reported')"
   results+=("delivery: $cfg $name $worst rss_mb=$rss")
@@ -402,6 +414,11 @@ for entry in "${configs[@]}"; do
   if wanted 5hz || wanted stalled; then
     start_daemon 30
     ! wanted 5hz || scenario 5hz "$cfg" 30 1 "$secs_5hz"
+    if wanted inplace && [ "$cfg" = loopback ]; then
+      in_place=1
+      scenario 5hz-inplace "$cfg" 30 1 "$secs_5hz"
+      in_place=0
+    fi
     ! wanted stalled || scenario stalled "$cfg" 30 2 "$((secs + 12))" 1
     stop_daemon
   fi
