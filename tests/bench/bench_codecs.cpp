@@ -13,6 +13,9 @@
 //   the fraction of its valid points within 0.01 mm of ours (proj_iter 0):
 //   it computes the same thing, not a strawman.
 //
+// - BM_DecodeTriangulatePaced: BM_DecodeTriangulate's 3+3 cloud-only case
+//   with 200 ms of idle before each scan (the daemon's cadence at 5 Hz).
+//
 // - BM_MemoryFloor: only the memory traffic of a 3+3 one-direction scan (the
 //   frames read, the cloud and optionally the maps written), the floor the
 //   processing cannot beat on this machine.
@@ -29,6 +32,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -37,6 +41,7 @@
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "sl/pipeline/codec.h"
@@ -372,6 +377,33 @@ BENCHMARK(BM_DecodeTriangulate)
     ->Unit(benchmark::kMillisecond)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()
+    ->UseRealTime();
+
+// BM_DecodeTriangulate (3+3 horizontal, cloud only) at the sensor's
+// cadence: the threads idle for 200 ms between scans (not timed), as the
+// daemon's processing stage is at 5 Hz, so each scan starts on idle cores.
+// Against BM_DecodeTriangulate's back-to-back loop it shows what idling
+// costs on this machine (README, "Measured: delivery").
+void BM_DecodeTriangulatePaced(benchmark::State& state) {
+  const int pattern = int(state.range(0));
+  const CameraImages in = images(pattern);
+  const Triangulator& t = triangulator(int(state.range(1)));
+  ScanProcessor processor(int(state.range(2)));
+  for (auto _ : state) {
+    state.PauseTiming();
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    state.ResumeTiming();
+    const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam", ScanProcessor::Keep::kCloud);
+    benchmark::DoNotOptimize(out.cloud->points.data());
+  }
+  reportScans(state);
+}
+
+BENCHMARK(BM_DecodeTriangulatePaced)
+    ->ArgsProduct({{0}, {2}, {1, 2}})
+    ->ArgNames({"pattern", "proj_iter", "threads"})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(40)
     ->UseRealTime();
 
 int main(int argc, char** argv) {
