@@ -14,7 +14,9 @@
 //   it computes the same thing, not a strawman.
 //
 // - BM_DecodeTriangulatePaced: BM_DecodeTriangulate's 3+3 cloud-only case
-//   with 200 ms of idle before each scan (the daemon's cadence at 5 Hz).
+//   with 200 ms of idle before each scan (the daemon's cadence at 5 Hz); per
+//   scan also the CPU time of all threads and of the caller, and how often a
+//   thread was preempted.
 //
 // - BM_MemoryFloor: only the memory traffic of a 3+3 one-direction scan (the
 //   frames read, the cloud and optionally the maps written), the floor the
@@ -28,6 +30,7 @@
 // proj_iter: projector distortion iterations of the triangulator (0 = the
 // baseline's model, which ignores projector distortion).
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
 #include <emmintrin.h>
 
 #include <Eigen/Geometry>
@@ -389,13 +392,33 @@ void BM_DecodeTriangulatePaced(benchmark::State& state) {
   const CameraImages in = images(pattern);
   const Triangulator& t = triangulator(int(state.range(1)));
   ScanProcessor processor(int(state.range(2)));
+  // Per scan: CPU time of all threads and of the caller, and the times a
+  // thread was preempted (two threads taking turns on one CPU show here).
+  auto cpuMs = [](const rusage& r) {
+    return (r.ru_utime.tv_sec + r.ru_stime.tv_sec) * 1e3 +
+           (r.ru_utime.tv_usec + r.ru_stime.tv_usec) * 1e-3;
+  };
+  double all_ms = 0, caller_ms = 0, preempted = 0;
   for (auto _ : state) {
     state.PauseTiming();
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    rusage all0, caller0, all1, caller1;
+    getrusage(RUSAGE_SELF, &all0);
+    getrusage(RUSAGE_THREAD, &caller0);
     state.ResumeTiming();
     const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam", ScanProcessor::Keep::kCloud);
     benchmark::DoNotOptimize(out.cloud->points.data());
+    state.PauseTiming();
+    getrusage(RUSAGE_SELF, &all1);
+    getrusage(RUSAGE_THREAD, &caller1);
+    all_ms += cpuMs(all1) - cpuMs(all0);
+    caller_ms += cpuMs(caller1) - cpuMs(caller0);
+    preempted += double(all1.ru_nivcsw - all0.ru_nivcsw);
+    state.ResumeTiming();
   }
+  state.counters["cpu_ms"] = benchmark::Counter(all_ms, benchmark::Counter::kAvgIterations);
+  state.counters["caller_cpu_ms"] = benchmark::Counter(caller_ms, benchmark::Counter::kAvgIterations);
+  state.counters["preempted"] = benchmark::Counter(preempted, benchmark::Counter::kAvgIterations);
   reportScans(state);
 }
 

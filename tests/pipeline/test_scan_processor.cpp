@@ -1,14 +1,18 @@
 // RowWorkers (every block once, exceptions) and ScanProcessor (same maps and
 // cloud as the single-threaded stages; recycled buffers never overwrite a
 // result still held).
+#include <sched.h>
+
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -121,6 +125,43 @@ TEST_CASE("RowWorkers rethrow the first exception and stay usable", "[row_worker
   std::atomic<int> rows{0};
   workers.run(100, 7, [&](int begin, int end, int) { rows += end - begin; });
   CHECK(rows == 100);
+}
+
+TEST_CASE("RowWorkers keep their workers off the caller's CPU", "[row_workers]") {
+  cpu_set_t allowed;
+  REQUIRE(sched_getaffinity(0, sizeof allowed, &allowed) == 0);
+  if (CPU_COUNT(&allowed) < 2) {
+    WARN("one CPU available: nothing to check");
+    return;
+  }
+  RowWorkers workers(3);
+  // Pin the caller to each allowed CPU in turn: no worker may run there
+  // (nor be allowed to, which is what makes the check deterministic).
+  const std::thread::id caller = std::this_thread::get_id();
+  for (int cpu = 0; cpu < CPU_SETSIZE; ++cpu) {
+    if (!CPU_ISSET(cpu, &allowed)) continue;
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(cpu, &one);
+    REQUIRE(sched_setaffinity(0, sizeof one, &one) == 0);
+    std::atomic<int> on_caller_cpu{0}, may_use_caller_cpu{0}, worker_blocks{0};
+    workers.run(400, 1, [&](int, int, int) {
+      if (std::this_thread::get_id() == caller) {  // leave blocks to the workers
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+        return;
+      }
+      ++worker_blocks;
+      if (sched_getcpu() == cpu) ++on_caller_cpu;
+      cpu_set_t mine;
+      if (sched_getaffinity(0, sizeof mine, &mine) != 0 || CPU_ISSET(cpu, &mine))
+        ++may_use_caller_cpu;
+    });
+    CAPTURE(cpu);
+    REQUIRE(worker_blocks > 0);
+    CHECK(on_caller_cpu == 0);
+    CHECK(may_use_caller_cpu == 0);
+  }
+  REQUIRE(sched_setaffinity(0, sizeof allowed, &allowed) == 0);
 }
 
 TEST_CASE("ScanProcessor equals the single-threaded stages", "[scan_processor]") {
