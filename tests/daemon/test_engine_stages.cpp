@@ -301,21 +301,42 @@ TEST_CASE("device health: silent devices named with their last error; a delivery
   CHECK(health.triggerDelivered(15 * kS));
 }
 
-TEST_CASE("memory prefault: the plan follows the cameras, patterns and queue depth; off by default") {
+TEST_CASE("memory prefault: the plan follows the cameras, patterns and queue depth; off by default but for the points writer's history") {
   sl::daemon::DaemonConfig config = sl::daemon::loadConfig(std::string(SL_SOURCE_DIR) + "/config/sim.yaml");
+  const std::size_t pixels = std::size_t(config.calibration.camera.width) * config.calibration.camera.height;
+  REQUIRE(pixels == 1440 * 1080);
   CHECK_FALSE(config.runtime.prefault_memory);
-  CHECK(sl::daemon::prefaultPlanOf(config, 64).totalBytes(1) == 0);
+  {
+    // Off: only the points writer's history (reliable, keep-last 4): the
+    // 4 clouds a stopped reader leaves unacknowledged and the one written.
+    const auto plan = sl::daemon::prefaultPlanOf(config, 64);
+    CHECK(config.dds.points_qos.reliable);
+    CHECK(config.dds.points_qos.depth == 4);
+    CHECK(plan.output_blocks == 4 + 1);
+    CHECK(plan.output_block_bytes == pixels * 16 + 4096);
+    CHECK(plan.frames * plan.frame_bytes + plan.process_clouds * plan.cloud_bytes == 0);
+    CHECK(plan.totalBytes(1) == 5 * (pixels * 16 + 4096));
+    // A lighter cloud: decimation 2 of 1440 x 1080 is 720 x 540 points.
+    config.dds.points_layout.decimation = 2;
+    CHECK(sl::daemon::prefaultPlanOf(config, 64).output_block_bytes == 720 * 540 * 16 + 4096);
+    config.dds.points_layout.decimation = 1;
+    // Best effort: the writer keeps nothing for its readers.
+    config.dds.points_qos.reliable = false;
+    CHECK(sl::daemon::prefaultPlanOf(config, 64).totalBytes(1) == 0);
+    config.dds.points_qos.reliable = true;
+  }
 
   config.runtime.prefault_memory = true;
   config.runtime.queue_depth = 3;
-  const auto plan = sl::daemon::prefaultPlanOf(config, 64);
-  const std::size_t pixels = std::size_t(config.calibration.camera.width) * config.calibration.camera.height;
-  CHECK(pixels == 1440 * 1080);
+  auto plan = sl::daemon::prefaultPlanOf(config, 64);
   CHECK(plan.frame_bytes == pixels);         // 8-bit simulated camera
   CHECK(plan.frames == 12 * (3 + 2) + 64);  // the longest pattern, 3+3_both: 12 images
   CHECK(plan.cloud_bytes == pixels * 16);
   CHECK(plan.process_clouds == 3 + 3);
-  CHECK(plan.output_clouds == 3 + 3);
+  CHECK(plan.output_blocks == 3 + 3);  // more than the points history (4 + 1)
+  CHECK(plan.output_block_bytes == pixels * 16 + 4096);
+  config.dds.points_qos.depth = 8;
+  CHECK(sl::daemon::prefaultPlanOf(config, 64).output_blocks == 8 + 1);
   config.sim.bit_depth = 12;
   CHECK(sl::daemon::prefaultPlanOf(config, 64).frame_bytes == 2 * pixels);
 }

@@ -19,12 +19,30 @@ std::size_t bytesPerPixel(const DaemonConfig& config) {
 
 PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_capacity) {
   PrefaultPlan plan;
-  if (!config.runtime.prefault_memory) return plan;
   std::size_t pixels = static_cast<std::size_t>(config.calibration.camera.width) *
                        static_cast<std::size_t>(config.calibration.camera.height);
-  for (const auto& [id, calibration] : config.extra_calibrations)
+  std::size_t width = static_cast<std::size_t>(config.calibration.camera.width);
+  std::size_t height = static_cast<std::size_t>(config.calibration.camera.height);
+  for (const auto& [id, calibration] : config.extra_calibrations) {
     pixels = std::max(pixels, static_cast<std::size_t>(calibration.camera.width) *
                                   static_cast<std::size_t>(calibration.camera.height));
+    width = std::max(width, static_cast<std::size_t>(calibration.camera.width));
+    height = std::max(height, static_cast<std::size_t>(calibration.camera.height));
+  }
+  // The points writer's history, whatever runtime.prefault_memory says: a
+  // reliable keep-last writer keeps the serialized clouds a reader has not
+  // acknowledged, all `depth` of them while a reader is stopped, besides
+  // the one being written. Left to grow on demand, the first reader that
+  // stopped cost every other reader ~80-130 ms on 3-4 clouds (each write
+  // faulting in a fresh 25 MB; README "stalled over UDP").
+  if (config.dds.points_qos.reliable) {
+    const auto d = static_cast<std::size_t>(std::max(1, config.dds.points_layout.decimation));
+    // Points of the published cloud, 16 bytes each, and a page for the
+    // message's header and the serialized sample's own.
+    plan.output_block_bytes = ((width + d - 1) / d) * ((height + d - 1) / d) * 16 + 4096;
+    plan.output_blocks = static_cast<std::size_t>(config.dds.points_qos.depth) + 1;
+  }
+  if (!config.runtime.prefault_memory) return plan;
   std::size_t longest = 1;
   for (const pipeline::PatternSpec& p : config.patterns)
     longest = std::max(longest, static_cast<std::size_t>(p.frameCount()));
@@ -34,10 +52,12 @@ PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_
   plan.frames = longest * (depth + 2) + input_queue_capacity;
   plan.cloud_bytes = pixels * 16;
   // Clouds waiting for output, in processing, and the decoder's maps; the
-  // output thread's messages and serialized copies (writer history).
+  // output thread's messages and serialized copies (writer history), at
+  // least the points writer's history above.
   // Measured: with depth + 2 each, a thread still faulted in one more cloud.
   plan.process_clouds = depth + 3;
-  plan.output_clouds = depth + 3;
+  plan.output_block_bytes = std::max(plan.output_block_bytes, plan.cloud_bytes);
+  plan.output_blocks = std::max(plan.output_blocks, depth + 3);
   return plan;
 }
 

@@ -1,5 +1,5 @@
 // Fresh memory for the stage threads before the first scan
-// (runtime.prefault_memory). On a machine whose free memory is handed back
+// (runtime.prefault_memory; the points writer's history always). On a machine whose free memory is handed back
 // to the hypervisor (free page reporting), the first touch of a page costs
 // far more than on bare metal: ~5 ms per MB on the VM this project is
 // measured on (README, "Measured: delivery"), 125 ms for one 25 MB cloud.
@@ -22,16 +22,20 @@ struct PrefaultPlan {
   std::size_t frames = 0;          // images per camera thread
   std::size_t cloud_bytes = 0;     // one full-resolution cloud (16 bytes a point), largest camera
   std::size_t process_clouds = 0;  // clouds of the processing thread
-  std::size_t output_clouds = 0;   // messages and serialized copies of the output thread
+  // The output thread's messages and serialized copies (the writers' histories).
+  std::size_t output_block_bytes = 0;
+  std::size_t output_blocks = 0;
 
   std::size_t totalBytes(std::size_t cameras) const {
-    return cameras * frames * frame_bytes + (process_clouds + output_clouds) * cloud_bytes;
+    return cameras * frames * frame_bytes + process_clouds * cloud_bytes +
+           output_blocks * output_block_bytes;
   }
 };
 
 // Sizes from the cameras' calibrations and image depth, the longest
-// pattern, runtime.queue_depth and the input queue's capacity; all zero when
-// runtime.prefault_memory is off.
+// pattern, runtime.queue_depth, the input queue's capacity and the points
+// topic's layout and QoS. With runtime.prefault_memory off, only the points
+// writer's history (reliable points: history depth + 1 serialized clouds).
 PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_capacity);
 
 // Touches `count` blocks of `block_bytes` in the calling thread's heap and

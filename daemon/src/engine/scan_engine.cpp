@@ -385,7 +385,7 @@ ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, Output
   });
   d.threads.emplace_back([&d, k, plan] {
     nameThisThread("sl-output");
-    prefaultThreadHeap(plan.cloud_bytes, plan.output_clouds);
+    prefaultThreadHeap(plan.output_block_bytes, plan.output_blocks);
     d.prefaulted.count_down();
     d.outputLoop(d.heartbeats[k + 3]);
   });
