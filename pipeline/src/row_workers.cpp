@@ -40,8 +40,9 @@ struct RowWorkers::Shared {
 
   // Keeps the workers off the CPU the caller runs on. Without this, a
   // worker woken after an idle spell was often placed on the caller's CPU
-  // (the kernel takes an idle vCPU of a VM for a busy one) and the two
-  // threads took turns on one CPU for milliseconds: BM_DecodeTriangulatePaced,
+  // (on the VM measured; why the scheduler passed over the idle vCPU was
+  // not established) and the two threads took turns on one CPU for
+  // milliseconds: BM_DecodeTriangulatePaced,
   // 2 threads, 8.5-9.4 ms a scan against 5.6-6.7 ms with the workers kept
   // off (README "Processing after idle"). Syscalls only when the caller has
   // moved; a failure leaves the workers as they were (they still run, maybe

@@ -1,6 +1,6 @@
-// RowWorkers (every block once, exceptions) and ScanProcessor (same maps and
-// cloud as the single-threaded stages; recycled buffers never overwrite a
-// result still held).
+// RowWorkers (every block once, exceptions, workers off the caller's CPU)
+// and ScanProcessor (same maps and cloud as the single-threaded stages;
+// recycled buffers never overwrite a result still held).
 #include <sched.h>
 
 #include <algorithm>

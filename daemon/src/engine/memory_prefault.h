@@ -1,6 +1,7 @@
 // Fresh memory for the stage threads before the first scan
-// (runtime.prefault_memory; the points writer's history always). On a machine whose free memory is handed back
-// to the hypervisor (free page reporting), the first touch of a page costs
+// (runtime.prefault_memory; the points writer's history always). On a
+// machine whose free memory is handed back to the hypervisor (free page
+// reporting), the first touch of a page costs
 // far more than on bare metal: ~5 ms per MB on the VM this project is
 // measured on (README, "Measured: delivery"), 125 ms for one 25 MB cloud.
 // Without this, the first second after START paid for every image, cloud

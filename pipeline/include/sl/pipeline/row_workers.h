@@ -36,7 +36,9 @@ class RowWorkers {
   // indexed by it. Blocks are handed out one at a time in row order (a
   // thread that is descheduled takes fewer). If fn throws, the remaining
   // blocks are skipped and the first exception is rethrown here once all
-  // threads are idle again.
+  // threads are idle again. The workers run on the CPUs the constructing
+  // thread could use, minus the one the caller is on when run() starts (when
+  // another is left): two threads on one CPU would take turns.
   void run(int rows, int block, const std::function<void(int begin, int end, int thread)>& fn);
 
   // Hardware threads, clamped to [1, 8].
