@@ -571,12 +571,13 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
       b_row_row[u] = br0 * x + br1 * y + br2;
     }
     // Pixels with a finite coordinate on the second axis (NaN pixels stay NaN
-    // whatever their axis).
-    float on_second = 0.0f;
+    // whatever their axis). An integer OR: a float sum may not be reordered,
+    // so it was added up one lane at a time (~20 % of this function, perf).
+    unsigned on_second = 0;
     SL_ROW_LOOP
     for (int u = 0; u < width; ++u)
-      on_second +=
-          (is_column[u] != first_is_column) & ((decoded[u] - decoded[u]) == 0.0f) ? 1.0f : 0.0f;
+      on_second |= static_cast<unsigned>((is_column[u] != first_is_column) &
+                                         ((decoded[u] - decoded[u]) == 0.0f));
     auto passes = [&]<int kAxis>() {
       for (int it = 0; it < options.projector_distortion_iterations; ++it) {
         if (it == 0) {
@@ -592,7 +593,7 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
         }
       }
     };
-    if (on_second != 0.0f) {
+    if (on_second != 0) {
       passes.template operator()<2>();
     } else if (first_is_column != 0.0f) {
       passes.template operator()<kColumn>();
