@@ -4,6 +4,13 @@
 
 namespace sl::daemon {
 
+// The size packCloud's organized (decimated) layout gives.
+std::size_t maxPackedBytes(int width, int height, const CloudLayout& layout) {
+  const int step = layout.decimation;
+  return static_cast<std::size_t>((width + step - 1) / step) *
+         static_cast<std::size_t>((height + step - 1) / step) * sizeof(pipeline::PointXYZI);
+}
+
 PackedCloud packCloud(const pipeline::PointCloud& cloud, double unit_m, const CloudLayout& layout,
                       std::vector<float>& buffer) {
   static_assert(sizeof(pipeline::PointXYZI) == 16, "x, y, z, intensity: the PointCloud2 layout");

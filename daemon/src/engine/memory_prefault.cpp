@@ -1,5 +1,6 @@
 #include "engine/memory_prefault.h"
 
+#include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds.h"
 
 #include <algorithm>
@@ -21,13 +22,13 @@ PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_
   PrefaultPlan plan;
   std::size_t pixels = static_cast<std::size_t>(config.calibration.camera.width) *
                        static_cast<std::size_t>(config.calibration.camera.height);
-  std::size_t width = static_cast<std::size_t>(config.calibration.camera.width);
-  std::size_t height = static_cast<std::size_t>(config.calibration.camera.height);
+  int width = config.calibration.camera.width;
+  int height = config.calibration.camera.height;
   for (const auto& [id, calibration] : config.extra_calibrations) {
     pixels = std::max(pixels, static_cast<std::size_t>(calibration.camera.width) *
                                   static_cast<std::size_t>(calibration.camera.height));
-    width = std::max(width, static_cast<std::size_t>(calibration.camera.width));
-    height = std::max(height, static_cast<std::size_t>(calibration.camera.height));
+    width = std::max(width, calibration.camera.width);
+    height = std::max(height, calibration.camera.height);
   }
   // The points writer's history, whatever runtime.prefault_memory says: a
   // reliable keep-last writer keeps the serialized clouds a reader has not
@@ -36,10 +37,9 @@ PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_
   // stopped cost every other reader ~80-130 ms on 3-4 clouds (each write
   // faulting in a fresh 25 MB; README "stalled over UDP").
   if (config.dds.points_qos.reliable) {
-    const auto d = static_cast<std::size_t>(std::max(1, config.dds.points_layout.decimation));
-    // Points of the published cloud, 16 bytes each, and a page for the
-    // message's header and the serialized sample's own.
-    plan.output_block_bytes = ((width + d - 1) / d) * ((height + d - 1) / d) * 16 + 4096;
+    // The published cloud's points, and a page for the message's header and
+    // the serialized sample's own.
+    plan.output_block_bytes = maxPackedBytes(width, height, config.dds.points_layout) + 4096;
     plan.output_blocks = static_cast<std::size_t>(config.dds.points_qos.depth) + 1;
   }
   if (!config.runtime.prefault_memory) return plan;

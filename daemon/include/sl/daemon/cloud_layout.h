@@ -5,6 +5,7 @@
 // 25 MB at the scan rate (README "Topics").
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -24,6 +25,10 @@ struct PackedCloud {
   std::uint32_t width = 0, height = 0;
   bool dense = false;  // true only when it is known that no point is NaN (valid_only)
 };
+
+// Bytes of the packed data of a width x height cloud at most (valid_only
+// drops NaN points, so it may be fewer).
+std::size_t maxPackedBytes(int width, int height, const CloudLayout& layout);
 
 // Packs `cloud` (x, y, z in units of `unit_m` metres) as `layout` says. With
 // metres, the full organized layout borrows cloud.points (no copy); anything
