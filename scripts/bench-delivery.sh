@@ -25,6 +25,9 @@
 #            instead of deserializing it (loopback only)
 #   5hz-sets as 5hz with dds.publish_image_sets on (loopback only): what
 #            publishing the raw image sets costs the clouds
+#   5hz-copy (SL_BENCH_SCENARIOS name: copy) as 5hz with
+#            dds.points_zero_copy off (loopback only): clouds serialized by
+#            dds_write, the comparison for the daemon's zero-copy writer
 #   stalled  camera 30 fps, two subscribers, the second SIGSTOPped for 30 s
 #            (SL_BENCH_SECONDS) after 5 s; the figures are the first's; the second's clouds
 #            after it resumes are reported on their own line
@@ -70,7 +73,7 @@ subs3_fps=${SL_BENCH_3SUBS_FPS:-90}
 # ordinary process.
 daemon_prefix=()
 if [ -n "${SL_BENCH_DAEMON_RT:-}" ]; then daemon_prefix=(chrt -f "$SL_BENCH_DAEMON_RT"); fi
-# The 5 Hz windows (5hz, 5hz-sets, fastdds-5hz): 60 s = 300 clouds, so that
+# The 5 Hz windows (5hz, 5hz-inplace, 5hz-copy, 5hz-sets, fastdds-5hz): 60 s = 300 clouds, so that
 # the p99 is the 4th-worst cloud; with 100 clouds (20 s) it was the
 # 2nd-worst, i.e. the subscriber's second cloud, which always pays for its
 # buffers' first page faults. The first cloud's latency is printed on the
@@ -161,7 +164,7 @@ if [ -n "${SL_BENCH_CONFIGS:-}" ]; then
   done
   configs=("${kept[@]}")
 fi
-scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz inplace stalled sets max 3subs fastdds}
+scenarios=${SL_BENCH_SCENARIOS:-ceiling 5hz inplace copy stalled sets max 3subs fastdds}
 # Subscribers deserialize each cloud (dds_take into the generated struct, as
 # a ROS 2 node's subscription does) except in 5hz-inplace.
 in_place=0
@@ -420,6 +423,14 @@ for entry in "${configs[@]}"; do
       in_place=0
     fi
     ! wanted stalled || scenario stalled "$cfg" 30 2 "$((secs + 12))" 1
+    stop_daemon
+  fi
+  if wanted copy && [ "$cfg" = loopback ]; then
+    # The clouds serialized by dds_write (one more 25 MB copy per cloud)
+    # instead of sent from their own memory: compare with 5hz.
+    start_daemon 30 's/^  publish_projector_maps: false$/  publish_projector_maps: false\n  points_zero_copy: false/'
+    grep -q 'points_zero_copy: false' "$work/sim.yaml" || { echo "bench-delivery: could not turn zero copy off" >&2; exit 2; }
+    scenario 5hz-copy "$cfg" 30 1 "$secs_5hz"
     stop_daemon
   fi
   if wanted sets && [ "$cfg" = loopback ]; then

@@ -163,6 +163,7 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   if (d.points_layout.decimation < 1 || d.points_layout.decimation > 16)
     m.fail("points_decimation", "must be 1..16 (1 = every pixel)");
   d.points_layout.valid_only = m.get<bool>("points_valid_only", d.points_layout.valid_only);
+  d.points_zero_copy = m.get<bool>("points_zero_copy", d.points_zero_copy);
   d.status_period_s = positive(m, "status_period_s", d.status_period_s);
   const YamlMap qos = m.optionalMap("qos");
   parseTopicQos(qos.optionalMap("points"), d.points_qos);

@@ -144,6 +144,11 @@ Qos& Qos::resourceLimits(std::int32_t max_samples, std::int32_t max_instances,
   return *this;
 }
 
+Qos& Qos::partition(const std::string& name) {
+  dds_qset_partition1(qos_, name.c_str());
+  return *this;
+}
+
 bool Qos::hasDataRepresentation() const {
   uint32_t n = 0;
   dds_data_representation_id_t* values = nullptr;

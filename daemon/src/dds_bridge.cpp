@@ -4,16 +4,20 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "cloud_writer.h"
 #include "malformed_samples.h"
 #include "reader_acks.h"
 #include "request_dispatch.h"
 #include "ros_messages.h"
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds.h"
+#include "sl/daemon/dds_environment.h"
+#include "sl/daemon/log.h"
 
 namespace sl::daemon {
 
@@ -29,6 +33,22 @@ dds::Qos writerQos(const TopicQos& q) {
   else
     qos.bestEffort();
   return qos.keepLast(q.depth).xcdr1();
+}
+
+// Why the points writer must serialize clouds (empty: it may borrow them).
+// An iceoryx reader gets only what dds_write puts in shared memory, so with
+// shared memory configured (or a configuration that cannot be read) clouds
+// are serialized.
+std::string serializeReason(const DdsConfig& config) {
+  if (!config.points_zero_copy) return "dds.points_zero_copy is false";
+  const char* uri = std::getenv("CYCLONEDDS_URI");
+  if (uri == nullptr || *uri == '\0') return {};
+  try {
+    if (readDdsRequirements(uri).shared_memory) return "shared memory (iceoryx) is configured";
+  } catch (const std::exception& e) {
+    return std::string("the DDS configuration could not be read: ") + e.what();
+  }
+  return {};
 }
 
 // Requests act on the scan engine.
@@ -78,7 +98,7 @@ struct DdsBridge::Impl {
         // Clouds, maps, images: as configured (dds.qos; by default reliable
         // with a short keep-last history: a write waits at most
         // max_blocking_s for acknowledgements, then it is counted as timed out).
-        points_writer(participant, points_topic, writerQos(config.points_qos)),
+        points_writer(participant, points_topic, writerQos(config.points_qos), serializeReason(config)),
         maps_writer(participant, maps_topic, writerQos(config.maps_qos)),
         // Status: the latest value for late joiners.
         status_writer(participant, status_topic,
@@ -104,6 +124,19 @@ struct DdsBridge::Impl {
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);
     if (config.points_qos.reliable) points_acks.emplace(points_writer.handle(), config.points_qos.depth);
+    if (points_writer.borrowing())
+      logInfo("points: clouds are sent from their own memory (no serialization copy)");
+    else
+      logInfo("points: clouds are serialized by dds_write: " + points_writer.whyNotBorrowing());
+  }
+
+  // A buffer for a packed cloud that no earlier sample still borrows.
+  std::shared_ptr<std::vector<float>> packBuffer() {
+    for (const auto& b : pack_buffers)
+      if (b.use_count() == 1) return b;
+    auto b = std::make_shared<std::vector<float>>();
+    if (pack_buffers.size() < kPackBuffers) pack_buffers.push_back(b);
+    return b;
   }
 
   const DdsConfig config;
@@ -121,7 +154,7 @@ struct DdsBridge::Impl {
   dds::Topic<Image> shading_topic;
   dds::Topic<CameraInfo> info_topic;
   dds::Topic<ImageSetMsg> sets_topic;
-  dds::Writer<PointCloud2> points_writer;
+  CloudWriter points_writer;
   dds::Writer<Maps> maps_writer;
   dds::Writer<Status> status_writer;
   dds::Reader<Request> request_reader;
@@ -143,8 +176,10 @@ struct DdsBridge::Impl {
   RequestDispatcher dispatcher{config.requests};
   std::uint64_t requests_rejected = 0;  // the request reader's sample-rejected count (status thread)
 
-  // Publish-thread scratch buffer (metres), reused between clouds.
-  std::vector<float> cloud_buffer;
+  // Publish-thread buffers of packed clouds (metres, decimated or valid
+  // only), reused once no sample borrows them (beyond these, fresh ones).
+  static constexpr std::size_t kPackBuffers = 8;
+  std::vector<std::shared_ptr<std::vector<float>>> pack_buffers;
   // The image set published last (a set triangulated by two cameras gives
   // two results; it is published once). Publish thread only.
   pipeline::TimestampNs last_set_stamp_ns = -1;
@@ -213,10 +248,16 @@ void DdsBridge::publish(const ScanResult& result) {
   if (result.cloud) {
     // Triangulated in metres (resultContents()) and sent whole, the cloud's
     // points are the message's data; else one pass packs them.
+    std::shared_ptr<std::vector<float>> buffer = d.packBuffer();
     const PackedCloud packed =
-        packCloud(*result.cloud, result.cloud_unit_m, d.config.points_layout, d.cloud_buffer);
+        packCloud(*result.cloud, result.cloud_unit_m, d.config.points_layout, *buffer);
+    // The sample keeps what its data is in: the cloud or the buffer.
+    std::shared_ptr<const void> owner = result.cloud;
+    if (packed.data != reinterpret_cast<const std::uint8_t*>(result.cloud->points.data()))
+      owner = std::move(buffer);
     const bool written = d.points_writer.write(
-        CloudMessage(packed, result.cloud->stamp_ns, d.frame_ids.of(result.camera_id)).sample());
+        CloudMessage(packed, result.cloud->stamp_ns, d.frame_ids.of(result.camera_id)).sample(),
+        std::move(owner));
     count(written);
     if (written && d.points_acks) d.points_acks->written();
   }

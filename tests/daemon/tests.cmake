@@ -5,8 +5,9 @@ sl_add_test(test_dds daemon/test_dds.cpp)
 target_link_libraries(test_dds PRIVATE sl_dds sl_idl)
 
 # End to end: sl_sensord in a child process on the simulated sensor.
-sl_add_test(test_e2e daemon/test_e2e.cpp daemon/test_bridge.cpp)
+sl_add_test(test_e2e daemon/test_e2e.cpp daemon/test_bridge.cpp daemon/test_cloud_writer.cpp)
 target_link_libraries(test_e2e PRIVATE sl_daemon sl_drivers sl_dds sl_idl yaml-cpp)
+target_include_directories(test_e2e PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)  # cloud_writer.h
 add_dependencies(test_e2e sl_sensord malformed_writer points_subscriber sl_view)  # sl_view record
 
 # A client whose requests the daemon cannot deserialize (test_e2e): a

@@ -115,6 +115,8 @@ class Qos {
   // Data representation XCDR1 only, as ROS 2 uses (a reader with this QoS
   // accepts only XCDR1 writers).
   Qos& xcdr1();
+  // The one partition the entity is in (default: the default partition "").
+  Qos& partition(const std::string& name);
   // DDS_LENGTH_UNLIMITED (-1) for "no limit".
   Qos& resourceLimits(std::int32_t max_samples, std::int32_t max_instances,
                       std::int32_t max_samples_per_instance);
