@@ -204,6 +204,17 @@ TEST_CASE("dds.qos sets each topic's writer QoS, the rest keep their defaults") 
   CHECK(defaults.dds.points_qos.depth == sl::daemon::DdsConfig{}.points_qos.depth);
 }
 
+TEST_CASE("dds.points_zero_copy is on unless turned off, and only a boolean") {
+  CHECK(sl::daemon::parseConfig(shippedConfig(), "test.yaml").dds.points_zero_copy);
+  CHECK_FALSE(sl::daemon::parseConfig(
+                  edited("status_period_s: 1.0", "status_period_s: 1.0\n  points_zero_copy: false"), "test.yaml")
+                  .dds.points_zero_copy);
+  const std::string message =
+      errorOf(edited("status_period_s: 1.0", "status_period_s: 1.0\n  points_zero_copy: sometimes"));
+  INFO(message);
+  CHECK(message.find("dds.points_zero_copy") != std::string::npos);
+}
+
 TEST_CASE("dds.points_decimation and dds.points_valid_only shape the published cloud") {
   const auto c = sl::daemon::parseConfig(
       edited("status_period_s: 1.0", "status_period_s: 1.0\n  points_decimation: 3\n  points_valid_only: true"),
