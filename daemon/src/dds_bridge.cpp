@@ -237,7 +237,12 @@ DdsBridge::DdsBridge(const DdsConfig& config, const std::string& camera_id,
 DdsBridge::~DdsBridge() = default;
 
 ResultContents DdsBridge::resultContents() const {
-  return {CloudUnit::kMetres, impl_->config.publish_projector_maps};
+  const DdsConfig& c = impl_->config;
+  // A full cloud in metres is published from its own points (packCloud);
+  // a reliable writer sending them in place keeps them until acknowledged.
+  const bool whole = c.points_layout.decimation == 1 && !c.points_layout.valid_only;
+  return {CloudUnit::kMetres, c.publish_projector_maps,
+          impl_->points_writer.borrowing() && c.points_qos.reliable && whole};
 }
 
 void DdsBridge::publish(const ScanResult& result) {

@@ -323,7 +323,15 @@ TEST_CASE("memory prefault: the plan follows the cameras, patterns and queue dep
     // Best effort: the writer keeps nothing for its readers.
     config.dds.points_qos.reliable = false;
     CHECK(sl::daemon::prefaultPlanOf(config, 64).totalBytes(1) == 0);
+    CHECK(sl::daemon::prefaultPlanOf(config, 64, true).totalBytes(1) == 0);
     config.dds.points_qos.reliable = true;
+    // Clouds sent from their own memory: the history holds the processing
+    // thread's clouds (4), besides the one processed and the one written.
+    const auto kept = sl::daemon::prefaultPlanOf(config, 64, true);
+    CHECK(kept.output_blocks * kept.output_block_bytes == 0);
+    CHECK(kept.process_clouds == 4 + 2);
+    CHECK(kept.cloud_bytes == pixels * 16);
+    CHECK(kept.totalBytes(1) == 6 * pixels * 16);
   }
 
   config.runtime.prefault_memory = true;

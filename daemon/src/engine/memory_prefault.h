@@ -36,8 +36,13 @@ struct PrefaultPlan {
 // Sizes from the cameras' calibrations and image depth, the longest
 // pattern, runtime.queue_depth, the input queue's capacity and the points
 // topic's layout and QoS. With runtime.prefault_memory off, only the points
-// writer's history (reliable points: history depth + 1 serialized clouds).
-PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_capacity);
+// writer's history (reliable points): history depth + 1 serialized clouds
+// for the output thread, or, when the writer keeps the processing thread's
+// clouds themselves (clouds_kept_by_writer: ResultContents::keeps_clouds),
+// history depth + 2 clouds for the processing thread (those the history
+// holds, the one in processing and the one being written).
+PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_capacity,
+                            bool clouds_kept_by_writer = false);
 
 // Touches `count` blocks of `block_bytes` in the calling thread's heap and
 // frees them (see above). No-op for a zero count or block.

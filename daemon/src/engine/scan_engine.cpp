@@ -361,7 +361,7 @@ ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, Output
   // Named for ps -L / top -H (at most 15 characters). The stages that
   // allocate images and clouds first touch the memory they will recycle
   // (engine/memory_prefault.h).
-  const PrefaultPlan plan = prefaultPlanOf(d.config, kInputQueueCapacity);
+  const PrefaultPlan plan = prefaultPlanOf(d.config, kInputQueueCapacity, contents.keeps_clouds);
   for (std::size_t i = 0; i < k; ++i)
     d.threads.emplace_back([&d, i, plan] {
       nameThisThread("sl-camera" + std::to_string(i));

@@ -114,6 +114,11 @@ enum class CloudUnit { kMillimetres, kMetres };
 struct ResultContents {
   CloudUnit cloud_unit = CloudUnit::kMillimetres;
   bool projector_maps = false;  // ScanResult::maps (they cost memory traffic)
+  // The consumer keeps each ScanResult::cloud as it was written out, until
+  // its readers are done with it (points sent from the cloud's own memory
+  // by a reliable writer): the writer's history holds the processing
+  // thread's clouds, not copies.
+  bool keeps_clouds = false;
 };
 
 // Thread-safe: start/stop/selectPattern/status may be called from any thread.
