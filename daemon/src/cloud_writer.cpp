@@ -248,7 +248,7 @@ std::optional<Around> serializedAround(const ddsi_sertype* type, const PointClou
   const Bytes b = serialized(type, m);
   if (a.size() < 8 || b.size() != a.size() + 4) return std::nullopt;
   const std::size_t first = static_cast<std::size_t>(std::mismatch(a.begin(), a.end(), b.begin()).first - a.begin());
-  if (first >= a.size()) return std::nullopt;
+  if (first < 4 || first >= a.size()) return std::nullopt;  // not past the encapsulation header
   // CDR offsets count from after the 4-byte encapsulation header; a length
   // is 4-byte aligned.
   const std::size_t at = 4 + ((first - 4) & ~std::size_t{3});
