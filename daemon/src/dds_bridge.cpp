@@ -130,10 +130,15 @@ struct DdsBridge::Impl {
       logInfo("points: clouds are serialized by dds_write: " + points_writer.whyNotBorrowing());
   }
 
-  // A buffer for a packed cloud that no earlier sample still borrows.
+  // A buffer for a packed cloud that no earlier sample still borrows. The
+  // fence orders Cyclone's last reads of it (before its thread dropped the
+  // sample's reference) before our writes.
   std::shared_ptr<std::vector<float>> packBuffer() {
-    for (const auto& b : pack_buffers)
-      if (b.use_count() == 1) return b;
+    for (const auto& b : pack_buffers) {
+      if (b.use_count() != 1) continue;
+      std::atomic_thread_fence(std::memory_order_acquire);
+      return b;
+    }
     auto b = std::make_shared<std::vector<float>>();
     if (pack_buffers.size() < kPackBuffers) pack_buffers.push_back(b);
     return b;

@@ -20,7 +20,10 @@
 #include <dds/ddsi/ddsi_serdata.h>
 
 #include "cloud_writer.h"
+#include "sl/daemon/config.h"
 #include "sl/daemon/dds.h"
+#include "sl/daemon/dds_bridge.h"
+#include "sl/daemon/scan_engine.h"
 
 namespace {
 
@@ -193,4 +196,59 @@ TEST_CASE("cloud writers of several participants in one process", "[dds][cloud_w
   dds::Topic<Cloud> tb(b, uniqueTopic("points"), sensor_msgs_msg_dds__PointCloud2__desc);
   CloudWriter wb(b, tb, cloudQos(), "");
   CHECK(wb.borrowing());
+}
+
+// The bridge's lighter layouts pack each cloud into a buffer that the
+// borrowed sample then holds: while readers hold more samples than the
+// bridge keeps buffers (8), every cloud must still arrive as packed, none
+// overwritten by a later one.
+TEST_CASE("decimated clouds borrowed by a reader's history each arrive as packed",
+          "[dds][cloud_writer]") {
+  useLoopbackConfig();
+  sl::daemon::DdsConfig config;
+  config.ns = "sl_test_" + std::to_string(getpid()) + "_decimated";
+  config.points_layout.decimation = 2;
+  sl::pipeline::PinholeModel camera;
+  camera.width = 64;
+  camera.height = 48;
+  camera.fx = camera.fy = 50;
+  camera.cx = 32;
+  camera.cy = 24;
+  sl::daemon::DdsBridge bridge(config, "cam", camera);
+  CHECK_FALSE(bridge.resultContents().keeps_clouds);  // packed: the bridge's buffers are held
+  dds::Participant participant;
+  const std::string topic_name = sl::daemon::TopicNames::forNamespace(config.ns).points;
+  dds::Topic<Cloud> topic(participant, topic_name, sensor_msgs_msg_dds__PointCloud2__desc);
+  dds::Reader<Cloud> reader(participant, topic, dds::Qos().reliable().keepLast(16));
+  REQUIRE(reader.waitForWriters(1, DDS_SECS(10) * sl::test::kTimeScale));
+  constexpr int kClouds = 12;  // held by the reader until it takes them all
+  for (int i = 0; i < kClouds; ++i) {
+    auto cloud = std::make_shared<sl::pipeline::PointCloud>();
+    cloud->width = 64;
+    cloud->height = 48;
+    cloud->stamp_ns = 1'000'000'000LL * (i + 1);
+    for (int v = 0; v < 48; ++v)
+      for (int u = 0; u < 64; ++u)
+        cloud->points.push_back({float(u), float(v), float(i), float(u + v)});
+    sl::daemon::ScanResult result;
+    result.camera_id = "cam";
+    result.cloud = cloud;
+    result.cloud_unit_m = 1.0;
+    bridge.publish(result);
+  }
+  auto loan = reader.take(32);
+  REQUIRE(loan.size() == static_cast<std::size_t>(kClouds));
+  for (int i = 0; i < kClouds; ++i) {
+    INFO("cloud " << i);
+    const Cloud& got = loan[static_cast<std::size_t>(i)];
+    REQUIRE(got.width == 32);
+    REQUIRE(got.height == 24);
+    REQUIRE(got.data._length == 32u * 24u * 16u);
+    const float* p = reinterpret_cast<const float*>(got.data._buffer);
+    int wrong = 0;
+    for (int v = 0; v < 24; ++v)
+      for (int u = 0; u < 32; ++u, p += 4)
+        wrong += p[0] != float(2 * u) || p[1] != float(2 * v) || p[2] != float(i) || p[3] != float(2 * u + 2 * v);
+    CHECK(wrong == 0);
+  }
 }
