@@ -30,7 +30,8 @@ namespace {
 using PointCloud2 = CloudWriter::PointCloud2;
 using Bytes = std::vector<unsigned char>;
 
-// The probe's writer and reader meet only each other (README "Topics").
+// The probe's writer and reader meet only each other (README "Clouds
+// written from their own memory").
 constexpr const char* kProbePartition = "sl_internal_cloud_writer_probe";
 
 // A cloud's serialized form, Cyclone's view first. The CDR bytes are

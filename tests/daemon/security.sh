@@ -42,6 +42,15 @@ expect() {  # rc-expected message-pattern what -- command...
   echo "ok: $what -> exit $rc: $(echo "$msg" | grep -v "dq.builtin" | head -2 | tr '\n' ' ')"
 }
 
+# How the points writer sends clouds under security (README "Clouds written
+# from their own memory"): the daemon must say it, whichever way it is.
+say_how() {  # governance
+  local how
+  how=$(grep 'points: clouds are' "$work/daemon.log" | tail -n 1 || true)
+  [ -n "$how" ] || fail "the daemon's log does not say how it writes clouds: $(head -5 "$work/daemon.log")"
+  echo "ok: $1: $how"
+}
+
 # --- governance_control: requests, replies and status protected, data open ---
 start_daemon governance_control
 expect 0 "3+3_horizontal" "operator lists patterns" -- \
@@ -65,6 +74,7 @@ expect 0 "scan 1/1" "operator scans" -- \
 wait "$listener" || fail "open data: plain listener got no cloud: $(cat "$work/open_listener.log")"
 echo "ok: governance_control: a plain subscriber reads clouds"
 sl_stop_daemon "" 10
+say_how governance_control
 
 # --- governance_all: every topic protected ---
 start_daemon governance_all
@@ -85,4 +95,5 @@ echo "ok: governance_all: a plain subscriber receives nothing"
 expect 3 "no sl_sensord answered" "governance_all: participant without security" -- \
   unsecured "$bin/tools/slctl" --ns "$ns" --timeout 3 status
 sl_stop_daemon "" 10
+say_how governance_all
 echo "security: all checks passed"
