@@ -11,12 +11,16 @@ std::size_t maxPackedBytes(int width, int height, const CloudLayout& layout) {
          static_cast<std::size_t>((height + step - 1) / step) * sizeof(pipeline::PointXYZI);
 }
 
+bool packsInPlace(const CloudLayout& layout, double unit_m) {
+  return unit_m == 1.0 && layout.decimation == 1 && !layout.valid_only;
+}
+
 PackedCloud packCloud(const pipeline::PointCloud& cloud, double unit_m, const CloudLayout& layout,
                       std::vector<float>& buffer) {
   static_assert(sizeof(pipeline::PointXYZI) == 16, "x, y, z, intensity: the PointCloud2 layout");
   const int step = layout.decimation;
   PackedCloud packed;
-  if (unit_m == 1.0 && step == 1 && !layout.valid_only) {
+  if (packsInPlace(layout, unit_m)) {
     packed.data = reinterpret_cast<const std::uint8_t*>(cloud.points.data());
     packed.bytes = cloud.points.size() * sizeof(pipeline::PointXYZI);
     packed.width = static_cast<std::uint32_t>(cloud.width);

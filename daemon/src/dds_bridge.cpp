@@ -243,11 +243,10 @@ DdsBridge::~DdsBridge() = default;
 
 ResultContents DdsBridge::resultContents() const {
   const DdsConfig& c = impl_->config;
-  // A full cloud in metres is published from its own points (packCloud);
-  // a reliable writer sending them in place keeps them until acknowledged.
-  const bool whole = c.points_layout.decimation == 1 && !c.points_layout.valid_only;
+  // A cloud published from its own points and sent in place by a reliable
+  // writer is kept until its readers acknowledged it.
   return {CloudUnit::kMetres, c.publish_projector_maps,
-          impl_->points_writer.borrowing() && c.points_qos.reliable && whole};
+          impl_->points_writer.borrowing() && c.points_qos.reliable && packsInPlace(c.points_layout, 1.0)};
 }
 
 void DdsBridge::publish(const ScanResult& result) {
@@ -258,13 +257,14 @@ void DdsBridge::publish(const ScanResult& result) {
   if (result.cloud) {
     // Triangulated in metres (resultContents()) and sent whole, the cloud's
     // points are the message's data; else one pass packs them.
-    std::shared_ptr<std::vector<float>> buffer = d.packBuffer();
-    const PackedCloud packed =
-        packCloud(*result.cloud, result.cloud_unit_m, d.config.points_layout, *buffer);
     // The sample keeps what its data is in: the cloud or the buffer.
+    const bool in_place = packsInPlace(d.config.points_layout, result.cloud_unit_m);
+    std::shared_ptr<std::vector<float>> buffer = in_place ? nullptr : d.packBuffer();
+    std::vector<float> unused;
+    const PackedCloud packed = packCloud(*result.cloud, result.cloud_unit_m, d.config.points_layout,
+                                         buffer ? *buffer : unused);
     std::shared_ptr<const void> owner = result.cloud;
-    if (packed.data != reinterpret_cast<const std::uint8_t*>(result.cloud->points.data()))
-      owner = std::move(buffer);
+    if (buffer) owner = std::move(buffer);
     const bool written = d.points_writer.write(
         CloudMessage(packed, result.cloud->stamp_ns, d.frame_ids.of(result.camera_id)).sample(),
         std::move(owner));

@@ -6,11 +6,9 @@
 #include "support/time_scale.h"
 #include <catch2/catch.hpp>
 
-#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
-#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -20,6 +18,7 @@
 #include <dds/ddsi/ddsi_serdata.h>
 
 #include "cloud_writer.h"
+#include "daemon_process.h"
 #include "sl/daemon/config.h"
 #include "sl/daemon/dds.h"
 #include "sl/daemon/dds_bridge.h"
@@ -31,16 +30,10 @@ using sl::daemon::CloudWriter;
 using Cloud = CloudWriter::PointCloud2;
 namespace dds = sl::dds;
 
-void useLoopbackConfig() {
-  const char* other = std::getenv("SL_TEST_CYCLONEDDS_URI");
-  const std::string uri =
-      other != nullptr ? other : "file://" SL_SOURCE_DIR "/config/cyclonedds-loopback.xml";
-  setenv("CYCLONEDDS_URI", (uri + sl::test::scaledDdsLeaseXml()).c_str(), 1);
-}
-
+// A topic name no other test (process or case) uses.
 std::string uniqueTopic(const std::string& name) {
   static std::atomic<int> counter{0};
-  return "sl_test/" + std::to_string(getpid()) + "_" + std::to_string(counter++) + "/" + name;
+  return "sl_test/" + sl::test::uniqueNamespace("cloud_writer") + "_" + std::to_string(counter++) + "/" + name;
 }
 
 dds::Qos cloudQos() { return dds::Qos().reliable(DDS_MSECS(200)).keepLast(4).xcdr1(); }
@@ -92,7 +85,7 @@ std::string takeBytes(const dds::Reader<Cloud>& reader) {
 
 TEST_CASE("a borrowed cloud has dds_write's bytes for every frame id and data length",
           "[dds][cloud_writer]") {
-  useLoopbackConfig();
+  sl::test::useLoopbackDds();
   const std::string name = uniqueTopic("points");
   dds::Participant participant;
   dds::Topic<Cloud> topic(participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
@@ -121,7 +114,7 @@ TEST_CASE("a borrowed cloud has dds_write's bytes for every frame id and data le
 
 TEST_CASE("borrowed clouds reach a reader whole and their memory is let go afterwards",
           "[dds][cloud_writer]") {
-  useLoopbackConfig();
+  sl::test::useLoopbackDds();
   const std::string name = uniqueTopic("points");
   dds::Participant writer_participant;
   dds::Participant reader_participant;
@@ -167,7 +160,7 @@ TEST_CASE("borrowed clouds reach a reader whole and their memory is let go after
 }
 
 TEST_CASE("a cloud writer told to serialize says why and still delivers", "[dds][cloud_writer]") {
-  useLoopbackConfig();
+  sl::test::useLoopbackDds();
   const std::string name = uniqueTopic("points");
   dds::Participant participant;
   dds::Topic<Cloud> topic(participant, name, sensor_msgs_msg_dds__PointCloud2__desc);
@@ -187,7 +180,7 @@ TEST_CASE("a cloud writer told to serialize says why and still delivers", "[dds]
 // probe finds what the first one's left there (the in-process bridges of
 // test_bridge.cpp do the same).
 TEST_CASE("cloud writers of several participants in one process", "[dds][cloud_writer]") {
-  useLoopbackConfig();
+  sl::test::useLoopbackDds();
   dds::Participant a;
   dds::Topic<Cloud> ta(a, uniqueTopic("points"), sensor_msgs_msg_dds__PointCloud2__desc);
   CloudWriter wa(a, ta, cloudQos(), "");
@@ -204,16 +197,11 @@ TEST_CASE("cloud writers of several participants in one process", "[dds][cloud_w
 // overwritten by a later one.
 TEST_CASE("decimated clouds borrowed by a reader's history each arrive as packed",
           "[dds][cloud_writer]") {
-  useLoopbackConfig();
+  sl::test::useLoopbackDds();
   sl::daemon::DdsConfig config;
-  config.ns = "sl_test_" + std::to_string(getpid()) + "_decimated";
+  config.ns = sl::test::uniqueNamespace("decimated");
   config.points_layout.decimation = 2;
-  sl::pipeline::PinholeModel camera;
-  camera.width = 64;
-  camera.height = 48;
-  camera.fx = camera.fy = 50;
-  camera.cx = 32;
-  camera.cy = 24;
+  const sl::pipeline::PinholeModel camera{64, 48, 50, 50, 32, 24};  // width, height, fx, fy, cx, cy
   sl::daemon::DdsBridge bridge(config, "cam", camera);
   CHECK_FALSE(bridge.resultContents().keeps_clouds);  // packed: the bridge's buffers are held
   dds::Participant participant;

@@ -30,10 +30,13 @@ struct PackedCloud {
 // drops NaN points, so it may be fewer).
 std::size_t maxPackedBytes(int width, int height, const CloudLayout& layout);
 
-// Packs `cloud` (x, y, z in units of `unit_m` metres) as `layout` says. With
-// metres, the full organized layout borrows cloud.points (no copy); anything
-// else is written to `buffer` in one pass. The result points into `cloud`
-// or `buffer`, so both must outlive it.
+// True when packCloud's data is the cloud's own points (the full organized
+// layout, in metres): no copy, and `buffer` is not used.
+bool packsInPlace(const CloudLayout& layout, double unit_m);
+
+// Packs `cloud` (x, y, z in units of `unit_m` metres) as `layout` says: in
+// place (packsInPlace) or written to `buffer` in one pass. The result points
+// into `cloud` or `buffer`, so both must outlive it.
 PackedCloud packCloud(const pipeline::PointCloud& cloud, double unit_m, const CloudLayout& layout,
                       std::vector<float>& buffer);
 
