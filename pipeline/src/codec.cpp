@@ -37,16 +37,20 @@ SL_MULTIVERSION void nanWhereInvalid(int width, const std::uint8_t* __restrict s
   for (int x = 0; x < width; ++x) coord[x] = status[x] == 0 ? coord[x] : kNaN;
 }
 
-// kBoth: a pixel is valid where both directions are; B is the smaller one.
+// kBoth: a pixel is valid where both directions are; B is the smaller one,
+// the residual the larger.
 SL_MULTIVERSION void combineDirections(int width, std::uint8_t* __restrict status,
-                                       float* __restrict modulation, float* __restrict up,
-                                       float* __restrict vp, const std::uint8_t* __restrict status2,
+                                       float* __restrict modulation, float* __restrict residual,
+                                       float* __restrict up, float* __restrict vp,
+                                       const std::uint8_t* __restrict status2,
                                        const float* __restrict mod2,
+                                       const float* __restrict residual2,
                                        const float* __restrict coord2) {
   for (int x = 0; x < width; ++x) {
     const std::uint8_t s = status[x] != 0 ? status[x] : status2[x];
     status[x] = s;
     modulation[x] = std::min(modulation[x], mod2[x]);
+    residual[x] = std::max(residual[x], residual2[x]);
     up[x] = s == 0 ? up[x] : kNaN;
     vp[x] = s == 0 ? coord2[x] : kNaN;
   }
@@ -155,6 +159,7 @@ void Codec::prepare(const std::vector<cv::Mat>& frames, int bit_depth, Projector
   ensureMap(out.modulation, size, CV_32FC1);
   ensureMap(out.offset, size, CV_32FC1);
   ensureMap(out.status, size, CV_8UC1);
+  ensureMap(out.residual, size, CV_32FC1);
   // The map of an axis the pattern does not encode is never written by
   // decodeRows(): NaN it when it is (re)allocated. Reusing `out` with a codec
   // of another direction therefore needs a fresh ProjectorMaps.
@@ -193,6 +198,7 @@ void Codec::decodeBand(const std::vector<cv::Mat>& frames, int bit_depth, int ro
   ensureBand(band.modulation, CV_32FC1);
   ensureBand(band.offset, CV_32FC1);
   ensureBand(band.status, CV_8UC1);
+  ensureBand(band.residual, CV_32FC1);
   if (spec_.direction == Direction::kVertical && up_new) band.up.setTo(kNaN);
   if (spec_.direction == Direction::kHorizontal && vp_new) band.vp.setTo(kNaN);
   decodeRowsTo(frames, bit_depth, row_begin, row_end, band, 0);
@@ -216,12 +222,13 @@ void Codec::decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int 
   // zeroing them cost as much as 5 % of a 3+3 decode in 16-row blocks).
   const auto scratch =
       std::make_unique_for_overwrite<float[]>(static_cast<std::size_t>(scratchRows()) * width);
-  // Second direction of kBoth: coordinate, B, A, status.
+  // Second direction of kBoth: coordinate, B, A, status, residual.
   const std::size_t width2 = both ? width : 0;
   const auto coord2 = std::make_unique_for_overwrite<float[]>(width2);
   const auto mod2 = std::make_unique_for_overwrite<float[]>(width2);
   const auto off2 = std::make_unique_for_overwrite<float[]>(width2);
   const auto status2 = std::make_unique_for_overwrite<std::uint8_t[]>(width2);
+  const auto residual2 = std::make_unique_for_overwrite<float[]>(width2);
   std::vector<const void*> rows(per_direction);
 
   auto context = [&](bool columns) {
@@ -247,14 +254,16 @@ void Codec::decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int 
     float* modulation = out.modulation.ptr<float>(yo);
     float* offset = out.offset.ptr<float>(yo);
     std::uint8_t* status = out.status.ptr<std::uint8_t>(yo);
-    runRow(0, y, first_ctx, RowOutput{coord, modulation, offset, status});
+    float* residual = out.residual.ptr<float>(yo);
+    runRow(0, y, first_ctx, RowOutput{coord, modulation, offset, status, residual});
     if (!both) {
       nanWhereInvalid(width, status, coord);
       continue;
     }
-    runRow(1, y, second_ctx, RowOutput{coord2.get(), mod2.get(), off2.get(), status2.get()});
-    combineDirections(width, status, modulation, coord, out.vp.ptr<float>(yo), status2.get(),
-                      mod2.get(), coord2.get());
+    runRow(1, y, second_ctx,
+           RowOutput{coord2.get(), mod2.get(), off2.get(), status2.get(), residual2.get()});
+    combineDirections(width, status, modulation, residual, coord, out.vp.ptr<float>(yo),
+                      status2.get(), mod2.get(), residual2.get(), coord2.get());
   }
 }
 

@@ -167,6 +167,7 @@ class GrayCodec final : public RowTemplateCodec<GrayCodec> {
         s = b[x] >= min_b ? s : 1;
         s = peak[x] >= saturation ? 2 : s;
         status[x] = s;
+        out.residual[x] = 0.0f;
       }
       return;
     }
@@ -225,6 +226,7 @@ class GrayCodec final : public RowTemplateCodec<GrayCodec> {
       s = out.modulation[x] >= min_b ? s : 1;
       s = peak[x] >= saturation ? 2 : s;
       status[x] = s;
+      out.residual[x] = err;
     }
   }
 

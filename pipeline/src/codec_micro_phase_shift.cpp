@@ -111,7 +111,9 @@ class MicroPhaseShiftCodec final : public RowTemplateCodec<MicroPhaseShiftCodec>
       const float p = base + static_cast<float>(best_k) * wavelength;
       out.coord[x] = p;
       std::uint8_t st = p >= -0.5f && p <= max_coord ? 0 : 4;
-      st = std::sqrt(best / static_cast<float>(others)) > max_err ? 3 : st;
+      const float residual = std::sqrt(best / static_cast<float>(others));
+      out.residual[x] = residual;
+      st = residual > max_err ? 3 : st;
       st = a >= min_b ? st : 1;
       st = peak >= c.saturation ? 2 : st;
       out.status[x] = st;

@@ -130,6 +130,7 @@ class ModulatedPhaseShiftCodec final : public RowTemplateCodec<ModulatedPhaseShi
       out.coord[x] = p;
       out.offset[x] = a_first;
       out.modulation[x] = b_finest;
+      out.residual[x] = err;
       std::uint8_t st = p >= -0.5f && p <= max_coord ? 0 : 4;
       st = err > max_err ? 3 : st;
       st = b_min >= min_b ? st : 1;

@@ -59,7 +59,8 @@ void phaseAndModulation(int n, const float* __restrict s, const float* __restric
 // Unwrapping, coordinate and status of one pixel of two sets, as the general
 // row does (status as a float code: the loops then vectorize in one width).
 inline void twoSetPixel(const TwoSetConstants& k, float phase_fine, float phase_coarse,
-                        float b2_min, float peak, float& coord, float& status_code) {
+                        float b2_min, float peak, float& coord, float& status_code,
+                        float& residual) {
   const float cycles = (k.ratio * phase_coarse - phase_fine) * kInvTwoPi;
   const float n = roundUp1024(cycles);
   const float err = std::fabs(cycles - n);
@@ -71,6 +72,7 @@ inline void twoSetPixel(const TwoSetConstants& k, float phase_fine, float phase_
   st = peak >= k.saturation ? 2.0f : st;
   status_code = st;
   coord = p;
+  residual = err;
 }
 
 // Two 3-step sets, hierarchical (the 3+3 patterns): the general row fused
@@ -98,6 +100,7 @@ template <bool kOffsetFromFine, typename Pixel>
   float* __restrict coord = out.coord;
   float* __restrict modulation = out.modulation;
   float* __restrict offset = out.offset;
+  float* __restrict residual = out.residual;
   float* __restrict status_code = out.scratch;
   // Nine inputs and five outputs exceed GCC's alias-check budget; the rows
   // are distinct buffers (frames vs. maps vs. scratch).
@@ -117,7 +120,7 @@ template <bool kOffsetFromFine, typename Pixel>
     const float b2_coarse = (sg * sg + cg * cg) * coarse_scale2;
     modulation[x] = std::sqrt(b2_fine);
     twoSetPixel(k, fastAtan2Positive(sf, cf), fastAtan2Positive(sg, cg),
-                std::min(b2_fine, b2_coarse), peak, coord[x], status_code[x]);
+                std::min(b2_fine, b2_coarse), peak, coord[x], status_code[x], residual[x]);
   }
   // Separate from the float loop, which then vectorizes in one vector width.
   std::uint8_t* __restrict status = out.status;
@@ -190,6 +193,7 @@ struct Avx512Rows {
   float* modulation;
   float* offset;
   std::uint8_t* status;
+  float* residual;
 };
 
 SL_AVX512 inline __m512 absPs(__m512 v, __m512i abs_mask) {
@@ -294,6 +298,7 @@ SL_AVX512 inline void twoThreeStepBlock(const Avx512Constants& c, const Avx512Ro
   SL_EACH_LANE _mm512_mask_storeu_ps(r.coord + x + 16 * j, m, p[j]);
   SL_EACH_LANE {
     const __m512 err = absPs(_mm512_sub_ps(cycles[j], n[j]), c.abs_mask);
+    _mm512_mask_storeu_ps(r.residual + x + 16 * j, m, err);
     const __mmask16 in_range = _mm512_mask_cmp_ps_mask(
         _mm512_cmp_ps_mask(p[j], c.min_coord, _CMP_GE_OQ), p[j], c.max_coord, _CMP_LE_OQ);
     const __mmask16 bad_unwrap = _mm512_cmp_ps_mask(err, c.max_err, _CMP_GT_OQ);
@@ -355,7 +360,8 @@ SL_AVX512 void twoThreeStepRowAvx512(const TwoThreeStepParams& prm, const std::u
                      out.coord,
                      out.modulation,
                      out.offset,
-                     out.status};
+                     out.status,
+                     out.residual};
   // Vectors in flight: with 1 the kernel was slower than the compiled loop,
   // with 2 about as fast; 3 and 4 measured alike.
   constexpr int kLanes = 4;
@@ -572,7 +578,8 @@ class PhaseShiftCodec final : public RowTemplateCodec<PhaseShiftCodec> {
     const Pixel* rows[6] = {frames[fine.frames[0]],   frames[fine.frames[1]],
                             frames[fine.frames[2]],   frames[coarse.frames[0]],
                             frames[coarse.frames[1]], frames[coarse.frames[2]]};
-    const TwoThreeStepOutput o{out.coord, out.modulation, out.offset, out.status, c.scratch};
+    const TwoThreeStepOutput o{out.coord,  out.modulation, out.offset,
+                               out.status, out.residual,   c.scratch};
     if constexpr (std::is_same_v<Pixel, std::uint8_t>) {
       if (avx512_) {
         twoThreeStepRowAvx512(p, rows, width, o);
@@ -620,6 +627,7 @@ class PhaseShiftCodec final : public RowTemplateCodec<PhaseShiftCodec> {
     float* __restrict coord = out.coord;
     float* __restrict modulation = out.modulation;
     float* __restrict offset = out.offset;
+    float* __restrict residual = out.residual;
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC ivdep
 #endif
@@ -631,7 +639,7 @@ class PhaseShiftCodec final : public RowTemplateCodec<PhaseShiftCodec> {
       offset[x] = ((static_cast<float>(o0[x]) + o1[x]) + o2[x]) * inv_count;
       modulation[x] = std::sqrt(b2_fine[x]);
       twoSetPixel(k, phase_fine[x], phase_coarse[x], std::min(b2_fine[x], b2_coarse[x]), peak,
-                  coord[x], status_code[x]);
+                  coord[x], status_code[x], residual[x]);
     }
     std::uint8_t* __restrict status = out.status;
     for (int x = 0; x < width; ++x) status[x] = static_cast<std::uint8_t>(status_code[x]);
@@ -783,6 +791,7 @@ class PhaseShiftCodec final : public RowTemplateCodec<PhaseShiftCodec> {
     const float saturation = c.saturation;
     float* __restrict coord = out.coord;
     std::uint8_t* __restrict status = out.status;
+    std::copy(err, err + n, out.residual);
     for (int x = 0; x < n; ++x) {
       float p = phi_abs[x] * to_px;
       p -= period * floor1024(p * inv_period);

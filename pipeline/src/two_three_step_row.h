@@ -38,6 +38,7 @@ struct TwoThreeStepOutput {
   float* modulation;
   float* offset;
   std::uint8_t* status;
+  float* residual;
   float* scratch;  // `width` floats (the portable kernel's status codes)
 };
 

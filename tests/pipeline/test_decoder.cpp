@@ -126,11 +126,13 @@ TEST_CASE("AVX-512 3+3 row kernel matches the portable one bit for bit", "[decod
   const int max_width = 1000 + 13;
   std::vector<std::vector<std::uint8_t>> frames(6, std::vector<std::uint8_t>(max_width));
   struct Maps {
-    std::vector<float> coord, modulation, offset, scratch;
+    std::vector<float> coord, modulation, offset, residual, scratch;
     std::vector<std::uint8_t> status;
-    explicit Maps(int n) : coord(n), modulation(n), offset(n), scratch(n), status(n) {}
+    explicit Maps(int n)
+        : coord(n), modulation(n), offset(n), residual(n), scratch(n), status(n) {}
     detail::TwoThreeStepOutput out() {
-      return {coord.data(), modulation.data(), offset.data(), status.data(), scratch.data()};
+      return {coord.data(),  modulation.data(), offset.data(),
+              status.data(), residual.data(),   scratch.data()};
     }
   };
   auto same = [](const std::vector<float>& a, const std::vector<float>& b, int n) {
@@ -188,6 +190,7 @@ TEST_CASE("AVX-512 3+3 row kernel matches the portable one bit for bit", "[decod
           const bool equal = same(portable.coord, avx512.coord, width) &&
                              same(portable.modulation, avx512.modulation, width) &&
                              same(portable.offset, avx512.offset, width) &&
+                             same(portable.residual, avx512.residual, width) &&
                              portable.status == avx512.status;
           if (!equal) ++differing_rows;
           for (int x = 0; x < width; ++x) ++status_count[std::min<int>(portable.status[x], 4)];

@@ -74,6 +74,8 @@ float derivedMinModulation(const PatternSpec& spec, float max_unwrap_error);
 // - status: PixelStatus, the first failing test in the order saturated, low
 //   modulation, unwrap inconsistency, out of range; for kBoth a pixel is
 //   valid only when both directions are (otherwise up and vp are both NaN).
+// - residual: the consistency residual behind kUnwrapInconsistent (types.h),
+//   for decode health (decode_health.h).
 class Codec {
  public:
   virtual ~Codec() = default;
@@ -126,6 +128,7 @@ class Codec {
     float* modulation;
     float* offset;
     std::uint8_t* status;
+    float* residual;  // ProjectorMaps::residual
   };
   struct RowContext {
     bool columns;       // the direction's axis

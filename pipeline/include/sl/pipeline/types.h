@@ -64,6 +64,15 @@ struct ProjectorMaps {
   cv::Mat modulation;  // CV_32FC1 B of eq. 1 in camera DN (of the encoding frames)
   cv::Mat offset;      // CV_32FC1 A of eq. 1 in camera DN
   cv::Mat status;      // CV_8UC1 PixelStatus per pixel
+  // CV_32FC1 consistency residual of the code at each pixel, the quantity the
+  // codec compares with DecoderOptions::max_unwrap_error: temporal unwrapping
+  // |r Phi_coarse - phi_fine - 2 pi k| / (2 pi) in periods of the finer
+  // frequency (largest over the steps), Gray + phase shift with the
+  // complementary bit the periods outside the half stripe, micro phase shift
+  // the RMS cosine residual of the chosen period. 0 where the code has no
+  // such test (Gray code, one frequency); for kBoth the larger of the two
+  // directions. Any value where status is kLowModulation or kSaturated.
+  cv::Mat residual;
 };
 
 struct PointXYZI {

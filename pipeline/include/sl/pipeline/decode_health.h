@@ -1,0 +1,98 @@
+// Decode health of one scan: does what was decoded look like frames of the
+// pattern the decoder was told about? A wrong description (frequencies in the
+// wrong order, another period, another steps x frequencies split) still
+// yields "valid" pixels, but their consistency residuals (ProjectorMaps::
+// residual) spread uniformly over [0, 0.5] periods instead of gathering near
+// 0, and many pixels fail unwrapping. Measured from the maps the codec wrote
+// (status and residual of every pixel) and from the frames (modulation per
+// frequency, on a sparse grid). Thresholds and their measurements:
+// docs/decode-health.md.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "sl/pipeline/codec.h"
+#include "sl/pipeline/pattern_spec.h"
+#include "sl/pipeline/types.h"
+
+namespace sl::pipeline {
+
+// Where a decode stops being plausible. Fractions are of the modulated
+// pixels (valid, unwrap inconsistent or out of range: above the modulation
+// threshold and not saturated).
+struct DecodeHealthLimits {
+  // Fewer modulated pixels than this: too little to judge (not implausible).
+  std::int64_t min_modulated_pixels = 2000;
+  // Implausible above these (codes with a consistency test only).
+  double max_inconsistent_fraction = 0.15;
+  double max_median_residual = 0.10;  // periods (micro phase shift: RMS cosine)
+  // Implausible above this (every code): the coordinates run past the
+  // projector, which a right description only gives through noise at the
+  // last pixel (another period or pitch than the one projected, or another
+  // projector size).
+  double max_out_of_range_fraction = 0.02;
+  // A warning above this fraction of all pixels.
+  double max_saturated_fraction = 0.05;
+};
+
+// Median modulation B (8-bit DN, i.e. camera DN / 2^(bit_depth - 8)) of one
+// sinusoid set of the pattern over the modulated pixels of a sparse grid.
+struct FrequencyModulation {
+  bool columns = true;     // the set encodes u_p (else v_p)
+  double frequency = 0;    // periods across the axis
+  double median_b_dn = 0;  // 8-bit DN
+};
+
+struct DecodeHealth {
+  std::int64_t pixels = 0;
+  std::int64_t valid = 0, low_modulation = 0, saturated = 0, inconsistent = 0, out_of_range = 0;
+  std::int64_t modulated() const { return valid + inconsistent + out_of_range; }
+  // modulated / pixels.
+  double modulatedFraction() const;
+  // (valid + out_of_range) / modulated: pixels whose code agreed with itself.
+  double consistentFraction() const;
+  double inconsistentFraction() const;   // inconsistent / modulated
+  double outOfRangeFraction() const;     // out_of_range / modulated
+  double saturatedFraction() const;      // saturated / pixels
+
+  // The code has a consistency test (>= 2 frequencies, micro phase shift,
+  // Gray + phase shift with the complementary bit); without one the residual
+  // fields are 0 and a wrong description cannot be seen from one scan.
+  bool has_residual = false;
+  // Distribution of the residual over the modulated pixels: quantiles and
+  // the fraction in each bin [0.05 i, 0.05 (i + 1)) periods, the last bin
+  // everything from 0.5 up. Uniform residuals (a wrong description) give a
+  // median near 0.25 and about 0.1 per bin.
+  double residual_median = 0, residual_p90 = 0;
+  std::array<double, 11> residual_histogram{};
+  double max_unwrap_error = 0;  // the decoder's bound, for the reader
+
+  std::vector<FrequencyModulation> modulation;
+
+  // Judgement against DecodeHealthLimits: `implausible` with one sentence per
+  // failed limit in `problems`; `warnings` for what deserves a look.
+  bool implausible = false;
+  std::vector<std::string> problems;
+  std::vector<std::string> warnings;
+};
+
+// Measures the health of `maps` decoded by a codec of `spec` with `options`
+// (the options the codec used: Codec::options()) from `frames` (the frames
+// decoded, projection order) of `bit_depth` significant bits. Throws
+// std::invalid_argument when the maps lack status or residual or differ in
+// size from the frames.
+DecodeHealth measureDecodeHealth(const PatternSpec& spec, const DecoderOptions& options,
+                                 const ProjectorMaps& maps, const std::vector<cv::Mat>& frames,
+                                 int bit_depth, const DecodeHealthLimits& limits = {});
+
+// Multi-line text (each line starting with `prefix`): counts, fractions,
+// residual quantiles and histogram, modulation per frequency, problems and
+// warnings.
+std::string describeDecodeHealth(const DecodeHealth& health, const std::string& prefix);
+
+}  // namespace sl::pipeline

@@ -1,0 +1,275 @@
+// Decode health: counts of the status map, the residual distribution of the
+// modulated pixels, the modulation of each sinusoid set on a sparse grid.
+#include "sl/pipeline/decode_health.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "frame_layout.h"
+
+namespace sl::pipeline {
+
+namespace {
+
+// Grid step (camera px, both axes) of the modulation-per-frequency estimate.
+constexpr int kModulationGridStep = 4;
+
+bool modulatedStatus(std::uint8_t s) {
+  return s == static_cast<std::uint8_t>(PixelStatus::kValid) ||
+         s == static_cast<std::uint8_t>(PixelStatus::kUnwrapInconsistent) ||
+         s == static_cast<std::uint8_t>(PixelStatus::kOutOfRange);
+}
+
+bool hasConsistencyTest(const PatternSpec& spec) {
+  switch (spec.family) {
+    case PatternFamily::kPhaseShift:
+    case PatternFamily::kTwoPlusOne:
+    case PatternFamily::kModulatedPhaseShift:
+      return spec.frequencies.size() >= 2;
+    case PatternFamily::kMicroPhaseShift:
+      return true;
+    case PatternFamily::kGrayPhaseShift:
+      return spec.complementary;
+    case PatternFamily::kGrayCode:
+      return false;
+  }
+  return false;
+}
+
+// Value of `sorted` at quantile q (nearest rank).
+double quantile(const std::vector<float>& sorted, double q) {
+  if (sorted.empty()) return 0;
+  const auto i = static_cast<std::size_t>(std::clamp(q * double(sorted.size() - 1), 0.0,
+                                                     double(sorted.size() - 1)));
+  return sorted[i];
+}
+
+// One N-step set (equally spaced shifts) of one direction: the captured
+// frames of each shift, summed over carrier shifts (modulated phase shift:
+// the three carrier phases add up to a constant 1.5 times the sinusoid).
+struct SinusoidSet {
+  bool columns = true;
+  double frequency = 0;
+  std::vector<double> deltas;
+  std::vector<std::vector<int>> frames;  // per delta: captured frame indices
+};
+
+std::vector<SinusoidSet> sinusoidSets(const PatternSpec& spec) {
+  const auto canonical = detail::canonicalFrames(spec);
+  std::vector<int> position(canonical.size(), -1);
+  for (int i = 0; i < spec.frameCount(); ++i) {
+    const int c = spec.frame_order.empty() ? i : spec.frame_order[i];
+    if (c != kSkippedFrame) position[static_cast<std::size_t>(c)] = i;
+  }
+  std::vector<SinusoidSet> sets;
+  for (std::size_t c = 0; c < canonical.size(); ++c) {
+    const detail::FrameInfo& f = canonical[c];
+    if (f.kind != detail::FrameInfo::Kind::kSinusoid) continue;
+    auto set = std::find_if(sets.begin(), sets.end(), [&](const SinusoidSet& s) {
+      return s.columns == f.columns && s.frequency == f.frequency;
+    });
+    if (set == sets.end()) {
+      sets.push_back(SinusoidSet{f.columns, f.frequency, {}, {}});
+      set = sets.end() - 1;
+    }
+    auto d = std::find(set->deltas.begin(), set->deltas.end(), f.delta);
+    if (d == set->deltas.end()) {
+      set->deltas.push_back(f.delta);
+      set->frames.emplace_back();
+      d = set->deltas.end() - 1;
+    }
+    set->frames[static_cast<std::size_t>(d - set->deltas.begin())].push_back(position[c]);
+  }
+  // Only sets whose shifts are equally spaced over 2 pi (N >= 3) give B
+  // from the first harmonic alone; 2+1 pairs and single micro frames do not.
+  std::erase_if(sets, [&](const SinusoidSet& s) {
+    return s.deltas.size() < 3 || spec.family == PatternFamily::kTwoPlusOne;
+  });
+  return sets;
+}
+
+template <typename Pixel>
+std::vector<FrequencyModulation> modulationPerSet(const std::vector<SinusoidSet>& sets,
+                                                  const std::vector<cv::Mat>& frames,
+                                                  const cv::Mat& status, double dn_scale) {
+  std::vector<FrequencyModulation> out;
+  for (const SinusoidSet& s : sets) {
+    const int n = static_cast<int>(s.deltas.size());
+    std::vector<double> ws(n), wc(n);
+    for (int m = 0; m < n; ++m) {
+      ws[m] = std::sin(s.deltas[m]) / static_cast<double>(s.frames[m].size());
+      wc[m] = std::cos(s.deltas[m]) / static_cast<double>(s.frames[m].size());
+    }
+    std::vector<float> b;
+    for (int y = 0; y < status.rows; y += kModulationGridStep) {
+      const auto* st = status.ptr<std::uint8_t>(y);
+      for (int x = 0; x < status.cols; x += kModulationGridStep) {
+        if (!modulatedStatus(st[x])) continue;
+        double sv = 0, cv = 0;
+        for (int m = 0; m < n; ++m) {
+          double v = 0;
+          for (int i : s.frames[m]) v += frames[static_cast<std::size_t>(i)].ptr<Pixel>(y)[x];
+          sv += ws[m] * v;
+          cv += wc[m] * v;
+        }
+        b.push_back(static_cast<float>(2.0 / n * std::hypot(sv, cv) / dn_scale));
+      }
+    }
+    std::sort(b.begin(), b.end());
+    out.push_back(FrequencyModulation{s.columns, s.frequency, quantile(b, 0.5)});
+  }
+  return out;
+}
+
+std::string percent(double fraction) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.1f %%", 100.0 * fraction);
+  return text;
+}
+
+std::string fixed(double v, int digits) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.*f", digits, v);
+  return text;
+}
+
+}  // namespace
+
+double DecodeHealth::modulatedFraction() const {
+  return pixels > 0 ? double(modulated()) / double(pixels) : 0.0;
+}
+double DecodeHealth::consistentFraction() const {
+  return modulated() > 0 ? double(valid + out_of_range) / double(modulated()) : 0.0;
+}
+double DecodeHealth::inconsistentFraction() const {
+  return modulated() > 0 ? double(inconsistent) / double(modulated()) : 0.0;
+}
+double DecodeHealth::outOfRangeFraction() const {
+  return modulated() > 0 ? double(out_of_range) / double(modulated()) : 0.0;
+}
+double DecodeHealth::saturatedFraction() const {
+  return pixels > 0 ? double(saturated) / double(pixels) : 0.0;
+}
+
+DecodeHealth measureDecodeHealth(const PatternSpec& spec, const DecoderOptions& options,
+                                 const ProjectorMaps& maps, const std::vector<cv::Mat>& frames,
+                                 int bit_depth, const DecodeHealthLimits& limits) {
+  if (maps.status.empty() || maps.status.type() != CV_8UC1 || maps.residual.type() != CV_32FC1 ||
+      maps.residual.size() != maps.status.size())
+    throw std::invalid_argument("measureDecodeHealth: maps without status or residual");
+  if (static_cast<int>(frames.size()) != spec.frameCount())
+    throw std::invalid_argument("measureDecodeHealth: " + std::to_string(frames.size()) +
+                                " frames for pattern '" + spec.name + "' of " +
+                                std::to_string(spec.frameCount()));
+  for (const cv::Mat& f : frames)
+    if (f.size() != maps.status.size() || (f.type() != CV_8UC1 && f.type() != CV_16UC1) ||
+        f.type() != frames.front().type())
+      throw std::invalid_argument("measureDecodeHealth: frames differ from the maps");
+
+  DecodeHealth h;
+  h.has_residual = hasConsistencyTest(spec);
+  h.max_unwrap_error = options.max_unwrap_error;
+  std::int64_t counts[5] = {0, 0, 0, 0, 0};
+  std::vector<float> residuals;
+  for (int y = 0; y < maps.status.rows; ++y) {
+    const auto* st = maps.status.ptr<std::uint8_t>(y);
+    const auto* r = maps.residual.ptr<float>(y);
+    for (int x = 0; x < maps.status.cols; ++x) {
+      ++counts[std::min<int>(st[x], 4)];
+      if (h.has_residual && modulatedStatus(st[x])) residuals.push_back(r[x]);
+    }
+  }
+  h.pixels = static_cast<std::int64_t>(maps.status.total());
+  h.valid = counts[0];
+  h.low_modulation = counts[1];
+  h.saturated = counts[2];
+  h.inconsistent = counts[3];
+  h.out_of_range = counts[4];
+  if (!residuals.empty()) {
+    for (float r : residuals) {
+      const int bin = std::clamp(static_cast<int>(r / 0.05f), 0, 10);
+      h.residual_histogram[static_cast<std::size_t>(bin)] += 1.0;
+    }
+    for (double& b : h.residual_histogram) b /= double(residuals.size());
+    const auto mid = residuals.begin() + static_cast<std::ptrdiff_t>(residuals.size() / 2);
+    std::nth_element(residuals.begin(), mid, residuals.end());
+    h.residual_median = *mid;
+    const auto p90 = residuals.begin() + static_cast<std::ptrdiff_t>(residuals.size() * 9 / 10);
+    std::nth_element(residuals.begin(), p90, residuals.end());
+    h.residual_p90 = *p90;
+  }
+  const auto sets = sinusoidSets(spec);
+  const double dn_scale = std::ldexp(1.0, bit_depth - 8);
+  h.modulation = frames.front().type() == CV_8UC1
+                     ? modulationPerSet<std::uint8_t>(sets, frames, maps.status, dn_scale)
+                     : modulationPerSet<std::uint16_t>(sets, frames, maps.status, dn_scale);
+
+  // Judgement.
+  const std::int64_t modulated = h.modulated();
+  if (modulated < limits.min_modulated_pixels) {
+    h.warnings.push_back(std::to_string(modulated) + " modulated pixels (fewer than " +
+                         std::to_string(limits.min_modulated_pixels) +
+                         "): too few to judge whether the pattern description fits the frames");
+  } else if (h.has_residual) {
+    if (h.inconsistentFraction() > limits.max_inconsistent_fraction)
+      h.problems.push_back(percent(h.inconsistentFraction()) +
+                           " of modulated pixels fail unwrapping (limit " +
+                           percent(limits.max_inconsistent_fraction) +
+                           "): does the pattern file match the projected sequence "
+                           "(frequencies and their order, steps, frame order)?");
+    if (h.residual_median > limits.max_median_residual)
+      h.problems.push_back("median unwrapping residual " + fixed(h.residual_median, 3) +
+                           " (limit " + fixed(limits.max_median_residual, 3) +
+                           "; 0.25 is what a description that does not fit the frames gives)");
+  }
+  if (modulated >= limits.min_modulated_pixels &&
+      h.outOfRangeFraction() > limits.max_out_of_range_fraction)
+    h.problems.push_back(percent(h.outOfRangeFraction()) +
+                         " of modulated pixels decode outside the projector (limit " +
+                         percent(limits.max_out_of_range_fraction) +
+                         "): is the fringe pitch, period or projector size of the pattern file "
+                         "the projected one?");
+  if (h.saturatedFraction() > limits.max_saturated_fraction)
+    h.warnings.push_back(percent(h.saturatedFraction()) +
+                         " of pixels saturated (limit " + percent(limits.max_saturated_fraction) +
+                         "): lower the exposure, or decode them anyway with --keep-saturated");
+  if (!h.has_residual)
+    h.warnings.push_back("pattern '" + spec.name +
+                         "' has no consistency test (one frequency, or Gray code without the "
+                         "complementary bit): a wrong description cannot be seen in one scan");
+  h.implausible = !h.problems.empty();
+  return h;
+}
+
+std::string describeDecodeHealth(const DecodeHealth& h, const std::string& prefix) {
+  std::ostringstream o;
+  o << prefix << "pixels " << h.pixels << ": " << h.valid << " valid, " << h.low_modulation
+    << " low modulation, " << h.saturated << " saturated, " << h.inconsistent
+    << " unwrap inconsistent, " << h.out_of_range << " out of range\n";
+  o << prefix << "modulated " << percent(h.modulatedFraction()) << " of pixels; of those "
+    << percent(h.consistentFraction()) << " unwrap consistently, "
+    << percent(h.outOfRangeFraction()) << " out of range\n";
+  if (h.has_residual) {
+    o << prefix << "unwrapping residual median " << fixed(h.residual_median, 3) << ", p90 "
+      << fixed(h.residual_p90, 3) << " (bound " << fixed(h.max_unwrap_error, 2)
+      << "); per 0.05 bin:";
+    for (double b : h.residual_histogram) o << " " << fixed(100.0 * b, 1);
+    o << " %\n";
+  }
+  if (!h.modulation.empty()) {
+    o << prefix << "modulation B (8-bit DN, median):";
+    for (const FrequencyModulation& m : h.modulation)
+      o << " " << (m.columns ? "u" : "v") << "@" << m.frequency << " " << fixed(m.median_b_dn, 1);
+    o << "\n";
+  }
+  for (const std::string& p : h.problems) o << prefix << "IMPLAUSIBLE: " << p << "\n";
+  for (const std::string& w : h.warnings) o << prefix << "warning: " << w << "\n";
+  return o.str();
+}
+
+}  // namespace sl::pipeline

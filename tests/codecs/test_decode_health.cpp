@@ -1,0 +1,147 @@
+// Decode health (pipeline/decode_health.h) on simulated captures: frames
+// rendered for one pattern, decoded with a description that does not fit
+// them (the mistakes of issue 32), must be judged implausible; the right
+// description of the same frames must not, and must decode to the
+// simulator's ground truth.
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <catch2/catch.hpp>
+
+#include "sl/drivers/sim.h"
+#include "sl/drivers/sim_rig.h"
+#include "sl/pipeline/codec.h"
+#include "sl/pipeline/decode_health.h"
+
+using namespace sl;
+using pipeline::PatternFamily;
+using pipeline::PatternSpec;
+
+namespace {
+
+// The rig of config/sim.yaml with a tilted plane and a sphere, the
+// simulator's default noise and optics, 8-bit frames.
+drivers::SimConfig simConfig(std::vector<PatternSpec> patterns) {
+  drivers::SimConfig c;
+  c.rig = drivers::simRig();
+  drivers::SimPlane plane;
+  plane.point = {0, 0, 600};
+  plane.normal = {0.1, 0.2, -1};
+  plane.albedo = 0.8;
+  c.scene.planes = {plane};
+  drivers::SimSphere sphere;
+  sphere.center = {40, -20, 520};
+  sphere.radius = 60;
+  sphere.albedo = 0.7;
+  c.scene.spheres = {sphere};
+  c.patterns = std::move(patterns);
+  return c;
+}
+
+PatternSpec phaseShift(const std::string& name, int steps, std::vector<double> frequencies) {
+  PatternSpec p;
+  p.name = name;
+  p.family = PatternFamily::kPhaseShift;
+  p.steps = steps;
+  p.frequencies = std::move(frequencies);
+  return p;
+}
+
+struct Decoded {
+  pipeline::DecodeHealth health;
+  double within_1px = 0;  // of valid pixels, |up - ground truth| <= 1 px
+  long valid = 0;
+};
+
+// Renders `truth` and decodes the frames as `described`.
+Decoded decodeAs(const PatternSpec& truth, const PatternSpec& described) {
+  const auto sensor = drivers::SimulatedSensor::create(simConfig({truth}));
+  std::vector<cv::Mat> frames;
+  for (int f = 0; f < truth.frameCount(); ++f) frames.push_back(sensor->render(truth.name, f, 7));
+  const auto codec = pipeline::makeCodec(described, {});
+  const auto maps = codec->decode(frames, 8);
+  Decoded d;
+  d.health = pipeline::measureDecodeHealth(described, codec->options(), maps, frames, 8);
+  const cv::Mat& gt = sensor->groundTruth().up;
+  long within = 0;
+  for (int v = 0; v < maps.status.rows; ++v)
+    for (int u = 0; u < maps.status.cols; ++u) {
+      if (maps.status.at<std::uint8_t>(v, u) != 0) continue;
+      ++d.valid;
+      within += std::abs(maps.up.at<float>(v, u) - gt.at<float>(v, u)) <= 1.0f;
+    }
+  d.within_1px = d.valid > 0 ? double(within) / double(d.valid) : 0.0;
+  return d;
+}
+
+std::string summary(const Decoded& d) {
+  return pipeline::describeDecodeHealth(d.health, "  ") + "  valid " + std::to_string(d.valid) +
+         ", within 1 px of ground truth " + std::to_string(100 * d.within_1px) + " %";
+}
+
+}  // namespace
+
+TEST_CASE("decode health: the right description is plausible and matches ground truth",
+          "[codecs][health]") {
+  std::vector<PatternSpec> patterns;
+  patterns.push_back(phaseShift("3+3_16", 3, {16, 1}));
+  patterns.push_back(phaseShift("3+3_40", 3, {40, 1}));
+  patterns.push_back(phaseShift("12x4", 12, {64, 16, 4, 1}));
+  PatternSpec heterodyne = phaseShift("heterodyne_3x4", 4, {70, 64, 59});
+  heterodyne.unwrapping = pipeline::Unwrapping::kHeterodyne;
+  patterns.push_back(heterodyne);
+  PatternSpec gray;
+  gray.name = "gray_ps";
+  gray.family = PatternFamily::kGrayPhaseShift;
+  gray.gray_bits = 5;
+  gray.complementary = true;
+  gray.steps = 4;
+  patterns.push_back(gray);
+  PatternSpec micro;
+  micro.name = "micro";
+  micro.family = PatternFamily::kMicroPhaseShift;
+  micro.frequencies = {1824 / 16.0, 1824 / 16.5, 1824 / 17.0, 1824 / 17.5, 1824 / 18.0,
+                       1824 / 18.5};
+  patterns.push_back(micro);
+  for (const PatternSpec& p : patterns) {
+    const Decoded d = decodeAs(p, p);
+    INFO(p.name << "\n" << summary(d));
+    WARN(p.name << "\n" << summary(d));
+    CHECK_FALSE(d.health.implausible);
+    CHECK(d.health.has_residual);
+    CHECK(d.health.modulated() > 100000);
+    CHECK(d.within_1px > 0.99);
+  }
+}
+
+TEST_CASE("decode health: a description that does not fit the frames is implausible",
+          "[codecs][health]") {
+  struct Case {
+    const char* mistake;
+    PatternSpec truth, described;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"frequency list in reverse order", phaseShift("p", 12, {64, 16, 4, 1}),
+                   phaseShift("p", 12, {1, 4, 16, 64})});
+  cases.push_back({"48 frames as 16 steps x 3 frequencies instead of 12 x 4",
+                   phaseShift("p", 12, {64, 16, 4, 1}), phaseShift("p", 16, {16, 4, 1})});
+  cases.push_back({"3+3 of 40 periods described with 16 (same preset name)",
+                   phaseShift("3+3_horizontal", 3, {40, 1}),
+                   phaseShift("3+3_horizontal", 3, {16, 1})});
+  cases.push_back({"unit cue first, fine set second", phaseShift("p", 3, {16, 1}),
+                   phaseShift("p", 3, {1, 16})});
+  cases.push_back({"12 periods for 16", phaseShift("p", 3, {16, 1}), phaseShift("p", 3, {12, 1})});
+  cases.push_back({"20 periods for 16", phaseShift("p", 3, {16, 1}), phaseShift("p", 3, {20, 1})});
+  PatternSpec mirrored = phaseShift("p", 4, {16, 1});
+  mirrored.start_phase_rad = 3.14159265358979;
+  cases.push_back({"start phase pi off", phaseShift("p", 4, {16, 1}), mirrored});
+  for (const Case& c : cases) {
+    const Decoded d = decodeAs(c.truth, c.described);
+    INFO(c.mistake << "\n" << summary(d));
+    WARN(c.mistake << "\n" << summary(d));
+    CHECK(d.health.implausible);
+    CHECK_FALSE(d.health.problems.empty());
+  }
+}
