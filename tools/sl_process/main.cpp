@@ -11,8 +11,12 @@
 // Frames are the image files of DIR in the natural order of the numbers in
 // their names (ambiguous numbering is refused), or the files named one per
 // line in --list (relative to DIR). Without --calibration only the maps (and
-// with --phase the phase maps) are written. Exit codes: 0 ok, 1 error
-// (including a capture that decodes to no valid pixel), 2 usage.
+// with --phase the phase maps) are written. The decode health of the capture
+// (pipeline/decode_health.h) is printed; a recorded set folder's meta.yml is
+// checked against the pattern file. Exit codes: 0 ok, 1 error (including a
+// capture that decodes to no valid pixel, and a recording made with another
+// pattern), 2 usage, 3 decoded but implausible (outputs written; 0 with
+// --accept-implausible).
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -30,15 +34,39 @@
 
 namespace {
 
+constexpr int kExitImplausible = 3;
+
+const char* const kHelp =
+    "usage: sl_process --pattern P.yaml --images DIR [options]\n"
+    "Decodes (and with --calibration triangulates) one recorded capture.\n"
+    "  --pattern FILE            pattern file describing the projected sequence (required)\n"
+    "  --images DIR              folder of the frames, natural order of the numbers in their\n"
+    "                            names; a recorded set folder's meta.yml is checked (required)\n"
+    "  --list FILE               frame files one per line (relative to DIR) instead\n"
+    "  --calibration FILE        camera-projector calibration: triangulate, write cloud.ply\n"
+    "  --calibration-keys K      FILE.yaml or name=key,... for a calibration whose keys are\n"
+    "                            not the project's (OpenCV FileStorage from other tools)\n"
+    "  --out DIR                 output folder (default sl_process_out)\n"
+    "  --phase                   also write the phase maps of the finest sinusoid\n"
+    "  --smooth-phase SIGMA_PX   Gaussian smoothing of the decoded coordinates (camera px)\n"
+    "  --min-modulation DN       modulation threshold, 8-bit DN (default: from the pattern)\n"
+    "  --max-unwrap-error P      unwrapping consistency bound, periods (default 0.3)\n"
+    "  --keep-saturated          decode pixels with a saturated frame too\n"
+    "  --undistort-images        resample the frames onto the ideal pinhole camera first\n"
+    "  --projector-iterations N  projector distortion iterations in triangulation\n"
+    "  --use best|columns|rows   which projector coordinate triangulates\n"
+    "  --min-depth MM            drop points nearer than this\n"
+    "  --max-depth MM            drop points farther than this\n"
+    "  --projector-gamma G       compensate a projector gamma in decoding\n"
+    "  --projector-response FILE compensate a measured projector response\n"
+    "  --estimate-gamma          estimate the projector gamma from the frames\n"
+    "  --accept-implausible      exit 0 even when the decode health says the pattern file\n"
+    "                            does not fit the frames (docs/decode-health.md)\n"
+    "  -h, --help                this text\n"
+    "Exit codes: 0 ok, 1 error, 2 usage, 3 decoded but implausible.\n";
+
 int usage(const std::string& message) {
-  std::cerr << "sl_process: " << message << "\n"
-            << "usage: sl_process --pattern P.yaml --images DIR [--calibration C]\n"
-               "         [--calibration-keys FILE.yaml|name=key,...] [--out DIR] [--list FILE]\n"
-               "         [--phase] [--smooth-phase SIGMA_PX] [--min-modulation DN]\n"
-               "         [--max-unwrap-error PERIODS] [--keep-saturated] [--undistort-images]\n"
-               "         [--projector-iterations N] [--use best|columns|rows]\n"
-               "         [--min-depth MM] [--max-depth MM]\n"
-               "         [--projector-gamma G | --projector-response FILE | --estimate-gamma]\n";
+  std::cerr << "sl_process: " << message << "\n" << kHelp;
   return 2;
 }
 
@@ -54,7 +82,8 @@ int main(int argc, char** argv) {
       out_dir = "sl_process_out", list_path;
   sl::pipeline::DecoderOptions decoder;
   sl::pipeline::TriangulatorOptions triangulator;
-  bool undistort_images = false, phase = false, estimate_gamma = false, gamma_given = false;
+  bool undistort_images = false, phase = false, estimate_gamma = false, gamma_given = false,
+       accept_implausible = false;
   std::string response_path;
   double smooth_sigma = 0;
   try {
@@ -96,8 +125,10 @@ int main(int argc, char** argv) {
         else if (use == "columns") triangulator.use = Use::kColumns;
         else if (use == "rows") triangulator.use = Use::kRows;
         else return usage("--use must be best, columns or rows");
+      } else if (arg == "--accept-implausible") {
+        accept_implausible = true;
       } else if (arg == "-h" || arg == "--help") {
-        usage("help");
+        std::cout << kHelp;
         return 0;
       } else {
         return usage("unknown argument '" + arg + "'");
@@ -123,8 +154,10 @@ int main(int argc, char** argv) {
                               calibration_path,
                               sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
                               .calibration;
-    // Before reading any image: a pattern made for another projector.
+    // Before reading any image: a pattern made for another projector, a
+    // recording made with another pattern.
     if (calibration) sl::tools::checkPatternFitsCalibration(pattern, *calibration);
+    if (list_path.empty()) sl::tools::checkRecordedSet(pattern, pattern_path, images_dir);
     const std::vector<std::string> files = list_path.empty()
                                                ? sl::tools::listFrameFiles(images_dir)
                                                : sl::tools::readFrameList(list_path, images_dir);
@@ -151,7 +184,7 @@ int main(int argc, char** argv) {
       result = sl::tools::processCapture(pattern, *calibration, frames, decoder, triangulator,
                                          undistort_images, smooth_sigma);
     } else {
-      result.maps = sl::tools::decodeCapture(pattern, frames, decoder);
+      result.maps = sl::tools::decodeCapture(pattern, frames, decoder, &result.health);
       sl::tools::smoothProjectorCoordinates(result.maps, smooth_sigma);
     }
     const std::size_t points =
@@ -167,6 +200,7 @@ int main(int argc, char** argv) {
               << " decoded pixels";
     if (calibration) std::cout << ", " << points << " points";
     std::cout << " -> " << out_dir << "\n";
+    std::cout << sl::pipeline::describeDecodeHealth(result.health, "sl_process: health: ");
     if (counts[0] == 0 || (calibration && points == 0)) {
       std::cerr << "sl_process: no " << (counts[0] == 0 ? "valid pixel" : "point")
                 << " (pixels: " << counts[1] << " low modulation, " << counts[2]
@@ -176,6 +210,14 @@ int main(int argc, char** argv) {
                                                      : "")
                 << "): check the pattern file, the frame order and the thresholds\n";
       return 1;
+    }
+    if (result.health.implausible) {
+      std::cerr << "sl_process: decoded, but implausible for pattern '" << pattern.name
+                << "' (" << pattern_path << ")";
+      for (const std::string& p : result.health.problems) std::cerr << "; " << p;
+      std::cerr << (accept_implausible ? " (accepted: --accept-implausible)\n"
+                                       : "; outputs written; --accept-implausible to exit 0\n");
+      if (!accept_implausible) return kExitImplausible;
     }
     return 0;
   } catch (const std::exception& e) {

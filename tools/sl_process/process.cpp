@@ -12,6 +12,7 @@
 
 #include "common/frame_files.h"
 #include "common/ply.h"
+#include "sl/drivers/recording.h"
 
 namespace sl::tools {
 
@@ -49,11 +50,37 @@ void checkPatternFitsCalibration(const pipeline::PatternSpec& pattern,
         " (set the pattern's projector: {width, height} to the calibrated resolution)");
 }
 
+bool checkRecordedSet(const pipeline::PatternSpec& pattern, const std::string& pattern_path,
+                      const std::string& images_dir) {
+  const fs::path meta = fs::path(images_dir) / "meta.yml";
+  if (!fs::exists(meta)) return false;
+  const pipeline::ImageSet set = drivers::readRecordedSet(images_dir, /*load_images=*/false);
+  if (set.pattern_name != pattern.name)
+    throw std::runtime_error(meta.string() + " says the set was recorded with pattern '" +
+                             set.pattern_name + "', the pattern file " + pattern_path +
+                             " describes '" + pattern.name +
+                             "': give the pattern file of the recorded sequence");
+  for (const pipeline::CameraImages& camera : set.cameras) {
+    if (static_cast<int>(camera.stamps_ns.size()) != pattern.frameCount())
+      throw std::runtime_error(meta.string() + " says camera '" + camera.camera_id + "' recorded " +
+                               std::to_string(camera.stamps_ns.size()) + " frames of pattern '" +
+                               set.pattern_name + "', the pattern file " + pattern_path +
+                               " describes " + std::to_string(pattern.frameCount()));
+  }
+  return true;
+}
+
 pipeline::ProjectorMaps decodeCapture(const pipeline::PatternSpec& pattern,
                                       const LoadedFrames& frames,
-                                      const pipeline::DecoderOptions& decoder) {
+                                      const pipeline::DecoderOptions& decoder,
+                                      pipeline::DecodeHealth* health) {
   if (frames.frames.empty()) throw std::invalid_argument("no frames");
-  return pipeline::makeCodec(pattern, decoder)->decode(frames.frames, frames.bit_depth);
+  const auto codec = pipeline::makeCodec(pattern, decoder);
+  pipeline::ProjectorMaps maps = codec->decode(frames.frames, frames.bit_depth);
+  if (health)
+    *health = pipeline::measureDecodeHealth(pattern, codec->options(), maps, frames.frames,
+                                            frames.bit_depth);
+  return maps;
 }
 
 void smoothProjectorCoordinates(pipeline::ProjectorMaps& maps, double sigma_px) {
@@ -132,11 +159,15 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
     pipeline::CameraProjectorCalibration pinhole = calibration;
     pinhole.camera.distortion = {0, 0, 0, 0, 0};
     r.maps = codec->decode(ideal, frames.bit_depth);
+    r.health =
+        pipeline::measureDecodeHealth(pattern, codec->options(), r.maps, ideal, frames.bit_depth);
     smoothProjectorCoordinates(r.maps, smooth_sigma_px);
     r.cloud = pipeline::Triangulator(pinhole, triangulator).triangulate(r.maps);
     return r;
   }
   r.maps = codec->decode(frames.frames, frames.bit_depth);
+  r.health = pipeline::measureDecodeHealth(pattern, codec->options(), r.maps, frames.frames,
+                                           frames.bit_depth);
   smoothProjectorCoordinates(r.maps, smooth_sigma_px);
   r.cloud = pipeline::Triangulator(calibration, triangulator).triangulate(r.maps);
   return r;

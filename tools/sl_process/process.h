@@ -9,6 +9,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/triangulator.h"
 
 namespace sl::tools {
@@ -30,6 +31,7 @@ LoadedFrames loadFrames(const std::vector<std::string>& paths);
 struct ProcessResult {
   pipeline::ProjectorMaps maps;
   pipeline::PointCloud cloud;  // mm, camera optical frame; empty (0 x 0) for maps only
+  pipeline::DecodeHealth health;  // of the decoded frames (measureDecodeHealth)
 };
 
 // Throws std::invalid_argument when the pattern was made for another
@@ -38,10 +40,22 @@ struct ProcessResult {
 void checkPatternFitsCalibration(const pipeline::PatternSpec& pattern,
                                  const pipeline::CameraProjectorCalibration& calibration);
 
-// Decodes one capture into maps, without triangulating.
+// When `images_dir` is a recorded set folder (sl-sensor-recording/1: it holds
+// a meta.yml), checks what the recording says against the pattern file
+// `pattern_path` describing `pattern`: the pattern name and the frame count
+// of every camera. Throws std::runtime_error naming the meta.yml and the
+// pattern file with both values on a mismatch; returns false (nothing
+// checked) for a plain folder of images. (A recording holds the pattern's
+// name only: another period under the same name shows in the decode health.)
+bool checkRecordedSet(const pipeline::PatternSpec& pattern, const std::string& pattern_path,
+                      const std::string& images_dir);
+
+// Decodes one capture into maps, without triangulating; with `health`, also
+// measures the decode health of the maps.
 pipeline::ProjectorMaps decodeCapture(const pipeline::PatternSpec& pattern,
                                       const LoadedFrames& frames,
-                                      const pipeline::DecoderOptions& decoder);
+                                      const pipeline::DecoderOptions& decoder,
+                                      pipeline::DecodeHealth* health = nullptr);
 
 // Smooths the decoded projector coordinates (up, vp) with a Gaussian of
 // `sigma_px` camera px, normalised over the valid pixels only (NaN and

@@ -1,0 +1,181 @@
+// sl_process on a recording of the simulated sensor (issue 32): a pattern file
+// that does not describe the recorded sequence gives no silent wrong cloud.
+// The recording is sim.yaml's 3+3_horizontal (40 periods) as the recorder
+// writes it; config/patterns/paper_3+3_horizontal.yaml has the same name and
+// 16 periods.
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <catch2/catch.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "sl/daemon/calibration_io.h"
+#include "sl/drivers/recording.h"
+#include "sl/drivers/sim.h"
+#include "sl/drivers/sim_rig.h"
+
+namespace fs = std::filesystem;
+using namespace sl;
+
+namespace {
+
+struct Run {
+  int exit_code;
+  std::string output;  // stdout and stderr
+};
+
+Run slProcess(const std::string& args) {
+  const fs::path log = fs::path(SL_BINARY_DIR) / "test_process_health.log";
+  const std::string command = std::string(SL_BINARY_DIR) + "/tools/sl_process " + args + " > " +
+                              log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  std::ifstream in(log);
+  std::stringstream text;
+  text << in.rdbuf();
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+}
+
+void writeFile(const fs::path& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+}
+
+const char* const kPattern40 =
+    "name: 3+3_horizontal\nfamily: phase_shift\ndirection: horizontal\n"
+    "projector: {width: 1824, height: 1140}\nsteps: 3\nfrequencies: [40, 1]\n"
+    "unwrapping: unit_cue\n";
+
+}  // namespace
+
+TEST_CASE("sl_process: a recording checked against the pattern file, implausible decodes exit 3",
+          "[process][health]") {
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_process_health";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  // The simulator of sim.yaml (its rig, 3+3_horizontal at 40 periods) seeing
+  // a tilted plane and a sphere, 8-bit frames with its default noise.
+  drivers::SimConfig sim;
+  sim.rig = drivers::simRig();
+  drivers::SimPlane plane;
+  plane.point = {0, 0, 600};
+  plane.normal = {0.1, 0.2, -1};
+  plane.albedo = 0.8;
+  sim.scene.planes = {plane};
+  drivers::SimSphere sphere;
+  sphere.center = {40, -20, 520};
+  sphere.radius = 60;
+  sphere.albedo = 0.7;
+  sim.scene.spheres = {sphere};
+  pipeline::PatternSpec recorded;
+  recorded.name = "3+3_horizontal";
+  recorded.steps = 3;
+  recorded.frequencies = {40, 1};
+  sim.patterns = {recorded};
+  const auto sensor = drivers::SimulatedSensor::create(sim);
+  pipeline::ImageSet set;
+  set.sequence_id = 1;
+  set.pattern_name = recorded.name;
+  pipeline::CameraImages camera;
+  camera.camera_id = "sim_top";
+  for (int f = 0; f < recorded.frameCount(); ++f) {
+    camera.frames.push_back(sensor->render(recorded.name, f, 3));
+    camera.stamps_ns.push_back(f);
+  }
+  set.cameras = {camera};
+  const fs::path recording = dir / "recording";
+  drivers::createRecording(recording.string(), "test");
+  drivers::writeRecordedSet(recording.string(), 1, set);
+  const std::string images = (recording / "set_000001").string();
+  daemon::CalibrationFile calibration;
+  calibration.calibration = sim.rig;
+  const std::string calibration_path = (dir / "rig.yaml").string();
+  daemon::saveCalibration(calibration, calibration_path);
+  const std::string common = " --calibration " + calibration_path + " --images " + images;
+
+  SECTION("same preset name, other period: decoded, but implausible (exit 3)") {
+    const Run r = slProcess("--pattern " + std::string(SL_SOURCE_DIR) +
+                            "/config/patterns/paper_3+3_horizontal.yaml --out " +
+                            (dir / "out16").string() + common);
+    INFO(r.output);
+    CHECK(r.exit_code == 3);
+    CHECK(r.output.find("implausible") != std::string::npos);
+    CHECK(r.output.find("fail unwrapping") != std::string::npos);
+    // Told to accept it: exit 0, the health still printed.
+    const Run accepted = slProcess("--pattern " + std::string(SL_SOURCE_DIR) +
+                                   "/config/patterns/paper_3+3_horizontal.yaml --out " +
+                                   (dir / "out16").string() + common + " --accept-implausible");
+    INFO(accepted.output);
+    CHECK(accepted.exit_code == 0);
+    CHECK(accepted.output.find("IMPLAUSIBLE") != std::string::npos);
+  }
+  SECTION("the right description: exit 0 and the simulator's depth") {
+    writeFile(dir / "p40.yaml", kPattern40);
+    const fs::path out = dir / "out40";
+    const Run r = slProcess("--pattern " + (dir / "p40.yaml").string() + " --out " +
+                            out.string() + common);
+    INFO(r.output);
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.output.find("IMPLAUSIBLE") == std::string::npos);
+    const cv::Mat depth = cv::imread((out / "depth.tiff").string(), cv::IMREAD_UNCHANGED);
+    const cv::Mat& truth = sensor->groundTruth().depth_mm;
+    REQUIRE(depth.size() == truth.size());
+    std::vector<double> error;
+    for (int v = 0; v < depth.rows; ++v)
+      for (int u = 0; u < depth.cols; ++u) {
+        const float z = depth.at<float>(v, u), t = truth.at<float>(v, u);
+        if (std::isfinite(z) && std::isfinite(t)) error.push_back(std::abs(z - t));
+      }
+    REQUIRE(error.size() > 100000);
+    std::sort(error.begin(), error.end());
+    const double median = error[error.size() / 2], p99 = error[error.size() * 99 / 100];
+    WARN("right description: " << error.size() << " points, |dz| median " << median
+                               << " mm, p99 " << p99 << " mm");
+    CHECK(median < 0.2);
+    CHECK(p99 < 2.0);
+  }
+  SECTION("a pattern of another name or frame count than the recording's is an error") {
+    std::string other = kPattern40;
+    other.replace(other.find("3+3_horizontal"), 14, "3+3_vertical");
+    writeFile(dir / "other.yaml", other);
+    const Run named = slProcess("--pattern " + (dir / "other.yaml").string() + " --out " +
+                                (dir / "out_other").string() + common);
+    INFO(named.output);
+    CHECK(named.exit_code == 1);
+    CHECK(named.output.find("'3+3_horizontal'") != std::string::npos);
+    CHECK(named.output.find("'3+3_vertical'") != std::string::npos);
+    CHECK(named.output.find("meta.yml") != std::string::npos);
+    std::string four = kPattern40;
+    four.replace(four.find("steps: 3"), 8, "steps: 4");
+    writeFile(dir / "four.yaml", four);
+    const Run counted = slProcess("--pattern " + (dir / "four.yaml").string() + " --out " +
+                                  (dir / "out_four").string() + common);
+    INFO(counted.output);
+    CHECK(counted.exit_code == 1);
+    CHECK(counted.output.find("6 frames") != std::string::npos);
+    CHECK(counted.output.find("describes 8") != std::string::npos);
+  }
+}
+
+TEST_CASE("sl_process --help lists every option and exits 0", "[process][cli]") {
+  const Run r = slProcess("--help");
+  CHECK(r.exit_code == 0);
+  CHECK(r.output.find("sl_process: help") == std::string::npos);
+  // Every option the parser takes (tools/sl_process/main.cpp).
+  for (const char* option :
+       {"--pattern", "--images", "--list", "--calibration", "--calibration-keys", "--out",
+        "--phase", "--smooth-phase", "--min-modulation", "--max-unwrap-error", "--keep-saturated",
+        "--undistort-images", "--projector-iterations", "--use", "--min-depth", "--max-depth",
+        "--projector-gamma", "--projector-response", "--estimate-gamma", "--accept-implausible",
+        "--help"}) {
+    INFO(option);
+    CHECK(r.output.find(std::string(" ") + option + " ") != std::string::npos);
+  }
+}
