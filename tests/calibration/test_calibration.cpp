@@ -1,12 +1,15 @@
 // Camera-projector calibration: on SLStudio's real captures against its
 // published calibration, and a round trip on the simulated sensor with a
 // checkerboard-textured plane in known poses.
+#include <sys/wait.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -647,4 +650,142 @@ TEST_CASE("poorly constrained calibrations warn and suggest poses", "[calibratio
   for (const auto& w : ok.report.warnings) ok_warnings += w + "\n";
   INFO(ok_warnings);
   CHECK(ok.report.advice.empty());
+}
+
+namespace {
+
+struct CliRun {
+  int exit_code;
+  std::string output;  // stdout and stderr
+};
+
+CliRun runCli(const std::string& args, const fs::path& log) {
+  const std::string command =
+      std::string(SL_BINARY_DIR) + "/tools/" + args + " > " + log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  std::ifstream in(log);
+  std::stringstream text;
+  text << in.rdbuf();
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+}
+
+// Five board poses on the simulator as pose folders of PNG frames (3+3_both,
+// sl_calibrate's built-in pattern), with the projector `brightness_dn` bright.
+std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightness_dn) {
+  const Checkerboard board{13, 9, 15.0};
+  PhaseShift33Pattern pattern;
+  pattern.name = "3+3_both";
+  pattern.direction = sl::pipeline::Direction::kBoth;
+  const std::vector<BoardPose> poses = {{0, 0, 0, {0, 0, 560}},
+                                        {25, 0, 0, {0, 0, 560}},
+                                        {0, 25, 0, {10, 0, 550}},
+                                        {18, -18, 0, {15, 0, 520}},
+                                        {-18, -18, 15, {-15, 0, 630}}};
+  std::vector<std::string> folders;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    sl::drivers::SimConfig config;
+    config.rig = simulatedRig();
+    config.patterns = {pattern};
+    config.scene.planes = {boardPlane(board, poses[i])};
+    config.projector_brightness_dn = brightness_dn;
+    const auto sensor = sl::drivers::SimulatedSensor::create(config);
+    const fs::path folder = dir / ("pose" + std::to_string(i));
+    fs::create_directories(folder);
+    for (int f = 0; f < pattern.frameCount(); ++f) {
+      char name[32];
+      std::snprintf(name, sizeof name, "frame_%02d.png", f);
+      REQUIRE(cv::imwrite((folder / name).string(),
+                          sensor->render(pattern.name, f, 1000 * i + f)));
+    }
+    folders.push_back(folder.string());
+  }
+  return folders;
+}
+
+}  // namespace
+
+TEST_CASE("sl_calibrate: saturated poses say so with numbers, --keep-saturated, RMS limit",
+          "[calibration][sim][cli]") {
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_calibration_cli";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path log = dir / "log.txt";
+  auto poses = [](const std::vector<std::string>& folders) {
+    std::string list;
+    for (const std::string& f : folders) list += " " + f;
+    return list;
+  };
+  const std::string board = " --board 13x9 --square 15 --presmooth 1 --window-radius 25";
+
+  auto count = [](const std::string& text, const std::string& what) {
+    int n = 0;
+    for (auto at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+  };
+  SECTION("an overexposed capture: poses skipped naming saturation, kept with the flag") {
+    // 9 x the default brightness: light and dark squares both clip in the
+    // bright frames of every sequence.
+    const auto folders = writeSimulatedPoses(dir / "bright", 2000.0);
+    const CliRun r = runCli("sl_calibrate --poses" + poses(folders) + board + " --out " +
+                                (dir / "bright.yaml").string(),
+                            log);
+    INFO(r.output);
+    const int skipped = count(r.output, "sl_calibrate: skipping");
+    CHECK(skipped >= 3);
+    CHECK(r.exit_code == 1);  // fewer than 3 usable poses
+    CHECK(count(r.output, "% saturated") >= skipped);
+    CHECK(r.output.find("% decoded") != std::string::npos);
+    CHECK(r.output.find("--keep-saturated") != std::string::npos);
+    const CliRun kept = runCli("sl_calibrate --poses" + poses(folders) + board +
+                                   " --keep-saturated --accept --out " +
+                                   (dir / "bright_kept.yaml").string(),
+                               log);
+    INFO(kept.output);
+    CHECK(kept.exit_code == 0);
+    CHECK(count(kept.output, "sl_calibrate: skipping") < skipped);
+    CHECK(fs::exists(dir / "bright_kept.yaml"));
+  }
+  SECTION("a result beyond --max-rms exits 3 after the report, without the calibration file") {
+    const auto folders = writeSimulatedPoses(dir / "normal", 220.0);
+    const CliRun ok = runCli(
+        "sl_calibrate --poses" + poses(folders) + board + " --out " + (dir / "ok.yaml").string(),
+        log);
+    INFO(ok.output);
+    CHECK(ok.exit_code == 0);
+    CHECK(fs::exists(dir / "ok.yaml"));
+    // The same poses against a limit below their RMS (about 0.05 px).
+    const CliRun beyond = runCli("sl_calibrate --poses" + poses(folders) + board +
+                                     " --max-rms 0.001 --out " + (dir / "beyond.yaml").string(),
+                                 log);
+    INFO(beyond.output);
+    CHECK(beyond.exit_code == 3);
+    CHECK(beyond.output.find("RMS reprojection error: camera") != std::string::npos);
+    CHECK(beyond.output.find("beyond --max-rms") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "beyond.yaml"));
+    const CliRun accepted = runCli("sl_calibrate --poses" + poses(folders) + board +
+                                       " --max-rms 0.001 --accept --out " +
+                                       (dir / "accepted.yaml").string(),
+                                   log);
+    INFO(accepted.output);
+    CHECK(accepted.exit_code == 0);
+    CHECK(fs::exists(dir / "accepted.yaml"));
+  }
+}
+
+TEST_CASE("sl_calibrate and sl_patterns --help list their options and exit 0", "[cli]") {
+  const fs::path log = fs::path(SL_BINARY_DIR) / "test_calibration_help.txt";
+  const CliRun calibrate = runCli("sl_calibrate --help", log);
+  CHECK(calibrate.exit_code == 0);
+  for (const char* option : {"--poses", "--board", "--square", "--pattern", "--keep-saturated",
+                             "--max-rms", "--accept", "--out", "--help"}) {
+    INFO(option);
+    CHECK(calibrate.output.find(std::string(" ") + option + " ") != std::string::npos);
+  }
+  const CliRun patterns = runCli("sl_patterns --help", log);
+  CHECK(patterns.exit_code == 0);
+  CHECK(patterns.output.find("sl_patterns: help") == std::string::npos);
+  for (const char* option : {"--out", "--lightcrafter", "--calibration", "--ramp", "--help"}) {
+    INFO(option);
+    CHECK(patterns.output.find(std::string(" ") + option + " ") != std::string::npos);
+  }
 }

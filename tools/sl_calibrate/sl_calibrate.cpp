@@ -64,6 +64,7 @@ constexpr const char* kUsage =
     "  --window-radius PX     local homography half window, camera px (default 15)\n"
     "  --min-valid N          minimum decoded pixels per window (default 100)\n"
     "  --min-modulation DN    decoder threshold on the 8-bit scale (default 8)\n"
+    "  --keep-saturated       decode pixels with a saturated frame too (default: rejected)\n"
     "model (prefix camera- or projector-):\n"
     "  --camera-fix-principal-point  --camera-fix-aspect-ratio\n"
     "  --camera-radial-terms N (0..3, default 3)  --camera-no-tangential\n"
@@ -76,7 +77,11 @@ constexpr const char* kUsage =
     "  --warn-px PX           per-corner residual warning threshold (default 1)\n"
     "  --max-focal-sigma PCT  warn when a focal length's 1-sigma exceeds PCT % (default 0.5)\n"
     "  --max-principal-sigma PX  warn when a principal point's 1-sigma exceeds PX (default 5)\n"
-    "exit codes: 0 ok, 1 error, 2 usage\n";
+    "  --max-rms PX           stereo RMS reprojection error above which the result is refused\n"
+    "                         (report written, calibration file not; default 2)\n"
+    "  --accept               write the calibration even beyond --max-rms (exit 0)\n"
+    "  -h, --help             this text\n"
+    "exit codes: 0 ok, 1 error, 2 usage, 3 calibrated but stereo RMS beyond --max-rms\n";
 
 [[noreturn]] void usageError(const std::string& message) {
   std::cerr << "sl_calibrate: " << message << "\n" << kUsage;
@@ -113,6 +118,9 @@ struct Args {
   pl::CornerDetectionOptions corners;
   pl::LocalHomographyOptions homography;
   float min_modulation = 8.0f;
+  bool keep_saturated = false;
+  double max_rms_px = 2.0;
+  bool accept = false;
   pl::CalibrationOptions calibration;
   std::string secondary_of;
   std::string out = "calibration.yaml";
@@ -175,6 +183,13 @@ Args parseArgs(int argc, char** argv) {
       a.homography.min_valid_pixels = parseInt(o, value());
     } else if (o == "--min-modulation") {
       a.min_modulation = static_cast<float>(parseNumber(o, value()));
+    } else if (o == "--keep-saturated") {
+      a.keep_saturated = true;
+    } else if (o == "--max-rms") {
+      a.max_rms_px = parseNumber(o, value());
+      if (!(a.max_rms_px > 0)) usageError("--max-rms must be > 0 (px)");
+    } else if (o == "--accept") {
+      a.accept = true;
     } else if (o == "--secondary") {
       a.secondary_of = value();
     } else if (o == "--out") {
@@ -347,6 +362,7 @@ int run(const Args& a) {
                              "' encodes one axis only: calibration needs both (direction both)");
   pl::DecoderOptions decoder_options;
   decoder_options.min_modulation = a.min_modulation;
+  decoder_options.reject_saturated = !a.keep_saturated;
   const pl::Decoder decoder(spec, decoder_options);
   // Sinusoid-only sequences average to the offset A; others use the codec's A.
   const bool mean_shading = spec.family == pl::PatternFamily::kPhaseShift;
@@ -401,8 +417,26 @@ int run(const Args& a) {
     const pl::BoardViewResult result =
         pl::observeBoard(shading, maps, a.board, label, a.corners, a.homography);
     if (!result.view) {
-      std::cerr << "sl_calibrate: skipping " << result.error << "\n";
-      skipped.push_back(result.error);
+      // Why, in numbers: how much of the image decoded, how much saturated.
+      std::int64_t counts[5] = {0, 0, 0, 0, 0};
+      for (int y = 0; y < maps.status.rows; ++y)
+        for (int x = 0; x < maps.status.cols; ++x)
+          ++counts[std::min<int>(maps.status.at<std::uint8_t>(y, x), 4)];
+      const double total = static_cast<double>(maps.status.total());
+      char numbers[256];
+      std::snprintf(numbers, sizeof numbers,
+                    "; pixels: %.1f %% decoded, %.1f %% saturated, %.1f %% low modulation, "
+                    "%.1f %% unwrap inconsistent",
+                    100.0 * counts[0] / total, 100.0 * counts[2] / total,
+                    100.0 * counts[1] / total, 100.0 * counts[3] / total);
+      std::string reason = result.error + numbers;
+      if (counts[2] > 0.05 * total)
+        reason += a.keep_saturated
+                      ? " (saturation: lower the exposure or the projector brightness)"
+                      : " (saturation: lower the exposure or the projector brightness, or "
+                        "decode saturated pixels with --keep-saturated)";
+      std::cerr << "sl_calibrate: skipping " << reason << "\n";
+      skipped.push_back(reason);
       continue;
     }
     std::cout << label << ": " << result.view->corner_ids.size() << " corners";
@@ -444,6 +478,17 @@ int run(const Args& a) {
       throw std::runtime_error((fs::path(a.report_dir) / name).string() + ": cannot write");
   }
 
+  const bool beyond = result.report.stereo_rms_px > a.max_rms_px;
+  if (beyond && !a.accept) {
+    std::cerr << "sl_calibrate: stereo RMS reprojection error " << result.report.stereo_rms_px
+              << " px is beyond --max-rms " << a.max_rms_px << " px: " << a.out
+              << " not written (report in " << a.report_dir
+              << "/; check the skipped poses and warnings above, or --accept)\n";
+    return 3;
+  }
+  if (beyond)
+    std::cerr << "sl_calibrate: stereo RMS " << result.report.stereo_rms_px
+              << " px beyond --max-rms " << a.max_rms_px << " px, accepted (--accept)\n";
   sl::daemon::CalibrationFile file;
   file.calibration = result.calibration;
   file.errors = sl::daemon::CalibrationErrors{result.report.camera_rms_px,

@@ -28,10 +28,20 @@
 
 namespace {
 
+const char* const kHelp =
+    "usage: sl_patterns PATTERN.yaml --out DIR [--lightcrafter] [--calibration C]\n"
+    "       sl_patterns --ramp N --out DIR\n"
+    "Writes the projector images of a pattern file, DIR/pattern_NN.png in projection order.\n"
+    "  PATTERN.yaml        the pattern file (docs/patterns-conventions.md)\n"
+    "  --out DIR           output folder (required)\n"
+    "  --lightcrafter      also DIR/lightcrafter4500/: native DMD images and 24-bit BMPs\n"
+    "  --calibration FILE  pre-distort the images for that calibration's projector lens\n"
+    "  --ramp N            instead: N + 1 flat 1824 x 1140 frames at levels k / N (2..255)\n"
+    "  -h, --help          this text\n"
+    "Exit codes: 0 ok, 1 error, 2 usage.\n";
+
 int usage(const std::string& message) {
-  std::cerr << "sl_patterns: " << message << "\n"
-            << "usage: sl_patterns PATTERN.yaml --out DIR [--lightcrafter] [--calibration C]\n"
-            << "       sl_patterns --ramp N --out DIR   (N + 1 flat 1824 x 1140 frames at k / N)\n";
+  std::cerr << "sl_patterns: " << message << "\n" << kHelp;
   return 2;
 }
 
@@ -60,7 +70,10 @@ int main(int argc, char** argv) {
       ramp = std::atoi(argv[++i]);
       if (ramp < 2 || ramp > 255) return usage("--ramp N needs N in 2..255");
     }
-    else if (arg == "-h" || arg == "--help") return usage("help"), 0;
+    else if (arg == "-h" || arg == "--help") {
+      std::cout << kHelp;
+      return 0;
+    }
     else if (!arg.empty() && arg[0] != '-' && pattern_path.empty()) pattern_path = arg;
     else return usage("unexpected argument '" + arg + "'");
   }
