@@ -47,6 +47,11 @@ void parseSinusoid(const YamlMap& m, PatternSpec& p) {
 void parseGray(const YamlMap& m, PatternSpec& p) {
   p.gray_bits = m.get<int>("bits", 0);
   if (p.gray_bits < 0) m.fail("bits", "must be >= 0 (0 = all bits)");
+  if (m.has("pitch_px")) {
+    if (m.has("bits")) m.fail("pitch_px", "give one of 'bits' and 'pitch_px' (stripe width, px)");
+    p.gray_pitch_px = m.get<double>("pitch_px");
+    if (!(p.gray_pitch_px > 0 && std::isfinite(p.gray_pitch_px))) m.fail("pitch_px", "must be > 0");
+  }
   p.gray_inverse = m.get<bool>("inverse", p.gray_inverse);
   p.reference_frames = m.get<bool>("reference_frames", p.reference_frames);
 }

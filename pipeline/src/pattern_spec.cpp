@@ -85,10 +85,17 @@ int PatternSpec::fullGrayBits(int axis_length) {
 }
 
 int PatternSpec::grayBitsUsed(int axis_length) const {
+  if (gray_pitch_px > 0) {
+    const double stripes = std::ceil(axis_length / gray_pitch_px);
+    int bits = 1;
+    while (std::ldexp(1.0, bits) < stripes) ++bits;
+    return bits;
+  }
   return gray_bits > 0 ? gray_bits : fullGrayBits(axis_length);
 }
 
 double PatternSpec::stripeWidth(int axis_length) const {
+  if (gray_pitch_px > 0) return gray_pitch_px;
   return std::ldexp(1.0, fullGrayBits(axis_length) - grayBitsUsed(axis_length));
 }
 
@@ -243,9 +250,15 @@ void PatternSpec::validate() const {
     for (int axis : axes) {
       const int full = fullGrayBits(axis);
       const int extra = complementary ? 1 : 0;
-      if (gray_bits < 0 || gray_bits + extra > full)
+      if (gray_pitch_px != 0) {
+        if (gray_bits != 0) fail("bits", "give one of bits and the stripe pitch");
+        if (!(std::isfinite(gray_pitch_px) && gray_pitch_px >= 2.0 && gray_pitch_px <= axis))
+          fail("pitch_px", "stripe pitch " + std::to_string(gray_pitch_px) +
+                               " px must be in 2.." + std::to_string(axis) + " px");
+      } else if (gray_bits < 0 || gray_bits + extra > full) {
         fail("bits", "must be in 0.." + std::to_string(full - extra) + " for " +
                          std::to_string(axis) + " px (0 = all)");
+      }
       // Gray + phase shift may threshold against the sinusoids' mean.
       if (!reference_frames && !gray_inverse && family == PatternFamily::kGrayCode)
         fail("reference_frames", "or inverse patterns are needed to threshold the bits of a "
@@ -257,7 +270,7 @@ void PatternSpec::validate() const {
     if (family == PatternFamily::kGrayPhaseShift) {
       for (int axis : axes)
         if (stripeWidth(axis) < 4.0)
-          fail("bits", "leave a phase period of " + std::to_string(stripeWidth(axis)) +
+          fail(gray_pitch_px > 0 ? "pitch_px" : "bits", "leave a phase period of " + std::to_string(stripeWidth(axis)) +
                            " px; need >= 4 px");
     }
   }
@@ -330,7 +343,8 @@ std::vector<FrameInfo> canonicalFrames(const PatternSpec& s) {
       }
       const int extra = s.family == PatternFamily::kGrayPhaseShift && s.complementary ? 1 : 0;
       const int bits = s.grayBitsUsed(axis) + extra;
-      const double stripe = std::ldexp(1.0, PatternSpec::fullGrayBits(axis) - bits);
+      // The complementary bit codes half stripes.
+      const double stripe = s.stripeWidth(axis) / (extra ? 2.0 : 1.0);
       for (int b = 0; b < bits; ++b) {
         for (int inv = 0; inv < (s.gray_inverse ? 2 : 1); ++inv) {
           FrameInfo f;

@@ -10,14 +10,17 @@
 
 #include <catch2/catch.hpp>
 
+#include "sl/daemon/pattern_config.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/decode_health.h"
+#include "sl/pipeline/pattern_spec.h"
 
 using namespace sl;
 using pipeline::PatternFamily;
 using pipeline::PatternSpec;
+using pipeline::describeDecodeHealth;
 
 namespace {
 
@@ -144,4 +147,78 @@ TEST_CASE("decode health: a description that does not fit the frames is implausi
     CHECK(d.health.implausible);
     CHECK_FALSE(d.health.problems.empty());
   }
+}
+
+TEST_CASE("Gray + phase shift at a 60 px pitch: decoded right, and implausible declared as 64",
+          "[codecs][health][gray]") {
+  const bool complementary = GENERATE(false, true);
+  PatternSpec truth;
+  truth.name = "gray_ps_60";
+  truth.family = PatternFamily::kGrayPhaseShift;
+  truth.gray_pitch_px = 60;
+  truth.complementary = complementary;
+  truth.steps = 4;
+  // ceil(1824 / 60) = 31 stripes: 5 bits, as many frames as 64 px stripes.
+  PatternSpec as64 = truth;
+  as64.gray_pitch_px = 0;
+  as64.gray_bits = 5;
+  REQUIRE(as64.stripeWidth(1824) == 64.0);
+  REQUIRE(as64.frameCount() == truth.frameCount());
+  const Decoded right = decodeAs(truth, truth);
+  INFO("complementary " << complementary << "\n" << summary(right));
+  WARN("60 px pitch, complementary " << complementary << ", right:\n" << summary(right));
+  CHECK_FALSE(right.health.implausible);
+  CHECK(right.valid > 100000);
+  CHECK(right.within_1px > 0.99);
+  // Declared as 64 px the code stays consistent (stripe index and phase
+  // scale alike): every coordinate is 64/60 too large, which only shows
+  // where it runs past the projector. The simulated camera does not see the
+  // projector's last 84 px, so nothing can be seen there...
+  const Decoded wrong = decodeAs(truth, as64);
+  WARN("60 px pitch, complementary " << complementary << ", declared 64:\n" << summary(wrong));
+  CHECK(wrong.within_1px < 0.01);
+  // ... while frames that show the whole projector width (sl_patterns'
+  // images, one camera pixel per projector pixel) are implausible: the
+  // columns past 29 x 60 px decode beyond 1824.
+  std::vector<cv::Mat> frames = pipeline::generatePatternImages(truth);
+  for (cv::Mat& f : frames) f.convertTo(f, CV_8UC1, 200.0 / 255.0, 20.0);  // no saturation
+  for (const PatternSpec* described : {&truth, &as64}) {
+    const auto codec = pipeline::makeCodec(*described, {});
+    const auto maps = codec->decode(frames, 8);
+    const auto health =
+        pipeline::measureDecodeHealth(*described, codec->options(), maps, frames, 8);
+    INFO((described == &truth ? "60 px" : "declared 64 px") << "\n"
+                                                             << describeDecodeHealth(health, "  "));
+    CHECK(health.implausible == (described == &as64));
+    if (described == &as64) {
+      CHECK(health.outOfRangeFraction() > 0.04);
+      CHECK(health.problems.front().find("outside the projector") != std::string::npos);
+    }
+  }
+}
+
+TEST_CASE("a Gray stripe pitch in projector px from a pattern file", "[codecs][gray][yaml]") {
+  const PatternSpec p = daemon::parsePatternText(
+      "family: gray_phase_shift\ndirection: horizontal\npitch_px: 60\ncomplementary: true\n",
+      "p.yaml");
+  CHECK(p.gray_pitch_px == 60.0);
+  CHECK(p.stripeWidth(1824) == 60.0);
+  CHECK(p.grayBitsUsed(1824) == 5);  // 31 stripes
+  CHECK(p.finestPeriod(1824) == 60.0);
+  // White, black, 5 bits, the complementary bit, 4 steps.
+  CHECK(p.frameCount() == 2 + 6 + 4);
+  // The stripes follow the pitch: the projected bit pattern changes code at
+  // multiples of 60 px (pixel centre p covers [p - 0.5, p + 0.5)).
+  const auto images = pipeline::generatePatternImages(p);
+  int last_code = -1, changes = 0;
+  for (int u = 0; u < 1824; ++u) {
+    int code = 0;
+    for (int b = 0; b < 5; ++b) code = 2 * code + (images[2 + b].at<std::uint8_t>(0, u) > 127);
+    if (code != last_code && last_code >= 0) {
+      ++changes;
+      CHECK(u % 60 == 0);
+    }
+    last_code = code;
+  }
+  CHECK(changes == 30);
 }

@@ -120,6 +120,12 @@ struct PatternSpec {
   // coordinate; 0 = all. With b of B bits a stripe is 2^(B-b) px wide.
   // kGrayPhaseShift: the phase period equals the stripe width.
   int gray_bits = 0;
+  // Or the stripe width itself, projector px (> 0; >= 4 for
+  // kGrayPhaseShift, where it is the phase period), for pitches that are not
+  // a power of two (60 px, say): the code then has ceil(log2(ceil(L /
+  // pitch))) bits and names the stripe floor((p + 0.5) / pitch); the last
+  // stripe may be cut by the projector's edge. 0 = from gray_bits.
+  double gray_pitch_px = 0;
   bool gray_inverse = false;      // each bit followed by its inverse
   bool reference_frames = true;   // full white then black before the bits
   bool complementary = false;     // kGrayPhaseShift: one extra bit of half a stripe
