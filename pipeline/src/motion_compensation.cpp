@@ -2,59 +2,224 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <vector>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "parallel_rows.h"
+#include "sl/pipeline/multiversion.h"
+#include "sl/pipeline/row_workers.h"
 
 namespace sl::pipeline {
 
 namespace {
 
-// The size cv::resize gives `size` scaled by 1 / factor.
-cv::Size subsampledSize(cv::Size size, int factor) {
-  return {cvRound(size.width * (1.0 / factor)), cvRound(size.height * (1.0 / factor))};
-}
-
 // Grid nodes of a lens's undistortion every kGridStep px: the resampling's
 // displacement field (the shift through the distortion model) is bilinear
 // between them, off the exact field by ~1e-5 px for the sim cameras' lens
 // (k1 = -0.08, 12 px of shift: its second derivative is ~6e-7 px per px^2).
+// Also the resampling's cell: within one, the source pixels of a row are
+// usually the same offset from their destination (the vectorized path).
 constexpr int kGridStep = 16;
 
-// Bilinear sample of `src` (T: uint8 or uint16) at rows r0, r0 + 1 and
-// columns c0, c0 + 1 with weights a (along x) and b (along y), rounded.
-template <typename T>
-T bilinear(const cv::Mat& src, int r0, int c0, float a, float b) {
-  const T* top = src.ptr<T>(r0) + c0;
-  const T* bottom = src.ptr<T>(r0 + 1) + c0;
-  const float upper = float(top[0]) + a * (float(top[1]) - float(top[0]));
-  const float lower = float(bottom[0]) + a * (float(bottom[1]) - float(bottom[0]));
-  return cv::saturate_cast<T>(upper + b * (lower - upper));
+// Registration averages kAcrossPx full-resolution pixels across the motion
+// axis into one line (the subsample factor is along it). The correlation sums
+// the cross-power of all lines (below), so averaging neighbouring lines keeps
+// what they share, the scene's content of low frequency across the axis, and
+// cuts the lines to transform 4x (1440 x 1080 frames moving along y: 180 lines
+// of 540 samples, not 720). Fringes across the axis of period p are dimmed by
+// sinc(kAcrossPx / p): 0.89 for sim-motion.yaml's ~30 px; they are a nuisance
+// to the registration anyway.
+constexpr int kAcrossPx = 8;
+
+// Rows of a frame handed to a worker thread at a time by the resampling.
+constexpr int kResampleBlockRows = 16;
+
+// Calls fn(begin, end) over blocks of [0, count): on `workers` when given,
+// else on OpenCV's threads.
+template <typename Fn>
+void forBlocks(RowWorkers* workers, int count, int block, const Fn& fn) {
+  if (workers) {
+    workers->run(count, block, [&](int begin, int end, int) { fn(begin, end); });
+  } else {
+    parallelRows(count, [&](const cv::Range& r) { fn(r.start, r.end); });
+  }
 }
 
-// The periodic Hann window 0.5 (1 - cos(2 pi x / N)) along each axis (not
-// OpenCV's symmetric one, N - 1): its DFT has exactly the frequencies 0 and
-// +-1, so whatever does not vary along the motion axis stays in those
-// columns of the spectrum, which the correlation leaves out.
-cv::Mat periodicHann(cv::Size size) {
-  auto hann = [](int n) {
-    std::vector<float> w(static_cast<std::size_t>(n));
-    for (int i = 0; i < n; ++i) w[i] = float(0.5 * (1 - std::cos(2 * CV_PI * i / n)));
-    return w;
-  };
-  const std::vector<float> wx = hann(size.width), wy = hann(size.height);
-  cv::Mat window(size, CV_32FC1);
-  for (int r = 0; r < size.height; ++r) {
-    float* row = window.ptr<float>(r);
-    for (int c = 0; c < size.width; ++c) row[c] = wy[r] * wx[c];
+// The periodic Hann window 0.5 (1 - cos(2 pi i / n)), i < n (not OpenCV's
+// symmetric one, n - 1): its DFT has exactly the frequencies 0 and +-1, so
+// whatever does not vary along the motion axis stays in those frequencies of
+// the spectrum, which the correlation leaves out.
+std::vector<float> periodicHann(int n) {
+  std::vector<float> w(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) w[std::size_t(i)] = float(0.5 * (1 - std::cos(2 * CV_PI * i / n)));
+  return w;
+}
+
+// `image` (CV_8UC1, CV_16UC1 or CV_32FC1) averaged over blocks of fx x fy
+// pixels: out(r, c) is the mean of rows r fy .. r fy + fy - 1, columns
+// c fx .. c fx + fx - 1 (CV_32FC1, cols / fx x rows / fy; a remainder is left
+// out). cv::resize's INTER_AREA does this too, but for unequal factors took
+// longer than the whole registration of a frame does here.
+template <typename T, int kFx>
+void boxAverageOf(const cv::Mat& image, int fy, cv::Mat& out) {
+  const int cols = image.cols / kFx, rows = image.rows / fy, width = cols * kFx;
+  out.create(rows, cols, CV_32FC1);
+  std::vector<float> sum(static_cast<std::size_t>(width));
+  float* __restrict s = sum.data();
+  const float scale = 1.0f / float(kFx * fy);
+  for (int r = 0; r < rows; ++r) {
+    const T* first = image.ptr<T>(r * fy);
+    for (int c = 0; c < width; ++c) s[c] = float(first[c]);
+    for (int k = 1; k < fy; ++k) {
+      const T* in = image.ptr<T>(r * fy + k);
+      for (int c = 0; c < width; ++c) s[c] += float(in[c]);
+    }
+    float* __restrict o = out.ptr<float>(r);
+    for (int c = 0; c < cols; ++c) {
+      float v = 0;
+      for (int k = 0; k < kFx; ++k) v += s[c * kFx + k];
+      o[c] = v * scale;
+    }
   }
-  return window;
+}
+
+template <typename T>
+void boxAverageOf(const cv::Mat& image, int fx, int fy, cv::Mat& out) {
+  switch (fx) {
+    case 1: boxAverageOf<T, 1>(image, fy, out); break;
+    case 2: boxAverageOf<T, 2>(image, fy, out); break;
+    case 4: boxAverageOf<T, 4>(image, fy, out); break;
+    case 8: boxAverageOf<T, 8>(image, fy, out); break;
+    default: throw std::logic_error("motion compensation: averaging over " + std::to_string(fx) + " px");
+  }
+}
+
+void boxAverage(const cv::Mat& image, int fx, int fy, cv::Mat& out) {
+  switch (image.type()) {
+    case CV_8UC1: boxAverageOf<std::uint8_t>(image, fx, fy, out); break;
+    case CV_16UC1: boxAverageOf<std::uint16_t>(image, fx, fy, out); break;
+    case CV_32FC1: boxAverageOf<float>(image, fx, fy, out); break;
+    default: throw std::invalid_argument("motion compensation: frames must be CV_8UC1, CV_16UC1 or CV_32FC1");
+  }
+}
+
+// Bilinear sample of `src` rows `top`, `bottom` at column c0 (and c0 + 1)
+// with weights a (along x) and b (along y), rounded and saturated as
+// cv::saturate_cast does (round half to even).
+template <typename T>
+inline T bilinearAt(const T* top, const T* bottom, int c0, float a, float b) {
+  const float upper = float(top[c0]) + a * (float(top[c0 + 1]) - float(top[c0]));
+  const float lower = float(bottom[c0]) + a * (float(bottom[c0 + 1]) - float(bottom[c0]));
+  const float v = std::nearbyint(upper + b * (lower - upper));
+  return T(std::clamp(v, 0.0f, float(std::numeric_limits<T>::max())));
+}
+
+// A run of pixels [begin, end) whose sources are all the same whole offset
+// (dx px, and source row r0) from them, up to resampleRow's margin, and
+// inside the frame: two contiguous source rows, no gathers, so it
+// vectorizes.
+template <typename T>
+SL_MULTIVERSION void resampleRun(const T* __restrict top, const T* __restrict bottom, const float* __restrict x,
+                        const float* __restrict y, int begin, int end, int dx, int r0, T* __restrict out) {
+  for (int c = begin; c < end; ++c)
+    out[c] = bilinearAt(top + dx, bottom + dx, c, x[c] - float(c + dx), y[c] - float(r0));
+}
+
+// Row r of `frame` (width x height) resampled into `out`: out[c] = frame at
+// (c + dx(c), r + dy(c)), the displacement linear over each kGridStep-pixel
+// cell j between displacement[j] and displacement[j + 1] (grid_cols nodes,
+// the last at or beyond the last pixel). A pixel whose source lies even
+// partly outside the frame is 0 and set in `lack`. `x`, `y`: scratch of
+// `width` floats.
+//
+// Under motion along one axis nearly every cell's sources are one whole
+// offset from their pixels (it changes where the shift crosses a whole
+// pixel): consecutive such cells are resampled as one run (resampleRun).
+template <typename T>
+SL_MULTIVERSION void resampleRow(const cv::Mat& frame, int r, const cv::Vec2f* displacement, int grid_cols,
+                                 float* __restrict x, float* __restrict y, T* __restrict out,
+                                 std::uint8_t* __restrict lack) {
+  const int width = frame.cols, height = frame.rows;
+  const float last_x = float(width - 1), last_y = float(height - 1);
+  for (int j = 0; j + 1 < grid_cols && j * kGridStep < width; ++j) {
+    const int c_begin = j * kGridStep, c_end = std::min(width, c_begin + kGridStep);
+    const cv::Vec2f d0 = displacement[j];
+    const cv::Vec2f slope = (displacement[j + 1] - d0) * (1.0f / kGridStep);
+    for (int c = c_begin; c < c_end; ++c) {
+      const float w = float(c - c_begin);
+      x[c] = float(c) + d0[0] + w * slope[0];
+      y[c] = float(r) + d0[1] + w * slope[1];
+    }
+  }
+  // A stretch of pixels [begin, end) is one run when its sources lie within
+  // kMargin of one whole offset's interval [dx, dx + 1] from their pixels
+  // and well inside the frame (given the range of x - c, y and x over it).
+  // Classified cell by cell; consecutive cells of one offset make one run.
+  // Within kMargin of a node the run extrapolates its pair of pixels instead
+  // of switching to the next pair: the bilinear surface's value within
+  // kMargin px of the position (0.26 DN at most for 8 bit), so a shift of
+  // nearly whole pixels still takes the run.
+  constexpr float kMargin = 1e-3f;
+  struct Range {
+    float e_low, e_high, y_low, y_high, x_low, x_high;
+  };
+  auto runOf = [&](const Range& g, int begin, int end, int& dx, int& r0) {
+    dx = int(std::floor(g.e_low + kMargin));
+    r0 = int(std::floor(g.y_low + kMargin));
+    return g.e_high <= float(dx) + 1 + kMargin && g.y_high <= float(r0) + 1 + kMargin && g.y_low >= kMargin &&
+           g.y_high <= last_y - kMargin && r0 >= 0 && r0 + 1 <= height - 1 && g.x_low >= kMargin &&
+           g.x_high <= last_x - kMargin && begin + dx >= 0 && end + dx <= width - 1;
+  };
+  // The range over one cell: x - c and y are linear along it (up to
+  // rounding, ~1e-4 px at 1440 px, well below kMargin), so its ends bound it.
+  auto cellRange = [&](int begin, int end) {
+    const int last = end - 1;
+    const float e0 = x[begin] - float(begin), e1 = x[last] - float(last);
+    return Range{std::min(e0, e1), std::max(e0, e1), std::min(y[begin], y[last]), std::max(y[begin], y[last]),
+                 std::min(x[begin], x[last]), std::max(x[begin], x[last])};
+  };
+  int run_begin = 0, run_dx = 0, run_r0 = 0;
+  bool in_run = false;
+  auto flush = [&](int end) {
+    if (in_run)
+      resampleRun(frame.ptr<T>(run_r0), frame.ptr<T>(run_r0 + 1), x, y, run_begin, end, run_dx, run_r0, out);
+    in_run = false;
+  };
+  // Adds [begin, end) to the current run, or starts one.
+  auto extend = [&](int begin, int dx, int r0) {
+    if (in_run && (dx != run_dx || r0 != run_r0)) flush(begin);
+    if (!in_run) {
+      in_run = true;
+      run_begin = begin;
+      run_dx = dx;
+      run_r0 = r0;
+    }
+  };
+  for (int c_begin = 0; c_begin < width; c_begin += kGridStep) {
+    const int c_end = std::min(width, c_begin + kGridStep);
+    int dx = 0, r0 = 0;
+    if (c_end - c_begin >= 2 && runOf(cellRange(c_begin, c_end), c_begin, c_end, dx, r0)) {
+      extend(c_begin, dx, r0);
+      continue;
+    }
+    flush(c_begin);
+    for (int c = c_begin; c < c_end; ++c) {
+      if (!(x[c] >= 0 && y[c] >= 0 && x[c] <= last_x && y[c] <= last_y)) {
+        lack[c] = 1;
+        out[c] = 0;
+        continue;
+      }
+      const int c0 = std::min(int(x[c]), width - 2), row0 = std::min(int(y[c]), height - 2);
+      out[c] = bilinearAt(frame.ptr<T>(row0), frame.ptr<T>(row0 + 1), c0, x[c] - float(c0), y[c] - float(row0));
+    }
+  }
+  flush(width);
 }
 
 }  // namespace
@@ -63,29 +228,46 @@ cv::Mat periodicHann(cv::Size size) {
 // its pinhole image has the model's intrinsics without the distortion.
 struct MotionCompensator::Lens {
   PinholeModel model;
-  // Registration: for each pixel of the subsampled pinhole image, its
-  // position in the subsampled (distorted) frame (cv::remap's maps).
-  cv::Mat subsampled_x, subsampled_y;
+  // Registration: each sample (line j across the axis, i along it) of the
+  // pinhole registration image, bilinear in the box-averaged (distorted)
+  // frame: the top-left source's index in it and the weights along its x and
+  // y. The same positions for every frame, so they do not bias the shift
+  // between two.
+  std::vector<int> source;
+  std::vector<float> weight_x, weight_y;
   // Undistorted normalized coordinates of the pixels (j kGridStep, i
   // kGridStep), i < grid_rows, j < grid_cols, row-major (the last node of a
   // row or column at or beyond the last pixel).
   int grid_rows = 0, grid_cols = 0;
   std::vector<Eigen::Vector2d> nodes;
 
-  Lens(const PinholeModel& m, int factor) : model(m) {
+  Lens(const PinholeModel& m, const Registration& grid) : model(m) {
     if (m.width < 2 || m.height < 2 || !(m.fx > 0) || !(m.fy > 0))
       throw std::invalid_argument("motion compensation: a camera model without a size or focal length");
-    const cv::Size sub = subsampledSize({m.width, m.height}, factor);
-    subsampled_x.create(sub, CV_32FC1);
-    subsampled_y.create(sub, CV_32FC1);
-    // Subsampled pixel i averages the full-resolution pixels i f .. i f + f - 1.
-    const double centre = 0.5 * (factor - 1);
-    for (int r = 0; r < sub.height; ++r)
-      for (int c = 0; c < sub.width; ++c) {
-        const Eigen::Vector2d xn(((c * factor + centre) - m.cx) / m.fx, ((r * factor + centre) - m.cy) / m.fy);
-        const Eigen::Vector2d q = m.normalizedToPixel(xn);
-        subsampled_x.at<float>(r, c) = float((q.x() - centre) / factor);
-        subsampled_y.at<float>(r, c) = float((q.y() - centre) / factor);
+    const int along = grid.along, across = grid.across;
+    const int lines = grid.lines, samples = grid.samples;
+    // The averaged frame: along_x ? lines x samples : samples x lines.
+    const int averaged_cols = grid.along_x ? samples : lines;
+    const int averaged_rows = grid.along_x ? lines : samples;
+    source.resize(std::size_t(lines) * std::size_t(samples));
+    weight_x.resize(source.size());
+    weight_y.resize(source.size());
+    // Averaged pixel k covers the full-resolution pixels k f .. k f + f - 1.
+    const double centre_along = 0.5 * (along - 1), centre_across = 0.5 * (across - 1);
+    for (int j = 0; j < lines; ++j)
+      for (int i = 0; i < samples; ++i) {
+        const double a = i * along + centre_along, c = j * across + centre_across;
+        const Eigen::Vector2d pixel = grid.along_x ? Eigen::Vector2d(a, c) : Eigen::Vector2d(c, a);
+        const Eigen::Vector2d q = m.normalizedToPixel({(pixel.x() - m.cx) / m.fx, (pixel.y() - m.cy) / m.fy});
+        const double fx = grid.along_x ? along : across, fy = grid.along_x ? across : along;
+        // Clamped to the averaged frame (its border repeated).
+        const float x = float(std::clamp((q.x() - 0.5 * (fx - 1)) / fx, 0.0, double(averaged_cols - 1)));
+        const float y = float(std::clamp((q.y() - 0.5 * (fy - 1)) / fy, 0.0, double(averaged_rows - 1)));
+        const int c0 = std::min(int(x), averaged_cols - 2), r0 = std::min(int(y), averaged_rows - 2);
+        const std::size_t k = std::size_t(j) * std::size_t(samples) + std::size_t(i);
+        source[k] = r0 * averaged_cols + c0;
+        weight_x[k] = x - float(c0);
+        weight_y[k] = y - float(r0);
       }
     grid_cols = (m.width - 1 + kGridStep - 1) / kGridStep + 1;
     grid_rows = (m.height - 1 + kGridStep - 1) / kGridStep + 1;
@@ -95,60 +277,53 @@ struct MotionCompensator::Lens {
         nodes.push_back(m.pixelToNormalized(Eigen::Vector2d(j * kGridStep, i * kGridStep)));
   }
 
-  // `frame` resampled so that each pixel shows what it showed in the
-  // reference frame: from the model's pixel of its undistorted point moved
-  // by `shift` (pinhole px) along the axis, bilinear in floating point (not
-  // cv::remap, whose positions are fixed-point, 1/32 px: as large as the
-  // displacement across the axis this corrects). Pixels whose source lies
-  // even partly outside the frame are 0 and set in `lacking` (CV_8UC1).
-  cv::Mat resample(const cv::Mat& frame, bool along_x, double shift, cv::Mat& lacking) const {
-    const int width = frame.cols, height = frame.rows;
-    // The displacement (px) at the grid nodes.
-    std::vector<cv::Vec2f> displacement(nodes.size());
+  // The pinhole registration image (lines x samples) of an averaged frame.
+  void undistort(const cv::Mat& averaged, int lines, int samples, cv::Mat& out) const {
+    out.create(lines, samples, CV_32FC1);
+    const float* in = averaged.ptr<float>(0);
+    const int step = averaged.cols;
+    for (int j = 0; j < lines; ++j) {
+      float* o = out.ptr<float>(j);
+      const std::size_t row = std::size_t(j) * std::size_t(samples);
+      for (int i = 0; i < samples; ++i) {
+        const float* p = in + source[row + std::size_t(i)];
+        const float a = weight_x[row + std::size_t(i)], b = weight_y[row + std::size_t(i)];
+        const float upper = p[0] + a * (p[1] - p[0]);
+        const float lower = p[step] + a * (p[step + 1] - p[step]);
+        o[i] = upper + b * (lower - upper);
+      }
+    }
+  }
+
+  // The displacement (px) at the grid nodes: from each node's pixel to the
+  // model's pixel of its undistorted point moved by `shift` (pinhole px)
+  // along the axis.
+  std::vector<cv::Vec2f> displacement(bool along_x, double shift) const {
+    std::vector<cv::Vec2f> d(nodes.size());
     const Eigen::Vector2d step = along_x ? Eigen::Vector2d(shift / model.fx, 0) : Eigen::Vector2d(0, shift / model.fy);
     for (std::size_t k = 0; k < nodes.size(); ++k) {
-      const Eigen::Vector2d d = model.normalizedToPixel(nodes[k] + step) - model.normalizedToPixel(nodes[k]);
-      displacement[k] = cv::Vec2f(float(d.x()), float(d.y()));
+      const Eigen::Vector2d v = model.normalizedToPixel(nodes[k] + step) - model.normalizedToPixel(nodes[k]);
+      d[k] = cv::Vec2f(float(v.x()), float(v.y()));
     }
-    cv::Mat out(frame.size(), frame.type());
-    const bool wide = frame.depth() == CV_16U;
-    parallelRows(height, [&](const cv::Range& rows) {
-      std::vector<cv::Vec2f> row_displacement(static_cast<std::size_t>(grid_cols));
-      for (int r = rows.start; r < rows.end; ++r) {
-        const int i = std::min(r / kGridStep, grid_rows - 2);
-        const float t = float(r - i * kGridStep) / kGridStep;
-        const cv::Vec2f* upper = &displacement[std::size_t(i) * std::size_t(grid_cols)];
-        const cv::Vec2f* lower = upper + grid_cols;
-        for (int j = 0; j < grid_cols; ++j) row_displacement[std::size_t(j)] = upper[j] + t * (lower[j] - upper[j]);
-        std::uint8_t* lack = lacking.ptr<std::uint8_t>(r);
-        auto* out8 = out.ptr<std::uint8_t>(r);
-        auto* out16 = out.ptr<std::uint16_t>(r);
-        for (int j = 0; j + 1 < grid_cols; ++j) {
-          const cv::Vec2f d0 = row_displacement[std::size_t(j)];
-          const cv::Vec2f slope = (row_displacement[std::size_t(j) + 1] - d0) * (1.0f / kGridStep);
-          const int c_end = std::min(width, (j + 1) * kGridStep);
-          for (int c = j * kGridStep; c < c_end; ++c) {
-            const float w = float(c - j * kGridStep);
-            const float x = float(c) + d0[0] + w * slope[0];
-            const float y = float(r) + d0[1] + w * slope[1];
-            if (!(x >= 0 && y >= 0 && x <= float(width - 1) && y <= float(height - 1))) {
-              lack[c] = 1;
-              if (wide) out16[c] = 0; else out8[c] = 0;
-              continue;
-            }
-            const int c0 = std::min(int(x), width - 2), r0 = std::min(int(y), height - 2);
-            const float a = x - float(c0), b = y - float(r0);
-            if (wide)
-              out16[c] = bilinear<std::uint16_t>(frame, r0, c0, a, b);
-            else
-              out8[c] = bilinear<std::uint8_t>(frame, r0, c0, a, b);
-          }
-        }
-      }
-    });
-    return out;
+    return d;
   }
 };
+
+MotionCompensator::Registration MotionCompensator::registration(cv::Size size) const {
+  Registration g;
+  g.along_x = options_.axis == MotionCompensationOptions::Axis::kX;
+  const int along_length = g.along_x ? size.width : size.height;
+  const int across_length = g.along_x ? size.height : size.width;
+  g.along = options_.subsample;
+  // Images too small to average 8 lines into one and keep 8 lines.
+  g.across = across_length >= 8 * kAcrossPx ? kAcrossPx : 1;
+  g.samples = along_length / g.along;
+  g.lines = across_length / g.across;
+  if (g.samples < 4 || g.lines < 1)
+    throw std::invalid_argument("motion compensation: images of " + std::to_string(size.width) + " x " +
+                                std::to_string(size.height) + " px are too small to register");
+  return g;
+}
 
 MotionCompensator::MotionCompensator(MotionCompensationOptions options,
                                      const std::map<std::string, PinholeModel>& cameras)
@@ -158,55 +333,59 @@ MotionCompensator::MotionCompensator(MotionCompensationOptions options,
   if (!(options_.max_shift_px > 0))
     throw std::invalid_argument("motion compensation: max_shift_px must be > 0");
   for (const auto& [id, model] : cameras)
-    if (model.hasDistortion()) lenses_.emplace(id, std::make_shared<const Lens>(model, options_.subsample));
+    if (model.hasDistortion())
+      lenses_.emplace(id, std::make_shared<const Lens>(model, registration({model.width, model.height})));
 }
 
 cv::Mat MotionCompensator::spectrum(const cv::Mat& image, const Lens* lens) const {
-  const int factor = options_.subsample;
-  cv::Mat f;
-  image.convertTo(f, CV_32F);
-  if (factor > 1) cv::resize(f, f, cv::Size(), 1.0 / factor, 1.0 / factor, cv::INTER_AREA);
-  if (lens) {
-    // The pinhole image (cv::remap's 1/32 px positions: the same for every
-    // frame, so they do not bias the shift between two).
-    cv::Mat pinhole;
-    cv::remap(f, pinhole, lens->subsampled_x, lens->subsampled_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-    f = pinhole;
+  const Registration g = registration(image.size());
+  cv::Mat averaged, lines;
+  boxAverage(image, g.along_x ? g.along : g.across, g.along_x ? g.across : g.along, averaged);
+  if (lens)
+    lens->undistort(averaged, g.lines, g.samples, lines);
+  else if (g.along_x)
+    lines = averaged;
+  else
+    cv::transpose(averaged, lines);
+  // The image's mean removed (so the DC term does not dominate the window),
+  // then the periodic Hann window along and across the axis.
+  const float mean = float(cv::mean(lines)[0]);
+  const std::vector<float> along_window =
+      options_.window ? periodicHann(g.samples) : std::vector<float>(std::size_t(g.samples), 1.0f);
+  const std::vector<float> across_window =
+      options_.window ? periodicHann(g.lines) : std::vector<float>(std::size_t(g.lines), 1.0f);
+  for (int j = 0; j < g.lines; ++j) {
+    float* row = lines.ptr<float>(j);
+    const float across = across_window[std::size_t(j)];
+    for (int i = 0; i < g.samples; ++i) row[i] = (row[i] - mean) * (across * along_window[std::size_t(i)]);
   }
-  // The motion axis along the columns (x).
-  if (options_.axis == MotionCompensationOptions::Axis::kY) cv::transpose(f, f);
-  // Remove the image's mean so the DC term does not dominate the window.
-  f -= cv::mean(f);
-  if (options_.window) {
-    if (window_.size() != f.size()) window_ = periodicHann(f.size());
-    f = f.mul(window_);
-  }
+  // Each line's spectrum along the axis (CCS packed, one row per line).
   cv::Mat transformed;
-  cv::dft(f, transformed, cv::DFT_COMPLEX_OUTPUT);
+  cv::dft(lines, transformed, cv::DFT_ROWS);
   return transformed;
 }
 
 cv::Mat MotionCompensator::correlate(const cv::Mat& fa, const cv::Mat& fb) const {
-  cv::Mat cross;
-  // Eq. 10: C = F_b * conj(F_a) / |F_b * conj(F_a)|; its inverse transform
-  // peaks at the shift of b relative to a.
-  cv::mulSpectrums(fb, fa, cross, 0, /*conjB=*/true);
-  const int rows = cross.rows, cols = cross.cols;
-  // Sum the cross-power over the frequencies across the motion axis (rows):
-  // its inverse transform is the correlation on the line of zero shift across
-  // the axis. Summing before normalising matters: the fringes multiply the
-  // scene, and the sidebands they create carry the fringes' phase step with
-  // opposite signs at +f and -f, which cancels only in the sum. Column 0 (no
+  // Eq. 10's cross-power spectrum F_b * conj(F_a), summed over the
+  // frequencies across the motion axis: its inverse transform is the
+  // correlation on the line of zero shift across the axis. By Parseval
+  // across the axis that sum is (up to a constant factor) the sum over the
+  // lines of each line's 1-D cross-power spectrum along the axis, which is
+  // what is computed here: the transforms across the axis are not needed.
+  //
+  // Summing before normalising matters: the fringes multiply the scene, and
+  // the sidebands they create carry the fringes' phase step with opposite
+  // signs at +f and -f, which cancels only in the sum. Frequency 0 (no
   // variation along the motion axis: the fringes themselves) is left out,
-  // and with the Hann window also columns +-1: the (periodic) window's
-  // spectrum has exactly the frequencies 0 and +-1, so the static fringes
-  // times the window lie there. Kept, they pull the peak away from the true shift: two frames
+  // and with the Hann window also +-1: the (periodic) window's spectrum has
+  // exactly the frequencies 0 and +-1, so the static fringes times the window
+  // lie there. Kept, they pull the peak away from the true shift: two frames
   // of the same fringes phase-stepped by 2 pi / 3 (3+3's unit-frequency
   // frames) correlate there with the sign of cos(2 pi / 3) < 0, a cosine of
   // one period over the image whose maximum is half an image away, so the
   // peak went to the edge of the search range (measured on sl_eval wall's
   // frames: -201 px and +199 px against a true -4.2 px; -4.24 px without
-  // columns +-1).
+  // +-1).
   //
   // The sum is then whitened partially (divided by the square root of its
   // magnitude) rather than fully as in eq. 10: with strong fringes, full
@@ -216,23 +395,29 @@ cv::Mat MotionCompensator::correlate(const cv::Mat& fa, const cv::Mat& fb) const
   // fringe contrast 0.3-0.8, shifts up to 9 px): max error 0.036 px with the
   // square root, 7-12 px with full whitening (1-D or OpenCV's 2-D
   // phaseCorrelate), up to 229 px without whitening.
+  const int lines = fa.rows, n = fa.cols, half = n / 2;
   const int skipped = options_.window ? 1 : 0;  // |frequency| <= skipped left out
-  auto used = [&](int c) { return std::min(c, cols - c) > skipped; };
-  std::vector<cv::Vec2d> sum(cols, cv::Vec2d(0, 0));
-  for (int r = 0; r < rows; ++r) {
-    const auto* in = cross.ptr<cv::Vec2f>(r);
-    for (int c = 1; c < cols; ++c)
-      if (used(c)) sum[c] += cv::Vec2d(in[c][0], in[c][1]);
-  }
-  cv::Mat line(1, cols, CV_32FC2, cv::Scalar(0, 0));
-  auto* out = line.ptr<cv::Vec2f>(0);
-  for (int c = 1; c < cols; ++c) {
-    if (!used(c)) continue;
-    const double magnitude = std::hypot(sum[c][0], sum[c][1]);
-    if (magnitude > 1e-30) {
-      const double scale = 1.0 / std::sqrt(magnitude);
-      out[c] = cv::Vec2f(float(sum[c][0] * scale), float(sum[c][1] * scale));
+  std::vector<double> re(std::size_t(half) + 1, 0.0), im(std::size_t(half) + 1, 0.0);
+  // CCS rows: Re0, Re1, Im1, Re2, Im2, ... (and Re(n/2) last for even n).
+  const int pairs = (n - 1) / 2;
+  for (int j = 0; j < lines; ++j) {
+    const float* a = fa.ptr<float>(j);
+    const float* b = fb.ptr<float>(j);
+    for (int k = 1; k <= pairs; ++k) {
+      const float ar = a[2 * k - 1], ai = a[2 * k], br = b[2 * k - 1], bi = b[2 * k];
+      re[std::size_t(k)] += double(br * ar + bi * ai);
+      im[std::size_t(k)] += double(bi * ar - br * ai);
     }
+    if (n % 2 == 0) re[std::size_t(half)] += double(b[n - 1] * a[n - 1]);
+  }
+  cv::Mat line(1, n, CV_32FC2, cv::Scalar(0, 0));
+  auto* out = line.ptr<cv::Vec2f>(0);
+  for (int k = skipped + 1; k <= half; ++k) {
+    const double magnitude = std::hypot(re[std::size_t(k)], im[std::size_t(k)]);
+    if (!(magnitude > 1e-30)) continue;
+    const double scale = 1.0 / std::sqrt(magnitude);
+    out[k] = cv::Vec2f(float(re[std::size_t(k)] * scale), float(im[std::size_t(k)] * scale));
+    out[n - k] = cv::Vec2f(out[k][0], -out[k][1]);  // Hermitian: a real correlation
   }
   cv::Mat correlation;
   cv::idft(line, correlation, cv::DFT_REAL_OUTPUT | cv::DFT_SCALE);
@@ -329,15 +514,49 @@ double MotionCompensator::peakShiftWithin(const cv::Mat& correlation, double fro
   return peak.shift * factor;
 }
 
-std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& set,
-                                                              MotionEstimate* estimate) const {
+
+cv::Mat MotionCompensator::resample(const cv::Mat& frame, double shift, const Lens* lens, cv::Mat& lacking,
+                                    RowWorkers* workers) const {
+  const bool along_x = options_.axis == MotionCompensationOptions::Axis::kX;
+  const int width = frame.cols, height = frame.rows;
+  // Without a lens the displacement is the shift everywhere (one cell of
+  // nodes per row, constant).
+  const int grid_cols = lens ? lens->grid_cols : (width - 1 + kGridStep - 1) / kGridStep + 1;
+  const int grid_rows = lens ? lens->grid_rows : 2;
+  const std::vector<cv::Vec2f> displacement =
+      lens ? lens->displacement(along_x, shift)
+           : std::vector<cv::Vec2f>(std::size_t(grid_rows) * std::size_t(grid_cols),
+                                    along_x ? cv::Vec2f(float(shift), 0) : cv::Vec2f(0, float(shift)));
+  cv::Mat out(frame.size(), frame.type());
+  const bool wide = frame.depth() == CV_16U;
+  forBlocks(workers, height, kResampleBlockRows, [&](int begin, int end) {
+    std::vector<cv::Vec2f> row_displacement(static_cast<std::size_t>(grid_cols));
+    std::vector<float> x(static_cast<std::size_t>(width)), y(static_cast<std::size_t>(width));
+    for (int r = begin; r < end; ++r) {
+      const int i = lens ? std::min(r / kGridStep, grid_rows - 2) : 0;
+      const float t = lens ? float(r - i * kGridStep) / kGridStep : 0.0f;
+      const cv::Vec2f* upper = &displacement[std::size_t(i) * std::size_t(grid_cols)];
+      const cv::Vec2f* lower = upper + grid_cols;
+      for (int j = 0; j < grid_cols; ++j) row_displacement[std::size_t(j)] = upper[j] + t * (lower[j] - upper[j]);
+      if (wide)
+        resampleRow(frame, r, row_displacement.data(), grid_cols, x.data(), y.data(),
+                    out.ptr<std::uint16_t>(r), lacking.ptr<std::uint8_t>(r));
+      else
+        resampleRow(frame, r, row_displacement.data(), grid_cols, x.data(), y.data(),
+                    out.ptr<std::uint8_t>(r), lacking.ptr<std::uint8_t>(r));
+    }
+  });
+  return out;
+}
+
+std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& set, MotionEstimate* estimate,
+                                                              RowWorkers* workers) const {
   if (set.cameras.empty() || set.cameras.front().frames.empty())
     throw std::invalid_argument("motion compensation: empty image set");
   auto out = std::make_shared<ImageSet>(set);  // frames are shared until replaced
   MotionEstimate local;
   MotionEstimate& result = estimate ? *estimate : local;
   result = {};
-  const bool along_x = options_.axis == MotionCompensationOptions::Axis::kX;
   for (CameraImages& camera : out->cameras) {
     const int n = static_cast<int>(camera.frames.size());
     const int ref = options_.reference_frame < 0 ? n / 2 : options_.reference_frame;
@@ -353,16 +572,20 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
                                     std::to_string(frame.cols) + " x " + std::to_string(frame.rows) +
                                     " px, its model " + std::to_string(lens->model.width) + " x " +
                                     std::to_string(lens->model.height));
-      if (lens && frame.type() != CV_8UC1 && frame.type() != CV_16UC1)
+      if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)
         throw std::invalid_argument("motion compensation: frames must be CV_8UC1 or CV_16UC1");
     }
     std::vector<double> shifts(n, 0.0);
     std::vector<bool> within(n, true), corrected(n, false), resampled(n, false);
-    std::vector<cv::Mat> correlations(n);
-    const cv::Mat reference_spectrum = spectrum(camera.frames[ref], lens);
+    // Each frame's spectrum and its correlation with the reference's; one
+    // frame per thread.
+    std::vector<cv::Mat> spectra(n), correlations(n);
+    forBlocks(workers, n, 1, [&](int begin, int end) {
+      for (int i = begin; i < end; ++i) spectra[std::size_t(i)] = spectrum(camera.frames[i], lens);
+    });
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
-      correlations[i] = correlate(reference_spectrum, spectrum(camera.frames[i], lens));
+      correlations[i] = correlate(spectra[std::size_t(ref)], spectra[std::size_t(i)]);
       shifts[i] = peakShift(correlations[i]);
       within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
     }
@@ -395,12 +618,9 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
         ++result.frames_corrected;
       }
     }
-    // [from, to) along the axis: the pixels some frame lacks (its source lies
-    // even partly outside the frame).
-    const int length = along_x ? camera.frames[ref].cols : camera.frames[ref].rows;
-    int lacking_before = 0, lacking_from = length;
-    cv::Mat lacking;  // through the lens: pixels some frame lacks
-    if (lens) lacking = cv::Mat::zeros(camera.frames[ref].size(), CV_8UC1);
+    // The pixels some frame lacks (their source lies even partly outside the
+    // frame).
+    cv::Mat lacking = cv::Mat::zeros(camera.frames[ref].size(), CV_8UC1);
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
       if (!within[i]) {
@@ -408,46 +628,38 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
         shifts[i] = 0;
         continue;
       }
-      const double shift = shifts[i];
-      if (lens) {
-        camera.frames[i] = lens->resample(camera.frames[i], along_x, shift, lacking);
-        resampled[i] = true;
-        continue;
-      }
-      // Move frame i's content back onto the reference: translate by -shift.
-      cv::Mat m = cv::Mat::zeros(2, 3, CV_64F);
-      m.at<double>(0, 0) = m.at<double>(1, 1) = 1;
-      (along_x ? m.at<double>(0, 2) : m.at<double>(1, 2)) = -shift;
-      cv::Mat aligned;
-      cv::warpAffine(camera.frames[i], aligned, m, camera.frames[i].size(), cv::INTER_LINEAR,
-                     cv::BORDER_CONSTANT, cv::Scalar(0));
-      camera.frames[i] = aligned;
+      camera.frames[i] = resample(camera.frames[i], shifts[i], lens, lacking, workers);
       resampled[i] = true;
-      // aligned(x) = frame(x + shift): a bilinear blend with the border where
-      // x + shift < 0 or > length - 1.
-      if (shift < 0)
-        lacking_before = std::max(lacking_before, std::min(length, int(std::ceil(-shift))));
-      else if (shift > 0)
-        lacking_from = std::min(lacking_from, std::max(0, int(std::floor(length - 1 - shift)) + 1));
     }
     // Those pixels are 0 in every frame (dimmed or missing in one frame, they
     // would decode to a wrong phase; 0 in all, they have no modulation).
-    if (lens && cv::countNonZero(lacking) > 0) {
-      for (int i = 0; i < n; ++i) {
-        if (!resampled[i]) camera.frames[i] = camera.frames[i].clone();  // not the input's pixels
-        camera.frames[i].setTo(cv::Scalar(0), lacking);
-      }
+    if (cv::countNonZero(lacking) == 0) {
+      if (&camera == &out->cameras.front() && ref < static_cast<int>(camera.stamps_ns.size()))
+        out->trigger_stamp_ns = camera.stamps_ns[ref];
+      result.shifts_px.push_back(std::move(shifts));
+      result.corrected.push_back(std::move(corrected));
+      continue;
     }
-    for (int i = 0; i < n && !lens && (lacking_before > 0 || lacking_from < length); ++i) {
+    for (int i = 0; i < n; ++i)
       if (!resampled[i]) camera.frames[i] = camera.frames[i].clone();  // not the input's pixels
-      for (const auto& [from, to] : {std::pair{0, lacking_before}, std::pair{lacking_from, length}}) {
-        if (to <= from) continue;
-        if (along_x)
-          camera.frames[i].colRange(from, to).setTo(cv::Scalar(0));
-        else
-          camera.frames[i].rowRange(from, to).setTo(cv::Scalar(0));
+    const bool wide = camera.frames[ref].depth() == CV_16U;
+    forBlocks(workers, lacking.rows, kResampleBlockRows, [&](int begin, int end) {
+      for (int r = begin; r < end; ++r) {
+        const std::uint8_t* lack = lacking.ptr<std::uint8_t>(r);
+        const std::uint8_t* lack_end = lack + lacking.cols;
+        for (const void* p = std::memchr(lack, 1, lacking.cols); p;
+             p = std::memchr(static_cast<const std::uint8_t*>(p) + 1, 1,
+                             std::size_t(lack_end - static_cast<const std::uint8_t*>(p) - 1))) {
+          const int c = int(static_cast<const std::uint8_t*>(p) - lack);
+          for (cv::Mat& frame : camera.frames) {
+            if (wide)
+              frame.ptr<std::uint16_t>(r)[c] = 0;
+            else
+              frame.ptr<std::uint8_t>(r)[c] = 0;
+          }
+        }
       }
-    }
+    });
     if (&camera == &out->cameras.front() && ref < static_cast<int>(camera.stamps_ns.size()))
       out->trigger_stamp_ns = camera.stamps_ns[ref];
     result.shifts_px.push_back(std::move(shifts));

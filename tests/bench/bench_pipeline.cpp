@@ -15,6 +15,7 @@
 
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/motion_compensation.h"
+#include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/triangulator.h"
 #include "support/test_rig.h"
 
@@ -164,9 +165,31 @@ void BM_MotionCompensation(benchmark::State& state) {
   cv::setNumThreads(threads);
 }
 
+// The same through the lens model on a RowWorkers pool of `threads` (the
+// caller included), as the daemon's processing thread runs it: frames
+// registered one per thread, rows resampled in blocks. OpenCV's own threads
+// off. Reports the caller's CPU time (the workers' is not counted): compare
+// the real time.
+void BM_MotionCompensationOnWorkers(benchmark::State& state) {
+  const int threads = cv::getNumThreads();
+  cv::setNumThreads(1);
+  const ImageSet set = movingSet();
+  MotionCompensationOptions options;
+  options.axis = MotionCompensationOptions::Axis::kY;
+  const MotionCompensator compensator(options, {{"camera", scan().calibration.camera}});
+  RowWorkers workers(int(state.range(0)));
+  for (auto _ : state) {
+    auto aligned = compensator.compensate(set, nullptr, &workers);
+    benchmark::DoNotOptimize(aligned.get());
+  }
+  reportScans(state);
+  cv::setNumThreads(threads);
+}
+
 }  // namespace
 
 BENCHMARK(BM_MotionCompensation)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MotionCompensationOnWorkers)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Decode)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Triangulate)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_DecodeAndTriangulate)->Arg(0)->Arg(2)->Unit(benchmark::kMillisecond);

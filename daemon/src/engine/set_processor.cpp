@@ -143,7 +143,7 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
   if (motion_compensation) {
     try {
       pipeline::MotionEstimate estimate;
-      compensated = motion_.compensate(input, &estimate);
+      compensated = motion_.compensate(input, &estimate, &processor_.workers());
       if (!estimate.all_within_limit)
         out.warning = "motion compensation: a shift beyond max_shift_px was ignored";
       else if (estimate.frames_corrected > 0)

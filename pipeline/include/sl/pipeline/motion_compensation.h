@@ -7,9 +7,12 @@
 // interpolating between frames, so non-uniform motion is handled), and
 // resampled so that it aligns with the reference.
 //
-// The registration is one-dimensional: the cross-power spectrum (eq. 10) is
-// summed over the frequencies across the motion axis (its inverse transform
-// is the correlation on the line of zero shift across the axis) and whitened
+// The registration is one-dimensional: the frames are averaged into lines
+// along the motion axis (8 px across it), each line is transformed along the
+// axis, and the lines' cross-power spectra (eq. 10) are summed (by Parseval
+// the 2-D cross-power spectrum summed over the frequencies across the axis:
+// its inverse transform is the correlation on the line of zero shift across
+// the axis) and whitened
 // by the square root of its magnitude; the frequency zero along the motion
 // axis (and +-1 with the Hann window) is left out, because the projected
 // fringes do not move with the scene and would pull the peak (see
@@ -36,6 +39,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "sl/pipeline/camera_model.h"
+#include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::pipeline {
@@ -74,8 +78,8 @@ struct MotionEstimate {
   std::vector<std::vector<bool>> corrected;
 };
 
-// Thread-compatible; holds its options, the undistortion of the cameras it
-// was given and a cached window.
+// Thread-compatible (its const methods may run concurrently); holds its
+// options and the undistortion of the cameras it was given.
 class MotionCompensator {
  public:
   // `cameras`: the models of the cameras by camera id (CameraImages'
@@ -105,27 +109,45 @@ class MotionCompensator {
   // frames (the reference included), so the decoder finds no modulation there
   // and marks it invalid. Throws std::invalid_argument on an empty set, a bad
   // reference or frames whose size differs from their camera's model.
-  std::shared_ptr<const ImageSet> compensate(const ImageSet& set,
-                                             MotionEstimate* estimate = nullptr) const;
+  // The frames are registered one per thread and resampled in blocks of
+  // rows on `workers` when given (the caller's pool, e.g. the daemon's
+  // processing threads), else on OpenCV's threads.
+  std::shared_ptr<const ImageSet> compensate(const ImageSet& set, MotionEstimate* estimate = nullptr,
+                                             RowWorkers* workers = nullptr) const;
 
   const MotionCompensationOptions& options() const { return options_; }
 
  private:
   struct Lens;  // a camera's undistortion (motion_compensation.cpp)
 
-  // One frame's spectrum, as the correlation takes it: subsampled (and
-  // undistorted through `lens` when given), transposed for the y axis, mean
-  // removed, windowed.
+  // Where a frame is registered: averaged over `along` px along the axis
+  // (the subsample factor) and `across` px across it, into `lines` lines
+  // across the axis of `samples` samples along it.
+  struct Registration {
+    bool along_x = true;
+    int along = 1, across = 1;
+    int lines = 0, samples = 0;
+  };
+  // Throws std::invalid_argument for images too small to register.
+  Registration registration(cv::Size size) const;
+
+  // One frame's spectrum, as the correlation takes it: averaged (and
+  // undistorted through `lens` when given) into lines along the axis, mean
+  // removed, windowed, each line transformed (CCS packed rows).
   cv::Mat spectrum(const cv::Mat& image, const Lens* lens) const;
   // The correlation along the axis (subsampled px, circular) of the frame
   // of spectrum `moving` against that of `reference`.
   cv::Mat correlate(const cv::Mat& reference, const cv::Mat& moving) const;
   double peakShift(const cv::Mat& correlation) const;
   double peakShiftWithin(const cv::Mat& correlation, double from_px, double to_px) const;
+  // `frame` moved by -shift along the axis (through `lens` when given);
+  // pixels whose source lies even partly outside it are 0 and set in
+  // `lacking` (CV_8UC1).
+  cv::Mat resample(const cv::Mat& frame, double shift, const Lens* lens, cv::Mat& lacking,
+                   RowWorkers* workers) const;
 
   MotionCompensationOptions options_;
   std::map<std::string, std::shared_ptr<const Lens>> lenses_;  // cameras with distortion
-  mutable cv::Mat window_;  // cached Hann window for the last size (thread-compatible)
 };
 
 }  // namespace sl::pipeline

@@ -31,6 +31,9 @@ class ScanProcessor {
   explicit ScanProcessor(int threads = RowWorkers::defaultThreads());
 
   int threads() const { return workers_.threads(); }
+  // Its pool, for other per-scan work of the same thread between process()
+  // calls (e.g. MotionCompensator::compensate).
+  RowWorkers& workers() { return workers_; }
 
   // What process() returns besides the cloud.
   enum class Keep {
