@@ -572,7 +572,7 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
     }
     // Pixels with a finite coordinate on the second axis (NaN pixels stay NaN
     // whatever their axis). An integer OR: a float sum may not be reordered,
-    // so it was added up one lane at a time (~20 % of this function, perf).
+    // so it would be added up one lane at a time (docs/measurements.md).
     unsigned on_second = 0;
     SL_ROW_LOOP
     for (int u = 0; u < width; ++u)
