@@ -45,6 +45,7 @@ recorded=$(sed -n 's/^recorded \([0-9]*\) image sets$/\1/p' "$work/block.log")
 sets=$(find "$rec" -name meta.yml | wc -l)
 [ "$recorded" -ge 1 ] && [ "$sets" -eq "$recorded" ] \
   || fail "slctl record --wait returned with $recorded sets reported, $sets in $rec"
-[ ! -e "$src/config/recordings" ] || fail "a recording landed in the source tree ($src/config/recordings)"
+[ ! -e "$work/recordings" ] \
+  || fail "a recording landed beside the config file (the source tree for config/sim.yaml)"
 sl_stop_daemon
 echo "ok: the README's first-scan block runs as pasted"
