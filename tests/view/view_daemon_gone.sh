@@ -2,7 +2,8 @@
 # sl_view says whether a daemon is behind its topics: "no daemon" on stderr
 # and in GET /stats (dds.daemon, dds.status_age_s) when none publishes its
 # status, at start and after the daemon exits; "daemon found" when one comes.
-# And a port in use is one clear line with the system's reason, exit 1.
+# The web page (headless Chromium) shows the same. And a port in use is one
+# clear line with the system's reason, exit 1.
 # usage: view_daemon_gone.sh SOURCE_DIR BINARY_DIR
 set -euo pipefail
 # shellcheck source=../support/daemon.sh
@@ -10,6 +11,10 @@ source "$1/tests/support/daemon.sh"
 sl_enter_netns "$0" "$@"
 sl_init "$1" "$2"
 view=$bin/tools/sl_view/sl_view
+node_dir=$src/tools/sl_view
+[ -d "$node_dir/node_modules/playwright-core" ] ||
+  fail "npm packages missing: run scripts/install-deps.sh (npm ci in tools/sl_view)"
+page() { node "$node_dir/test/daemon_check.mjs" --url "http://127.0.0.1:$vport/" --expect "$1" || fail "the page with the daemon $1"; }
 ns="gone_$$"
 sl_sim_config "$ns" "$work/sim.yaml"
 
@@ -58,10 +63,12 @@ sl_start_daemon "$work/sim.yaml" "$work/daemon.log"
 sl_wait_ready "$work/daemon.log"
 wait_for "^sl_view: daemon found" 1 10
 s=$(stats); echo "$s" | grep -q "^daemon=true" || fail "/stats with a daemon: $s"
+page present
 echo "ok: daemon found ($s)"
 
 # 4. It goes: sl_view says so, no stale "scanning".
 sl_stop_daemon
 wait_for "^sl_view: no daemon: no status on rt/$ns/status" 2 15
 s=$(stats); echo "$s" | grep -Eq "^daemon=false age=([5-9]|[1-9][0-9])" || fail "/stats after the daemon exited: $s"
+page gone
 echo "ok: daemon gone ($s)"
