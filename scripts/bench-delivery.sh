@@ -50,6 +50,8 @@
 #                 scenario through /proc/PID/clear_refs)
 # Ends with one line per configuration and scenario:
 #   delivery: <config> <scenario> clouds_per_s=<x> lost=<n> p50_ms=<x> p99_ms=<x> max_ms=<x> rss_mb=<x>
+# and writes them as CSV to SL_BENCH_CSV (default
+# docs/measurements/delivery-<UTC time>.csv; docs/measurements.md says how to read them).
 #
 # As root it runs in a private network and mount namespace (its own
 # loopback, /tmp and /dev/shm), so its DDS traffic and its RouDi never meet
@@ -61,8 +63,8 @@ build=$(cd "${1:-$src/build}" && pwd)
 secs=${SL_BENCH_SECONDS:-30}
 # A new reader's first clouds pay for its fresh buffers (Cyclone's receive
 # buffers, the deserialized sample, the kernel's socket buffers): on this
-# VM first-touched memory costs ~5 ms/MB (README, "Measured"), i.e. the
-# first clouds take 0.1-0.8 s. p50/p99/max are over the clouds a reader
+# VM first-touched memory costs several ms per MB (docs/measurements.md),
+# so the first clouds take far longer than the rest. p50/p99/max are over the clouds a reader
 # takes from SL_BENCH_WARMUP_S (default 1 s) after its first one; the
 # warm-up's clouds are counted for loss and rate, and their latencies are
 # printed on the reader's own line (first_ms, warmup_max_ms).
@@ -140,7 +142,7 @@ configs=("loopback:$src/config/cyclonedds-loopback.xml" "lan:$work/lan-loopback.
 if command -v iox-roudi > /dev/null; then
   if [ "${SL_BENCH_INSIDE:-0}" = 1 ] || ! pgrep -x iox-roudi > /dev/null; then
     # Monitoring off: with it on, RouDi declares a SIGSTOPped subscriber dead
-    # after a few seconds and the subscriber aborts when it resumes (README
+    # after a few seconds and the subscriber aborts when it resumes (docs/operations.md
     # "DDS deployment").
     iox-roudi -c "$src/config/iceoryx-roudi.toml" -m off -l warning > "$work/roudi.log" 2>&1 &
     roudi_pid=$!
@@ -237,7 +239,7 @@ first() { awk -v o="$2" -v w="$warmup_ns" '$1 == "rx" { l = ($3 - $2 - o) / 1e6
 daemon_pid=""
 ns=""
 # prefault_at FPS -> 1 or 0: runtime.prefault_memory for the daemon and
-# --prefault-clouds for its readers (README: recommended from ~15 scans/s),
+# --prefault-clouds for its readers (docs/formats.md, runtime.prefault_memory: recommended from ~15 scans/s),
 # on for the high-rate scenarios unless SL_BENCH_PREFAULT says 0 or 1 for all.
 prefault_at() {
   local p=${SL_BENCH_PREFAULT:-auto}
@@ -352,7 +354,7 @@ scenario() {
             else printf "  stalled/%s sub2: no gap of more than 5 s between its takes: it took no cloud after resuming (%s)\n", cfg, (prev ? "or never stopped" : "nor before") }' cfg="$cfg" "$work/sub2.log"
   fi
   echo "  $name/$cfg: load average $load; daemon status: ${status:0:400}"
-  # Minor page faults per cloud: fresh memory for 25 MB buffers (README).
+  # Minor page faults per cloud: fresh memory for 25 MB buffers (docs/operations.md).
   local scans
   scans=$(echo "$status" | grep -o 'scans: [0-9]*' | head -n 1 | cut -d' ' -f2)
   echo "  $name/$cfg: page faults per scan: daemon $(awk -v f="$faults" -v n="${scans:-0}" 'BEGIN { printf "%.0f", (n > 0 ? f / n : 0) }')$(for i in $(seq 1 "$subs"); do
@@ -462,8 +464,8 @@ elif [ -x "$fastdds" ]; then
   start_daemon 30
   n=$((secs_5hz * 5))
   # The Fast DDS subscriber stands for a ROS 2 node: it runs with the
-  # allocator settings the README recommends for subscribers of full clouds
-  # (README, "Memory of large samples": the values retainLargeSampleMemory
+  # allocator settings docs/operations.md recommends for subscribers of full clouds
+  # (docs/operations.md, "Memory of large samples": the values retainLargeSampleMemory
   # sets with mallopt), unless SL_DEFAULT_MALLOC=1.
   tunables=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=2147483647:glibc.malloc.top_pad=67108864
   [ "${SL_DEFAULT_MALLOC:-0}" = 1 ] && tunables=${GLIBC_TUNABLES:-}
@@ -506,3 +508,14 @@ for entry in "${configs[@]}"; do
 done
 echo "bench-delivery: load average at the end $(cut -d' ' -f1-3 /proc/loadavg); total $((SECONDS - t_start)) s"
 for r in "${results[@]}"; do echo "$r"; done
+# The same lines as data, in the columns of docs/measurements/delivery-history.csv.
+csv=${SL_BENCH_CSV:-$src/docs/measurements/delivery-$(date -u +%Y%m%dT%H%MZ).csv}
+tree=$(git -C "$src" rev-parse --short HEAD 2>/dev/null || echo unknown)
+{
+  echo "date_utc,tree,config,scenario,clouds_per_s,lost,p50_ms,p99_ms,max_ms,rss_mb"
+  for r in "${results[@]}"; do
+    set -- $r
+    echo "$(date -u +%FT%H:%MZ),$tree,$2,$3,$(field "$r" clouds_per_s),$(field "$r" lost),$(field "$r" p50_ms),$(field "$r" p99_ms),$(field "$r" max_ms),$(field "$r" rss_mb)"
+  done
+} > "$csv"
+echo "bench-delivery: results written to $csv"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Creates the DDS Security material for sl-sensor (README "DDS Security"):
+# Creates the DDS Security material for sl-sensor (docs/operations.md, "DDS Security"):
 # an identity CA and a permissions CA, one identity (certificate + key) and
 # one signed permissions document per role, and the two signed governance
 # documents. Everything is written to OUT (default ./dds-security); keys are

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# libFuzzer runs of the fuzz/ targets (README "Fuzzing"). Builds them with
+# libFuzzer runs of the fuzz/ targets (docs/testing.md, "Sanitizers and fuzzing"). Builds them with
 # clang into build-fuzz/ (SL_BUILD_FUZZERS=ON: ASan + UBSan + coverage) and
 # runs each for SECONDS (default 600) on a copy of its seed corpus in
 # build-fuzz/corpus/<name> (new inputs accumulate there, fuzz/corpus/ stays as

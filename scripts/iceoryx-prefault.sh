@@ -8,7 +8,7 @@
 # ~820 MB with config/iceoryx-roudi.toml). A page of /dev/shm is allocated
 # at its first write; on a VM that hands free memory back to the host that
 # costs ~5 ms per MB, so each 25 MB cloud chunk used for the first time cost
-# the daemon's output thread ~125 ms (README, "Measured: delivery").
+# the daemon's output thread ~125 ms (docs/measurements.md).
 # fallocate(1) allocates the missing pages of each segment file and leaves
 # what is written untouched, so it is safe while RouDi and its clients run.
 # Waits up to 20 s for RouDi to map its segments; a failure is reported and

@@ -1,6 +1,6 @@
 // The writer of rt/<ns>/points. dds_write serializes a sample into a buffer
 // of Cyclone's before sending it: for a 25 MB cloud that is one more 25 MB
-// copy (~2.5 ms here) on the way from the triangulator to the socket. This
+// copy (docs/measurements.md) on the way from the triangulator to the socket. This
 // writer hands Cyclone a serialized sample (a "serdata") whose point data is
 // the cloud's own memory: the CDR bytes before the data (header, fields,
 // the data's length) and after it (is_dense, padding) are its own, and the

@@ -383,13 +383,20 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   parseSoftwareTrigger(root.optionalMap("software_trigger"), config.software_trigger);
   // Relative: under the service's state directory when systemd gives one
-  // (StateDirectory=, $STATE_DIRECTORY; the config's folder is read-only
-  // there), else beside the config file.
+  // (StateDirectory=, $STATE_DIRECTORY), else under the user's data folder
+  // ($XDG_DATA_HOME/sl-sensor, ~/.local/share/sl-sensor): never in the source
+  // tree; beside the config file only without any of these.
   if (std::filesystem::path(config.runtime.recording_root).is_relative()) {
-    const char* state = std::getenv("STATE_DIRECTORY");
+    const auto env = [](const char* name) {
+      const char* v = std::getenv(name);
+      return std::string(v ? v : "");
+    };
+    const std::string state = env("STATE_DIRECTORY");
     const std::filesystem::path base =
-        state && *state ? std::filesystem::path(std::string(state).substr(0, std::string(state).find(':')))
-                        : base_dir;
+        !state.empty()                   ? std::filesystem::path(state.substr(0, state.find(':')))
+        : !env("XDG_DATA_HOME").empty() ? std::filesystem::path(env("XDG_DATA_HOME")) / "sl-sensor"
+        : !env("HOME").empty()           ? std::filesystem::path(env("HOME")) / ".local/share/sl-sensor"
+                                         : base_dir;
     config.runtime.recording_root =
         std::filesystem::absolute(base / config.runtime.recording_root).lexically_normal().string();
   }

@@ -219,7 +219,7 @@ void Codec::decodeRowsTo(const std::vector<cv::Mat>& frames, int bit_depth, int 
   const float saturation = options_.reject_saturated ? static_cast<float>((1 << bit_depth) - 1)
                                                      : std::numeric_limits<float>::infinity();
   // Row buffers, left uninitialized (the kernels write before they read;
-  // zeroing them cost as much as 5 % of a 3+3 decode in 16-row blocks).
+  // zeroing them would cost a share of a decode; docs/measurements.md).
   const auto scratch =
       std::make_unique_for_overwrite<float[]>(static_cast<std::size_t>(scratchRows()) * width);
   // Second direction of kBoth: coordinate, B, A, status, residual.

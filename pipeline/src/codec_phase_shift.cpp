@@ -160,9 +160,9 @@ void twoThreeStepRow(const TwoThreeStepParams& p, const std::uint16_t* const* ro
 // step handles kLanes vectors of 16 pixels in turn (independent chains for
 // out-of-order execution without spills), selects with masked operations,
 // takes the peak and status in bytes, and writes the status directly.
-// Measured on an EPYC (Zen 4), 1440 x 1080 3+3 decode of 8-bit frames, one
-// thread, CPU time per scan: 2.05 -> 1.77 ms with the data in cache, 3.0 ->
-// 2.2 ms for whole frames (no float status row to write and read back).
+// Results are bit for bit those of the portable row; it is faster (no float
+// status row to write and read back; bench_codecs, figures in
+// docs/measurements.md).
 namespace {
 
 #define SL_AVX512 __attribute__((target("avx512f,avx512bw,avx512vl")))
@@ -407,8 +407,8 @@ constexpr int kThreeStepSide = 511;
 inline int threeStepIndex(int e1, int e2) { return (e1 + 255) * kThreeStepSide + (e2 + 255); }
 
 // The table's gather pass is scalar: it beats the computed kernel's 4-wide
-// (SSE2) fast atan2, but not the 8-wide AVX2 variant (measured on 1440 x 1080
-// 3+3: decode 7.4 vs 10.2 ms with SSE2, 5.5 vs 4.9 ms with AVX2).
+// (SSE2) fast atan2, but not the 8-wide AVX2 variant (bench_codecs,
+// docs/measurements.md).
 inline bool threeStepTablesPay() {
 #if SL_MULTIVERSION_ENABLED
   return !__builtin_cpu_supports("avx2");  // see multiversion.h

@@ -42,9 +42,9 @@ struct RowWorkers::Shared {
   // worker woken after an idle spell was often placed on the caller's CPU
   // (on the VM measured; why the scheduler passed over the idle vCPU was
   // not established) and the two threads took turns on one CPU for
-  // milliseconds: BM_DecodeTriangulatePaced,
-  // 2 threads, 8.5-9.4 ms a scan against 5.6-6.7 ms with the workers kept
-  // off (README "Processing after idle"). Syscalls only when the caller has
+  // milliseconds (BM_DecodeTriangulatePaced with 2 threads: much slower
+  // than with the workers kept off; figures in docs/measurements.md,
+  // "Processing after idle"). Syscalls only when the caller has
   // moved; a failure leaves the workers as they were (they still run, maybe
   // on the caller's CPU).
   void steerAwayFrom(int cpu) {

@@ -411,3 +411,19 @@ TEST_CASE("a relative recording_root goes under systemd's state directory when t
   CHECK(by_hand.runtime.recording_root.rfind("/var/lib/sl-sensor", 0) == std::string::npos);
   CHECK(by_hand.runtime.recording_root.size() > std::string("/recordings").size());
 }
+
+TEST_CASE("a relative recording_root goes under the user's data folder, not beside the config") {
+  const char* old_xdg = std::getenv("XDG_DATA_HOME");
+  const char* old_home = std::getenv("HOME");
+  const std::string saved_xdg = old_xdg ? old_xdg : "", saved_home = old_home ? old_home : "";
+  ::unsetenv("STATE_DIRECTORY");
+  ::setenv("XDG_DATA_HOME", "/home/u/data", 1);
+  const auto xdg = sl::daemon::parseConfig(shippedConfig(), "/src/sl-sensor/config/sim.yaml");
+  ::unsetenv("XDG_DATA_HOME");
+  ::setenv("HOME", "/home/u", 1);
+  const auto home = sl::daemon::parseConfig(shippedConfig(), "/src/sl-sensor/config/sim.yaml");
+  if (old_xdg) ::setenv("XDG_DATA_HOME", saved_xdg.c_str(), 1);
+  if (old_home) ::setenv("HOME", saved_home.c_str(), 1); else ::unsetenv("HOME");
+  CHECK(xdg.runtime.recording_root == "/home/u/data/sl-sensor/recordings");
+  CHECK(home.runtime.recording_root == "/home/u/.local/share/sl-sensor/recordings");
+}

@@ -53,6 +53,14 @@ add_test(NAME e2e_cli COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/e2e_cli.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
 set_tests_properties(e2e_cli PROPERTIES TIMEOUT 300)
 
+# The README's first-scan block, as pasted, against the simulated daemon.
+add_test(NAME readme_first_scan COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/readme_first_scan.sh
+  ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
+set_tests_properties(readme_first_scan PROPERTIES TIMEOUT 300)
+
+# Every tool: --help exits 0, an unknown or misplaced option exits 2 with the usage.
+add_test(NAME tools_usage COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/tools_usage.sh ${PROJECT_BINARY_DIR})
+
 # The systemd unit passes systemd-analyze verify.
 add_test(NAME systemd_unit COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/verify_unit.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})

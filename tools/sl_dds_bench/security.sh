@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The cost of DDS Security per cloud (README "DDS Security"): sl_dds_bench
+# The cost of DDS Security per cloud (docs/operations.md, "DDS Security"): sl_dds_bench
 # sub/pub, full-resolution clouds (1440 x 1080 x 16 B) at the sensor's 5 Hz on
 # the loopback config, without security, with governance_control (clouds
 # open: only discovery and the control topics are protected) and with

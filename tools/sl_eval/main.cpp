@@ -59,6 +59,11 @@ int main(int argc, char** argv) {
   if (argc < 2) return usage();
   const std::string experiment = argv[1];
   if (experiment == "-h" || experiment == "--help") return usage(), 0;
+  if (experiment.empty() || experiment[0] == '-') {
+    std::cerr << "sl_eval: " << (experiment.empty() ? "no experiment" : "unknown option " + experiment)
+              << "\n";
+    return usage();
+  }
   sl::eval::EvalOptions options;
   options.out_dir = "sl_eval_out";
   for (int i = 2; i < argc; ++i) {

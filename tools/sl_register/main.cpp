@@ -128,7 +128,8 @@ std::optional<Args> parse(int argc, char** argv) {
     } else if (arg == "--pose-tolerance") {
       ok = number(&a.tolerance_s) && a.tolerance_s >= 0;
     } else if (arg == "-h" || arg == "--help") {
-      return std::nullopt;
+      usage();
+      std::exit(0);
     } else if (!arg.empty() && arg[0] == '-') {
       usage(("unknown option " + arg).c_str());
       std::exit(2);

@@ -39,8 +39,8 @@ struct RegisterOptions {
   int icp_iterations = 15;           // per scale (fewer when converged)
   // An ICP scale ends early when an iteration changes the fitness by less
   // than this and the RMSE by less than this many mm (Open3D's criteria;
-  // 1e-6 took 30 % more time on sl_eval wall's scans for drifts within
-  // 0.002 mm).
+  // a tighter value costs time for no drift that matters: docs/registration.md,
+  // docs/measurements.md).
   double icp_convergence = 1e-4;
   // An edge is tried only when at least this fraction of the source's points
   // has a target point within overlap_distance_mm under the initial guess.

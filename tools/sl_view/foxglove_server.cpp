@@ -519,13 +519,24 @@ FoxgloveServer::FoxgloveServer(const ServerOptions& options, std::vector<Channel
   boost::system::error_code addr_ec;
   const auto address = boost::asio::ip::make_address(options.host, addr_ec);
   if (addr_ec)
-    throw std::runtime_error("sl_view: '" + options.host + "' is not an IP address to listen on");
-  m.endpoint.listen(boost::asio::ip::tcp::endpoint(address, static_cast<unsigned short>(options.port)), ec);
-  if (ec)
-    throw std::runtime_error("sl_view: cannot listen on " + options.host + ":" +
-                             std::to_string(options.port) + ": " + ec.message());
+    throw std::runtime_error("'" + options.host + "' is not an IP address to listen on");
+  const boost::asio::ip::tcp::endpoint where(address, static_cast<unsigned short>(options.port));
+  m.endpoint.listen(where, ec);
+  if (ec) {
+    // websocketpp says only "Underlying Transport Error": ask the system why.
+    std::string why = ec.message();
+    boost::asio::io_context io;
+    boost::asio::ip::tcp::acceptor probe(io);
+    boost::system::error_code probe_ec;
+    probe.open(where.protocol(), probe_ec);
+    if (!probe_ec) probe.bind(where, probe_ec);
+    if (probe_ec) why = probe_ec.message();
+    const bool in_use = probe_ec == boost::asio::error::address_in_use;
+    throw std::runtime_error("cannot listen on " + options.host + ":" + std::to_string(options.port) +
+                             ": " + why + (in_use ? " (another sl_view? --port N picks another)" : ""));
+  }
   m.endpoint.start_accept(ec);
-  if (ec) throw std::runtime_error("sl_view: accept: " + ec.message());
+  if (ec) throw std::runtime_error("accept: " + ec.message());
   websocketpp::lib::asio::error_code local_ec;
   m.bound_port = m.endpoint.get_local_endpoint(local_ec).port();
   m.endpoint.set_timer(5, [&m](const websocketpp::lib::error_code&) { m.tick(); });

@@ -205,6 +205,14 @@ int serve(int argc, char** argv) {
       rejected_before(raw.topics().size(), 0);
   std::uint64_t clouds_published = 0, clouds_taken = 0;  // while the cloud was read
   std::optional<std::uint64_t> last_scans_done;
+  // Whether a daemon is behind the topics: it publishes its status at least
+  // every dds.status_period_s (1 s by default) and on every change, so no
+  // status for kDaemonGone means no daemon (it exited, or another --ns /
+  // --domain). Said on stderr when it changes, and in GET /stats.
+  constexpr auto kDaemonGone = std::chrono::seconds(5);
+  const auto started = std::chrono::steady_clock::now();
+  std::optional<std::chrono::steady_clock::time_point> last_status;
+  enum class Daemon { kUnknown, kPresent, kAbsent } daemon = Daemon::kUnknown;
   std::mutex dds_stats_mutex;
   std::string dds_stats_json = "{}";  // guarded by dds_stats_mutex
   const auto ddsStats = [&] {
@@ -223,6 +231,10 @@ int serve(int argc, char** argv) {
     v["clouds_published_while_read"] = Json::UInt64(clouds_published);
     v["clouds_taken_while_read"] = Json::UInt64(clouds_taken);
     v["clouds_missed"] = Json::UInt64(clouds_published > clouds_taken ? clouds_published - clouds_taken : 0);
+    v["daemon"] = daemon == Daemon::kPresent;
+    v["status_age_s"] = last_status ? std::chrono::duration<double>(std::chrono::steady_clock::now() -
+                                                                    *last_status).count()
+                                    : -1.0;
     Json::StreamWriterBuilder w;
     w["indentation"] = "";
     return Json::writeString(w, v);
@@ -252,7 +264,7 @@ int serve(int argc, char** argv) {
         rejected_before[i] += raw.samplesRejected(i);
         if (i == points_topic) last_scans_done.reset();
       }
-      raw.setActive(i, wanted);
+      raw.setActive(i, wanted || i == status_topic);  // the status tells whether a daemon is there
       // A writer this reader cannot read would leave the topic silently empty.
       std::int32_t policy = 0;
       const std::uint32_t n = raw.incompatibleWriters(i, &policy);
@@ -265,6 +277,7 @@ int serve(int argc, char** argv) {
     raw.poll(DDS_MSECS(100), [&](std::shared_ptr<const sl::view::RawSample> s) {
       const std::uint32_t channel = static_cast<std::uint32_t>(s->topic + 1);
       ++taken[s->topic];
+      if (s->topic == status_topic) last_status = std::chrono::steady_clock::now();
       if (s->topic == points_topic) ++clouds_taken;
       if (s->topic == status_topic && raw.active(points_topic)) {
         try {
@@ -297,7 +310,17 @@ int serve(int argc, char** argv) {
       }
       if (ws.subscribed(channel)) ws.publish({channel, s->receive_ns, s->bytes(), s});
     });
-    if (std::chrono::steady_clock::now() - stats_at > std::chrono::milliseconds(500)) {
+    const auto now = std::chrono::steady_clock::now();
+    if (last_status && now - *last_status < kDaemonGone) {
+      if (daemon != Daemon::kPresent) std::cerr << "sl_view: daemon found (status on rt/" << topics.ns << "/status)\n";
+      daemon = Daemon::kPresent;
+    } else if (daemon == Daemon::kPresent || (daemon == Daemon::kUnknown && now - started > kDaemonGone)) {
+      std::cerr << "sl_view: no daemon: no status on rt/" << topics.ns << "/status (domain "
+                << topics.domain_id << ") for " << std::chrono::duration_cast<std::chrono::seconds>(kDaemonGone).count()
+                << " s; the page shows \"no daemon\" until one answers\n";
+      daemon = Daemon::kAbsent;
+    }
+    if (now - stats_at > std::chrono::milliseconds(500)) {
       stats_at = std::chrono::steady_clock::now();
       std::string json = ddsStats();
       std::lock_guard<std::mutex> lock(dds_stats_mutex);

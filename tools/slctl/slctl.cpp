@@ -12,6 +12,7 @@
 #include <iostream>
 #include <limits>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -36,9 +37,10 @@ constexpr const char* kUsage =
     "                     take N scans, write DIR/scan_0001.ply ... (binary PLY: finite\n"
     "                     points; binary PCD: organized, NaN for invalid pixels)\n"
     "  start [--pattern NAME]  scan continuously until stop\n"
-    "  record NAME [--count N] [--pattern P]  scan and record the image sets under\n"
-    "                     NAME (in the daemon's runtime.recording_root) until N scans\n"
-    "                     (default: until 'slctl stop'); replay with sensor: replay\n"
+    "  record NAME [--count N] [--pattern P] [--wait]  scan and record the image sets\n"
+    "                     under NAME (in the daemon's runtime.recording_root, printed)\n"
+    "                     until N scans (default: until 'slctl stop'); --wait returns\n"
+    "                     when the recording has ended; replay with sensor: replay\n"
     "  stop               stop scanning\n"
     "  status             print the daemon's status\n"
     "  patterns           list the daemon's patterns\n"
@@ -71,7 +73,23 @@ struct Args {
   bool pcd = false;
   sl::daemon::StartRequest start;  // options of scan / start / record
   bool start_options_given = false;
+  bool wait = false;                // record: until the recording has ended
+  std::set<std::string> options;    // every option given, to check it fits the command
 };
+
+// The options each command takes besides --domain, --ns and --timeout.
+bool optionFits(const std::string& command, const std::string& option) {
+  static const std::set<std::string> start = {"--trigger", "--delay", "--at", "--cameras", "--motion"};
+  if (option == "--domain" || option == "--ns" || option == "--timeout") return true;
+  if (command == "scan")
+    return start.count(option) || option == "--count" || option == "--out" ||
+           option == "--pattern" || option == "--units" || option == "--format";
+  if (command == "start") return start.count(option) || option == "--pattern";
+  if (command == "record")
+    return start.count(option) || option == "--count" || option == "--pattern" || option == "--wait";
+  if (command == "watch") return option == "--count";
+  return false;
+}
 
 std::vector<std::string> splitCommas(const std::string& text) {
   std::vector<std::string> parts;
@@ -103,9 +121,12 @@ Args parseArgs(int argc, char** argv) {
       if (i + 1 >= argc) usageError(a + " needs a value");
       return argv[++i];
     };
+    if (a.size() > 1 && a[0] == '-') args.options.insert(a);
     if (a == "--help" || a == "-h") {
       std::cout << kUsage;
       std::exit(0);
+    } else if (a == "--wait") {
+      args.wait = true;
     } else if (a == "--domain") {
       args.domain = parseInt(a, value());
       // DDS domain ids the default RTPS port mapping can address (0..230).
@@ -179,6 +200,12 @@ Args parseArgs(int argc, char** argv) {
     }
   }
   if (args.command.empty()) usageError("no command given");
+  for (const auto& option : args.options)
+    if (!optionFits(args.command, option))
+      usageError("option " + option + " does not go with '" + args.command + "'");
+  const std::size_t positionals = args.command == "record" ? 1 : args.command == "pattern" ? 2 : 0;
+  if (args.positional.size() > positionals)
+    usageError("'" + args.command + "' does not take '" + args.positional[positionals] + "'");
   // watch and record run until stopped unless --count is given.
   if ((args.command == "watch" || args.command == "record") && !count_given) args.count = 0;
   if (args.start_options_given && args.command != "scan" && args.command != "start" &&
@@ -218,7 +245,8 @@ int sendCommand(SensorClient& client, const Args& args, Command command,
 }
 
 // Sends a START with the request's options; returns the exit code (0 = accepted).
-int sendStart(SensorClient& client, const Args& args, const std::string& recording, int count) {
+int sendStart(SensorClient& client, const Args& args, const std::string& recording, int count,
+              std::string* accepted_note = nullptr) {
   sl::daemon::StartRequest request = args.start;
   request.pattern = args.pattern;
   request.count = count;
@@ -233,6 +261,7 @@ int sendStart(SensorClient& client, const Args& args, const std::string& recordi
               << "): " << reply->reason << "\n";
     return 4;
   }
+  if (accepted_note) *accepted_note = reply->reason;
   return 0;
 }
 
@@ -393,6 +422,50 @@ int watch(SensorClient& client, const Args& args) {
   return 0;
 }
 
+// Waits until the daemon's recording has ended (its count reached, a stop or
+// a quota) and it is idle again; 1 when the daemon makes no progress for
+// --timeout, 3 when it stops answering.
+int waitForRecording(SensorClient& client, const Args& args, std::uint64_t sets_before) {
+  bool seen = false;
+  std::uint64_t settled_count = sets_before;
+  auto settled_since = std::chrono::steady_clock::now();
+  std::uint64_t progress = 0;
+  auto last_progress = std::chrono::steady_clock::now();
+  const auto stall = toMs(args.timeout_s + secondsUntilStart(args));
+  for (;;) {
+    const auto s = client.status(toMs(args.timeout_s));
+    if (!s) return noDaemon(args);
+    if (s->recording == args.positional[0]) seen = true;
+    const bool idle = s->state == sl::daemon::ScanState::kIdle && s->recording.empty();
+    // The recorder's thread may still write queued sets after the request
+    // ended: done once the count held for two status periods.
+    if (!idle || s->sets_recorded != settled_count) {
+      settled_count = s->sets_recorded;
+      settled_since = std::chrono::steady_clock::now();
+    }
+    const bool settled = std::chrono::steady_clock::now() - settled_since > 2s;
+    if (idle && settled && (seen || s->sets_recorded != sets_before)) {
+      // sets_recorded counts every recording of the daemon's life.
+      std::printf("recorded %llu image sets\n",
+                  static_cast<unsigned long long>(s->sets_recorded - sets_before));
+      if (!s->last_error.empty()) std::printf("daemon: %s\n", s->last_error.c_str());
+      return 0;
+    }
+    if (s->state == sl::daemon::ScanState::kError) {
+      std::cerr << "slctl: the recording ended in an error: " << s->last_error << "\n";
+      return 1;
+    }
+    if (s->sets_recorded + s->scans_done != progress) {
+      progress = s->sets_recorded + s->scans_done;
+      last_progress = std::chrono::steady_clock::now();
+    } else if (std::chrono::steady_clock::now() - last_progress > stall) {
+      std::cerr << "slctl: the recording made no progress for " << args.timeout_s << " s\n";
+      return 1;
+    }
+    std::this_thread::sleep_for(200ms);
+  }
+}
+
 int run(const Args& args) {
   sl::daemon::ClientOptions options;
   options.domain_id = args.domain;
@@ -412,10 +485,20 @@ int run(const Args& args) {
     if (args.positional.size() != 1) usageError("usage: slctl record NAME [--count N]");
     const int count = args.count;
     if (count < 0) usageError("record --count must be >= 0");
-    if (const int rc = sendStart(client, args, args.positional[0], count)) return rc;
-    std::printf("recording '%s' (%s); 'slctl stop' ends it\n", args.positional[0].c_str(),
-                count ? (std::to_string(count) + " scans").c_str() : "until stop");
-    return 0;
+    // The status before the request: a recording too short to be seen
+    // running still changes its set count.
+    const auto before = args.wait ? client.status(toMs(args.timeout_s)) : std::nullopt;
+    std::string note;
+    if (const int rc = sendStart(client, args, args.positional[0], count, &note)) return rc;
+    // The daemon names the folder in its reply ("recording to DIR").
+    const std::string prefix = "recording to ";
+    const std::string where =
+        note.rfind(prefix, 0) == 0 ? note.substr(prefix.size()) : "runtime.recording_root";
+    std::printf("recording '%s' to %s (%s)%s\n", args.positional[0].c_str(), where.c_str(),
+                count ? (std::to_string(count) + " scans").c_str() : "until stop",
+                args.wait ? "" : "; 'slctl stop' ends it");
+    std::fflush(stdout);
+    return args.wait ? waitForRecording(client, args, before ? before->sets_recorded : 0) : 0;
   }
   if (args.command == "stop") {
     const int rc = sendCommand(client, args, Command::kStop, "", 0);

@@ -35,14 +35,14 @@ PrefaultPlan prefaultPlanOf(const DaemonConfig& config, std::size_t input_queue_
   // reliable keep-last writer keeps the serialized clouds a reader has not
   // acknowledged, all `depth` of them while a reader is stopped, besides
   // the one being written. Left to grow on demand, the first reader that
-  // stopped cost every other reader ~80-130 ms on 3-4 clouds (each write
-  // faulting in a fresh 25 MB; README "stalled over UDP").
+  // stopped delayed every other reader's next clouds (each write faulting
+  // in a fresh 25 MB; docs/measurements.md, "Findings").
   const std::size_t history = static_cast<std::size_t>(config.dds.points_qos.depth);
   if (config.dds.points_qos.reliable && clouds_kept_by_writer) {
     // The history holds the processing thread's clouds (zero-copy points):
     // with a reader stopped, the processor's pool is all held and every
-    // scan takes a fresh cloud (measured: stalled p99 91 ms, the
-    // processing waiting for fresh pages).
+    // scan takes a fresh cloud: processing must never wait for fresh
+    // pages while a reader is stopped.
     plan.cloud_bytes = pixels * 16;
     plan.process_clouds = history + 2;
   } else if (config.dds.points_qos.reliable) {

@@ -2,8 +2,8 @@
 // (runtime.prefault_memory; the points writer's history always). On a
 // machine whose free memory is handed back to the hypervisor (free page
 // reporting), the first touch of a page costs
-// far more than on bare metal: ~5 ms per MB on the VM this project is
-// measured on (README, "Measured: delivery"), 125 ms for one 25 MB cloud.
+// far more than on bare metal (docs/measurements.md, "First touches on
+// this VM").
 // Without this, the first second after START paid for every image, cloud
 // and serialized sample the stages allocate for the first time (measured at
 // 30 scans/s: 31,500 page faults in the camera thread and 18,200 in each of

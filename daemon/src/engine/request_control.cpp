@@ -34,6 +34,9 @@ CommandResult RequestControl::start(const StartRequest& request) {
   const StartValidation validation = validateStart(request, context);
   if (!validation.accepted()) return validation.rejection;
   const AcceptedStart& accepted = validation.start;
+  // An accepted recording names its folder in the reply.
+  const CommandResult ok{Code::kOk,
+                         accepted.recording.empty() ? "" : "recording to " + accepted.recording_dir};
 
   if (!accepted.recording.empty()) {
     try {
@@ -70,11 +73,11 @@ CommandResult RequestControl::start(const StartRequest& request) {
     launch_at_ns_ = accepted.launch_at_ns;
     changed_.notify_all();
     ++status_version_;
-    return {};
+    return ok;
   }
   beginLocked();
   if (state_ == ScanState::kError) return {Code::kDeviceError, last_error_};
-  return {};
+  return ok;
 }
 
 CommandResult RequestControl::stop() {

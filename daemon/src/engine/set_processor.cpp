@@ -64,7 +64,7 @@ SetProcessor::SetProcessor(const ProcessingConfig& config)
 
 // The first scan after start-up allocates the cloud and the row workers'
 // band buffers, and each fresh page costs a fault (on this project's 2-core
-// VM ~2 us: ~11 ms for a 25 MB cloud). Decoding black frames (every pixel
+// VM: docs/measurements.md). Decoding black frames (every pixel
 // invalid, but every buffer written) moves that cost to start-up; the
 // cloud then waits in the processor's pool for the first scan.
 void SetProcessor::warmUp() {

@@ -125,8 +125,8 @@ CameraRays computeCameraRays(const pipeline::PinholeModel& camera);
 // checkerboard) and whose centre the bilinear interpolation predicts within
 // 0.01 projector px and 0.1 % of the signal is filled by interpolation, any
 // other block (silhouettes, shadow edges, texture, strongly curved surfaces)
-// pixel by pixel. The fast path of a moving sensor: ~35 ms per 1440 x 1080
-// image for a plane and a sphere filling 10 % of the view (exact: ~200 ms).
+// pixel by pixel: the fast path of a moving sensor (bench_sim; figures in
+// docs/measurements.md).
 SceneView computeSceneView(const SimConfig& config, const SceneGeometry& scene,
                            const pipeline::CameraProjectorCalibration& rig, const CameraRays& rays,
                            const Eigen::Isometry3d& camera_to_scene, bool with_ground_truth);

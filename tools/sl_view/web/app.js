@@ -147,9 +147,20 @@ let bridgeStats = null;
 const esc = (t) => String(t).replace(/[&<>"]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;' })[c]);
 function showStatus() {
   const s = view.status;
-  if (!s) return;
+  // sl_view says whether a daemon still publishes its status (GET /stats).
+  const dds = bridgeStats && bridgeStats.dds;
+  view.daemon = dds ? dds.daemon : null;
+  const age = dds && dds.status_age_s >= 0 ? `status ${dds.status_age_s.toFixed(1)} s old` : 'no status yet';
+  const daemonRow = ['daemon', dds && !dds.daemon ? `<span class="bad">no daemon</span> (${age})` : (dds ? age : '-')];
+  if (!s) {
+    if (dds) document.getElementById('status').innerHTML = `<tr><td>${daemonRow[0]}</td><td>${daemonRow[1]}</td></tr>`;
+    return;
+  }
+  const gone = dds && !dds.daemon;
   const rows = [
-    ['state', `<span class="${s.state === 'error' ? 'bad' : 'ok'}">${s.state}</span>`],
+    daemonRow,
+    ['state', gone ? `<span class="bad">unknown</span> (last seen: ${s.state})`
+      : `<span class="${s.state === 'error' ? 'bad' : 'ok'}">${s.state}</span>`],
     ['pattern', esc(s.pattern)],
     ['scans', `${s.scans_done} of ${s.scans_requested || 'continuous'}`],
     ['scan rate', `${s.scan_rate_hz.toFixed(2)} Hz`], ['frame rate', `${s.frame_rate_hz.toFixed(1)} Hz`],
@@ -159,7 +170,6 @@ function showStatus() {
     ['last error', s.last_error ? `<span class="bad">${esc(s.last_error)}</span>` : '-'],
   ];
   if (bridgeStats) rows.push(['viewer drops', `${bridgeStats.dropped} of ${bridgeStats.published + 0} (bridge, all viewers)`]);
-  const dds = bridgeStats && bridgeStats.dds;
   if (dds && dds.topics) {
     // What sl_view's DDS readers missed: clouds the daemon published while
     // they were read but never taken (overwritten in the keep-last history,
@@ -176,7 +186,7 @@ function showStatus() {
 }
 setInterval(async () => {
   try { bridgeStats = await (await fetch('/stats')).json(); showStatus(); } catch { /* bridge gone */ }
-}, 2000);
+}, 1000);
 
 // --- the bridge -------------------------------------------------------------------
 let ws, service = null, nextCall = 1;

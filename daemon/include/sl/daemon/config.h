@@ -83,7 +83,7 @@ struct RuntimeConfig {
   std::string default_pattern;  // selected at startup; first pattern if empty
   // Recordings requested over DDS go to <recording_root>/<name>; absolute
   // after loading (a relative key is resolved against $STATE_DIRECTORY
-  // under systemd, else against the config file's folder).
+  // under systemd, else $XDG_DATA_HOME/sl-sensor or ~/.local/share/sl-sensor).
   std::string recording_root = "recordings";
   TriggerMode trigger = TriggerMode::kHardware;  // default of start requests
   // While scanning, a camera without frames, a trigger source without

@@ -70,7 +70,7 @@ bool retainLargeSampleMemory();
 // and frees them: with retainLargeSampleMemory's settings the memory stays
 // with the thread's malloc arena, so the thread's first large buffers
 // (clouds, images, samples taken) do not page-fault. On a VM that hands
-// free memory back to the host a first touch costs ~5 ms per MB here.
+// free memory back to the host a first touch is costly (docs/measurements.md).
 void prefaultHeap(std::size_t block_bytes, std::size_t count);
 
 // Makes the process's shared-memory mappings (/dev/shm: iceoryx's segments
@@ -78,14 +78,14 @@ void prefaultHeap(std::size_t block_bytes, std::size_t count);
 // fills in their page tables, writable where the mapping is (madvise
 // MADV_POPULATE_WRITE / _READ, Linux >= 5.14), then reads one byte of every
 // page. Contents are not changed. Both steps are needed on this project's
-// VM: without the first, each page faults at its first use (~140 ms per
-// 32 MiB chunk); after it, the first access of each page by each process
-// still costs the hypervisor ~6 us (shadow page tables filled in on
-// access, invisible to the guest's fault counters): ~40 ms per 25 MB cloud
+// VM: without the first, each page faults at its first use; after it, the
+// first access of each page by each process still costs the hypervisor
+// time (shadow page tables filled in on access, invisible to the guest's
+// fault counters; docs/measurements.md, "Shared memory first access") per cloud
 // written into, or taken from, a chunk this process had not used. Chunks
 // come into use long after START (when a reader stops taking and holds
-// some), so a local reader's clouds were 70-100 ms late then. The read pass
-// costs ~1.4 ms per MB once (~1.2 s for the shipped 885 MB of segments).
+// some), so a local reader's clouds were late then. The read pass costs
+// time once at start, in proportion to the segments' size.
 // Call after the participant's readers and writers exist (the segments are
 // mapped by then). Returns the bytes populated: 0 without shared memory.
 std::size_t populateSharedMemoryMappings();

@@ -7,8 +7,8 @@
 // operations in the same order: the kernels' files are compiled with
 // -ffp-contract=off, so the FMA that x86-64-v4 offers is never fused into a
 // multiply-add, and nothing is reassociated. They agree bit for bit; only the
-// vector width differs (16 floats with AVX-512: measured on an EPYC, 1440 x
-// 1080 3+3 decode took 3.0 instead of 4.7 ms of CPU time).
+// vector width differs (16 floats with AVX-512; bench_codecs compares them,
+// figures in docs/measurements.md).
 //
 // ThreadSanitizer builds (SL_SANITIZE=thread) compile the baseline variant
 // only: glibc runs ifunc resolvers while relocating, before the TSan runtime
