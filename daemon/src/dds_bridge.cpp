@@ -87,14 +87,14 @@ struct DdsBridge::Impl {
         names(TopicNames::forNamespace(config.ns)),
         participant(config.domain_id),
         points_topic(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc),
-        maps_topic(participant, names.projector_maps, sl_msgs_msg_ProjectorMaps_desc),
-        status_topic(participant, names.status, sl_msgs_msg_Status_desc),
-        request_topic(participant, names.request, sl_msgs_msg_CommandRequest_desc),
-        reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
+        maps_topic(participant, names.projector_maps, sl_msgs_msg_dds__ProjectorMaps__desc),
+        status_topic(participant, names.status, sl_msgs_msg_dds__Status__desc),
+        request_topic(participant, names.request, sl_msgs_msg_dds__CommandRequest__desc),
+        reply_topic(participant, names.reply, sl_msgs_msg_dds__CommandReply__desc),
         depth_topic(participant, names.depth_image, sensor_msgs_msg_dds__Image__desc),
         shading_topic(participant, names.shading_image, sensor_msgs_msg_dds__Image__desc),
         info_topic(participant, names.camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
-        sets_topic(participant, names.image_sets, sl_msgs_msg_ImageSet_desc),
+        sets_topic(participant, names.image_sets, sl_msgs_msg_dds__ImageSet__desc),
         // Clouds, maps, images: as configured (dds.qos; by default reliable
         // with a short keep-last history: a write waits at most
         // max_blocking_s for acknowledgements, then it is counted as timed out).
@@ -148,7 +148,7 @@ struct DdsBridge::Impl {
   const FrameIds frame_ids;
   const pipeline::PinholeModel camera;  // of the first camera, for camera_info
   const TopicNames names;
-  MalformedSampleCounter malformed{names.request, sl_msgs_msg_CommandRequest_desc.m_typename};  // before the reader
+  MalformedSampleCounter malformed{names.request, sl_msgs_msg_dds__CommandRequest__desc.m_typename};  // before the reader
   dds::Participant participant;
   dds::Topic<PointCloud2> points_topic;
   dds::Topic<Maps> maps_topic;
