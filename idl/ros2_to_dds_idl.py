@@ -22,7 +22,7 @@ message (rmw_fastrtps puts the ids in the RTPS sample identity instead).
 usage: ros2_to_dds_idl.py [--cyclonedds-request-header] PACKAGE_DIR OUTPUT_DIR FILE...
 (FILE relative to
 PACKAGE_DIR, e.g. msg/Status.msg); writes OUTPUT_DIR/<package>/<msg|srv>/<Type>.idl,
-and OUTPUT_DIR/<package>/ros2_definitions.h: each message's .msg text without
+and (if there are messages) OUTPUT_DIR/<package>/ros2_definitions.h: each message's .msg text without
 comments, as C++ string literals (the `ros2msg` schemas of MCAP and Foxglove).
 Must run with the Python that has python3-rosidl (Debian: /usr/bin/python3).
 """
@@ -208,8 +208,9 @@ def main(argv):
             convert(package_dir, package, relative, output_dir, request_header)
         except Exception as e:  # rosidl's parsers raise assorted types
             sys.exit(f'ros2_to_dds_idl: {package_dir / relative}: {e}')
-    write_if_changed(output_dir / package / 'ros2_definitions.h',
-                     definitions_header(package_dir, package, relatives))
+    if any(r.suffix == '.msg' for r in relatives):
+        write_if_changed(output_dir / package / 'ros2_definitions.h',
+                         definitions_header(package_dir, package, relatives))
 
 
 if __name__ == '__main__':

@@ -13,6 +13,7 @@
 #include "malformed_samples.h"
 #include "reader_acks.h"
 #include "request_dispatch.h"
+#include "service_bridge.h"
 #include "ros_messages.h"
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds.h"
@@ -123,6 +124,7 @@ struct DdsBridge::Impl {
         waitset(participant) {
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);
+    services.attach(waitset, 3);
     if (config.points_qos.reliable) points_acks.emplace(points_writer.handle(), config.points_qos.depth);
     if (points_writer.borrowing())
       logInfo("points: clouds are sent from their own memory (no serialization copy)");
@@ -179,6 +181,8 @@ struct DdsBridge::Impl {
   std::atomic<std::uint64_t> writes_timed_out{0};
   // Requests: sizes, rate limits, retries, counters (request loop only).
   RequestDispatcher dispatcher{config.requests};
+  // ROS 2 services (<ns>/start, stop, ...) through the same dispatcher.
+  ServiceBridge services{participant, config.ns};
   std::uint64_t requests_rejected = 0;  // the request reader's sample-rejected count (status thread)
 
   // Publish-thread buffers of packed clouds (metres, decimated or valid
@@ -198,7 +202,7 @@ EdgeCounters DdsBridge::Impl::edgeCounters() {
   EdgeCounters c;
   c.requests = dispatcher.counters();
   c.replies_timed_out = dispatcher.repliesTimedOut();
-  c.requests_malformed = malformed.count();
+  c.requests_malformed = malformed.count() + services.notServed();
   c.writes_timed_out = writes_timed_out.load();
   // Samples the full request reader refused (reading the status resets its
   // change count).
@@ -305,6 +309,7 @@ void DdsBridge::serve(ScanEngine& engine) {
   while (!d.stopping) {
     d.waitset.wait(DDS_MSECS(100));
     d.serveRequests(target);
+    d.services.serve(d.dispatcher, target, engine.status().pattern);
     const EngineStatus status = engine.status();
     if (status.version != published_version || Clock::now() >= next_periodic) {
       d.publishStatus(status, patterns);

@@ -13,57 +13,16 @@
 // types): a request header (uint64 client guid, int64 sequence number) in
 // front of the message, which must come back unchanged too.
 //   node sl_msgs_wire.mjs PACKAGE_DIR ROUNDTRIP_EXE
-import fs from 'node:fs';
-import path from 'node:path';
 import { spawnSync } from 'node:child_process';
 import { MessageReader, MessageWriter } from '@foxglove/rosmsg2-serialization';
-import { parse, stringify } from '@foxglove/rosmsg';
-import { ros2humble } from '@foxglove/rosmsg-msgs-common';
+import { loadPackage } from './ros2_definitions.mjs';
 
 const [packageDir, roundTripExe] = process.argv.slice(2);
-const pkg = path.basename(path.resolve(packageDir));
 let failures = 0, checks = 0;
 const check = (c, what) => { checks++; if (!c) { failures++; console.error(`FAIL: ${what}`); } return c; };
 
 // --- the package's types and the standard ones they use ---------------------------
-// Each type's definition text: the package's .msg files, and the standard ROS 2
-// (Humble) definitions of the types they use.
-const ownText = new Map();  // "sl_msgs/PointsReader" -> .msg text
-for (const file of fs.readdirSync(path.join(packageDir, 'msg')))
-  ownText.set(`${pkg}/${path.basename(file, '.msg')}`, fs.readFileSync(path.join(packageDir, 'msg', file), 'utf8'));
-const textOf = (type) => {
-  if (ownText.has(type)) return ownText.get(type);
-  if (ros2humble[type]) return stringify([ros2humble[type]]);
-  throw new Error(`no definition of ${type}`);
-};
-const usedTypes = (text) => text.split('\n').map((l) => l.replace(/#.*/, '').trim().split(/\s+/)[0] ?? '')
-  .map((t) => t.replace(/\[.*$/, '')).filter((t) => t.includes('/'));
-// A definition text with every type it uses (MSG: sections, as in a ros2msg
-// schema), parsed as MessageReader/-Writer take it.
-const SEPARATOR = '='.repeat(80);
-const definitionsOf = (text) => {
-  const sections = [text], seen = new Set();
-  for (let i = 0; i < sections.length; i++)
-    for (const t of usedTypes(sections[i]))
-      if (!seen.has(t)) { seen.add(t); sections.push(`MSG: ${t}\n${textOf(t)}`); }
-  return parse(sections.join(`\n${SEPARATOR}\n`), { ros2: true });
-};
-const roots = [];  // [wire name "sl_msgs/msg/Status", definitions]
-for (const kind of ['msg', 'srv']) {
-  const dir = path.join(packageDir, kind);
-  for (const file of fs.readdirSync(dir).sort()) {
-    const text = fs.readFileSync(path.join(dir, file), 'utf8');
-    const name = path.basename(file, `.${kind}`);
-    if (kind === 'msg') {
-      roots.push([`${pkg}/msg/${name}`, definitionsOf(text)]);
-    } else {
-      const parts = text.split(/^---\s*$/m);
-      check(parts.length === 2, `${file}: one '---' line`);
-      roots.push([`${pkg}/srv/${name}_Request`, definitionsOf(parts[0])]);
-      roots.push([`${pkg}/srv/${name}_Response`, definitionsOf(parts[1] ?? '')]);
-    }
-  }
-}
+const { pkg, types: roots } = loadPackage(packageDir);
 check(roots.length >= 14, `${roots.length} types in ${packageDir}`);
 const definitionOf = (definitions, type) => definitions.find((d) => d.name === type);
 
