@@ -35,11 +35,12 @@
 #include "sl_msgs/srv/ListPatterns.h"
 #include "sl_msgs/srv/SetPattern.h"
 #include "sl_msgs/srv/Start.h"
+#include "std_srvs/srv/Trigger.h"
 
 namespace {
 
-// Every type of ros2/sl_msgs; sl_msgs_wire.mjs fails when the package has one
-// this table lacks.
+// Every type of ros2/sl_msgs and idl/std_srvs; sl_msgs_wire.mjs fails when
+// a package has one this table lacks.
 const std::map<std::string, const dds_topic_descriptor_t*>& descriptors() {
   static const std::map<std::string, const dds_topic_descriptor_t*> d = {
       {"sl_msgs/msg/CommandReply", &sl_msgs_msg_dds__CommandReply__desc},
@@ -56,6 +57,8 @@ const std::map<std::string, const dds_topic_descriptor_t*>& descriptors() {
       {"sl_msgs/srv/SetPattern_Response", &sl_msgs_srv_dds__SetPattern_Response__desc},
       {"sl_msgs/srv/Start_Request", &sl_msgs_srv_dds__Start_Request__desc},
       {"sl_msgs/srv/Start_Response", &sl_msgs_srv_dds__Start_Response__desc},
+      {"std_srvs/srv/Trigger_Request", &std_srvs_srv_dds__Trigger_Request__desc},
+      {"std_srvs/srv/Trigger_Response", &std_srvs_srv_dds__Trigger_Response__desc},
   };
   return d;
 }

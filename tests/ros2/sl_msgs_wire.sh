@@ -11,4 +11,4 @@ export CYCLONEDDS_URI=${CYCLONEDDS_URI:-file://$src/config/cyclonedds-loopback.x
   echo "FAIL: npm packages missing: run scripts/install-deps.sh (npm ci in tools/sl_view)" >&2
   exit 1
 }
-exec node "$src/tools/sl_view/test/sl_msgs_wire.mjs" "$src/ros2/sl_msgs" "$exe"
+exec node "$src/tools/sl_view/test/sl_msgs_wire.mjs" "$exe" "$src/ros2/sl_msgs" "$src/idl/std_srvs"

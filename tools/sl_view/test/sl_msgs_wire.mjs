@@ -12,18 +12,18 @@
 // samples are framed as rmw_cyclonedds frames them (the daemon's service
 // types): a request header (uint64 client guid, int64 sequence number) in
 // front of the message, which must come back unchanged too.
-//   node sl_msgs_wire.mjs PACKAGE_DIR ROUNDTRIP_EXE
+//   node sl_msgs_wire.mjs ROUNDTRIP_EXE PACKAGE_DIR... (ros2/sl_msgs, idl/std_srvs)
 import { spawnSync } from 'node:child_process';
 import { MessageReader, MessageWriter } from '@foxglove/rosmsg2-serialization';
 import { loadPackage } from './ros2_definitions.mjs';
 
-const [packageDir, roundTripExe] = process.argv.slice(2);
+const [roundTripExe, ...packageDirs] = process.argv.slice(2);
 let failures = 0, checks = 0;
 const check = (c, what) => { checks++; if (!c) { failures++; console.error(`FAIL: ${what}`); } return c; };
 
 // --- the package's types and the standard ones they use ---------------------------
-const { pkg, types: roots } = loadPackage(packageDir);
-check(roots.length >= 14, `${roots.length} types in ${packageDir}`);
+const roots = packageDirs.flatMap((dir) => loadPackage(dir).types);
+check(roots.length >= 16, `${roots.length} types in ${packageDirs}`);
 const definitionOf = (definitions, type) => definitions.find((d) => d.name === type);
 
 // --- a sample with a distinct value in every field ---------------------------------
