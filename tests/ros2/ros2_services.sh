@@ -2,11 +2,13 @@
 # The daemon's ROS 2 services against two rmw_cyclonedds-framed clients
 # (tools/sl_view/test/ros2_services_check.mjs says what is checked), with
 # sl_sensord on the simulated sensor in a unique namespace.
-# usage: ros2_services.sh SOURCE_DIR BINARY_DIR
+# usage: ros2_services.sh SOURCE_DIR BINARY_DIR [FASTDDS_CLIENT_EXE]
 set -euo pipefail
 src=$1
 bin=$2
+fastdds_client=${3:-}
 export CYCLONEDDS_URI=${CYCLONEDDS_URI:-file://$src/config/cyclonedds-loopback.xml}
+export FASTRTPS_DEFAULT_PROFILES_FILE=$src/config/fastdds-loopback.xml
 work=$(mktemp -d)
 daemon_pid=
 cleanup() {
@@ -32,5 +34,6 @@ for _ in $(seq 1 300); do
   sleep 0.1
 done
 grep -q "ready:" "$work/daemon.log" || fail "sl_sensord not ready within 30 s"
-node "$src/tools/sl_view/test/ros2_services_check.mjs" "$src" "$bin/tests/ros2/ros2_service_client" "$ns" ||
+node "$src/tools/sl_view/test/ros2_services_check.mjs" "$src" "$bin/tests/ros2/ros2_service_client" "$ns" \
+  $fastdds_client ||
   fail "ros2_services_check"

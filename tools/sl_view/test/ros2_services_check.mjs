@@ -12,15 +12,19 @@
 //   - bad requests (unknown trigger value, unknown pattern, an oversized
 //     pattern name, stop while idle) get success=false, the code and a
 //     message naming the fault, and change nothing (status before == after);
-//   - the status counters count every request.
-//   node ros2_services_check.mjs SOURCE_DIR CLIENT_EXE NAMESPACE
-import { spawn } from 'node:child_process';
+//   - the status counters count every request;
+//   - with FASTDDS_EXE (tests/interop/fastdds_service_client): requests from
+//     a Fast DDS client framed as rmw_fastrtps are not carried out (the
+//     daemon does not serve that framing, docs/ros2.md), get no response that
+//     client would take, and are counted in requests_malformed.
+//   node ros2_services_check.mjs SOURCE_DIR CLIENT_EXE NAMESPACE [FASTDDS_EXE]
+import { spawn, spawnSync } from 'node:child_process';
 import readline from 'node:readline';
 import path from 'node:path';
 import { MessageReader, MessageWriter } from '@foxglove/rosmsg2-serialization';
 import { loadPackage } from './ros2_definitions.mjs';
 
-const [src, clientExe, ns] = process.argv.slice(2);
+const [src, clientExe, ns, fastDdsExe] = process.argv.slice(2);
 let failures = 0, checks = 0;
 const check = (c, what) => { checks++; if (!c) { failures++; console.error(`FAIL: ${what}`); } return c; };
 
@@ -164,6 +168,28 @@ await settle(b, 1500);
 const stopped = mine(b, 'stop', 9);
 check(stopped.length === 1 && stopped[0].response.success === true, `stop: ${JSON.stringify(stopped[0]?.response)}`);
 
+// --- rmw_fastrtps-framed requests: counted, never carried out --------------------
+let fastDdsRequests = 0;
+if (fastDdsExe) {
+  await new Promise((r) => setTimeout(r, 1500));
+  const idle = await b.status();
+  for (const [service, type, request] of [
+    ['list_patterns', 'sl_msgs::srv::dds_::ListPatterns_', {}],
+    ['start', 'sl_msgs::srv::dds_::Start_', startRequest({ count: 0 })]]) {
+    const bytes = new MessageWriter(definitions(`${typeOf[service]}_Request`)).writeMessage(request);
+    const run = spawnSync(fastDdsExe, ['0', ns, service, type, Buffer.from(bytes).toString('hex'), '2'],
+                          { encoding: 'utf8', timeout: 30000 });
+    check(run.status === 0, `fastdds_service_client ${service}: exit ${run.status}: ${run.stderr}`);
+    check(/^responses 0$/m.test(run.stdout), `Fast DDS ${service}: ${run.stdout.trim()} (expected no response it takes)`);
+    fastDdsRequests++;
+  }
+  await new Promise((r) => setTimeout(r, 1500));
+  const later = await b.status();
+  check(later && later.state === idle.state && later.state === 0, `a Fast DDS start changed the state to ${later?.state}`);
+  check(later && later.requests_malformed - idle.requests_malformed === BigInt(fastDdsRequests),
+        `requests_malformed grew by ${later?.requests_malformed - idle?.requests_malformed}, ${fastDdsRequests} Fast DDS requests`);
+}
+
 // --- every request counted ----------------------------------------------------------
 await new Promise((r) => setTimeout(r, 1500));
 const end = await b.status();
@@ -175,5 +201,5 @@ check(end && end.requests_answered - before.requests_answered === BigInt(sent),
 check(end && end.requests_invalid - before.requests_invalid === 1n,
       `requests_invalid grew by ${end?.requests_invalid - before?.requests_invalid} (one oversized pattern)`);
 a.quit(); b.quit();
-console.log(`ros2_services: ${a.replies.length + b.replies.length} responses taken, ${checks} checks, ${failures} failed`);
+console.log(`ros2_services: ${a.replies.length + b.replies.length} responses taken, ${fastDdsRequests} Fast DDS requests, ${checks} checks, ${failures} failed`);
 process.exit(failures === 0 ? 0 : 1);
