@@ -53,9 +53,9 @@ struct Daemon {
     server = std::thread([this] { bridge->serve(*engine); });
     const TopicNames names = TopicNames::forNamespace(config.dds.ns);
     request_topic = std::make_unique<sl::dds::Topic<msg::Request>>(
-        participant, names.request, sl_msgs_msg_CommandRequest_desc);
+        participant, names.request, sl_msgs_msg_dds__CommandRequest__desc);
     reply_topic = std::make_unique<sl::dds::Topic<msg::Reply>>(participant, names.reply,
-                                                               sl_msgs_msg_CommandReply_desc);
+                                                               sl_msgs_msg_dds__CommandReply__desc);
     writer = std::make_unique<sl::dds::Writer<msg::Request>>(
         participant, *request_topic, sl::dds::Qos().reliable().keepLast(16).xcdr1());
     reader = std::make_unique<sl::dds::Reader<msg::Reply>>(
@@ -114,22 +114,20 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   msg::Request req{};
   req.client_id = client.data();
   req.request_id = d.next_id++;
-  // Within the IDL enums: Cyclone 0.10.2 refuses to serialize a value past
-  // them (dds_write: BAD_PARAMETER) and leaks 256 bytes doing so (found by
-  // this target; a writer-side library bug, the daemon never sees such a
-  // sample).
-  req.command = static_cast<sl_msgs_msg_Command>(in.ConsumeIntegralInRange(0, 4));
+  // Any uint8 (ros2/sl_msgs has constants, not IDL enums): the daemon
+  // answers values past the constants as invalid.
+  req.command = in.ConsumeIntegral<std::uint8_t>();
   req.pattern = pattern.data();
   req.recording = recording.data();
   req.count = in.ConsumeIntegral<std::int32_t>();
-  req.trigger = static_cast<sl_msgs_msg_TriggerMode>(in.ConsumeIntegralInRange(0, 2));
+  req.trigger = in.ConsumeIntegral<std::uint8_t>();
   req.delay_s = in.ConsumeFloatingPoint<double>();
   req.start_at.sec = in.ConsumeIntegral<std::int32_t>();
   req.start_at.nanosec = in.ConsumeIntegral<std::uint32_t>();
   req.cameras._maximum = req.cameras._length = static_cast<std::uint32_t>(camera_ptrs.size());
   req.cameras._buffer = camera_ptrs.data();
   req.cameras._release = false;
-  req.motion_compensation = static_cast<sl_msgs_msg_MotionCompensation>(in.ConsumeIntegralInRange(0, 2));
+  req.motion_compensation = in.ConsumeIntegral<std::uint8_t>();
 
   try {
     if (!d.writer->write(req)) return 0;
@@ -145,12 +143,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   // share one rate bucket, and rate-limited requests are counted, not
   // answered.)
   if (replied && reason_bytes > 1024) __builtin_trap();
-  if (replied && accepted && req.command == sl_msgs_msg_COMMAND_START) {
+  if (replied && accepted && req.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START) {
     msg::Request stop{};
     std::string stop_client = "fuzz-stop";
     stop.client_id = stop_client.data();
     stop.request_id = d.next_id++;
-    stop.command = sl_msgs_msg_COMMAND_STOP;
+    stop.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP;
     std::string empty;
     stop.pattern = stop.recording = empty.data();
     d.writer->write(stop);

@@ -24,6 +24,11 @@ packages=(
   # (Java: pulls default-jre-headless) and the sensor_msgs/std_msgs .msg
   # definitions the test checks its IDL against.
   libfastrtps-dev fastddsgen ros-sensor-msgs
+  # ROS 2 interfaces (ros2/sl_msgs, idl/): ament_cmake and rosidl build the
+  # interface package in CI; rosidl_adapter/rosidl_parser (python3-rosidl)
+  # turn its .msg/.srv into the daemon's DDS IDL at build time.
+  ament-cmake rosidl-core rosidl-cmake rosidl-generator-c-cpp python3-rosidl
+  librosidl-typesupport-introspection-c-cpp-dev
   # Cyclone DDS shared memory (config/cyclonedds-shm.xml): the RouDi daemon.
   iceoryx
   # sl_view (tools/sl_view): WebSockets (websocketpp over Boost.Asio), JSON,

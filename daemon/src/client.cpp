@@ -71,9 +71,9 @@ struct SensorClient::Impl {
         names(TopicNames::forNamespace(options.ns)),
         client_id(randomClientId()),
         participant(options.domain_id),
-        request_topic(participant, names.request, sl_msgs_msg_CommandRequest_desc),
-        reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
-        status_topic(participant, names.status, sl_msgs_msg_Status_desc),
+        request_topic(participant, names.request, sl_msgs_msg_dds__CommandRequest__desc),
+        reply_topic(participant, names.reply, sl_msgs_msg_dds__CommandReply__desc),
+        status_topic(participant, names.status, sl_msgs_msg_dds__Status__desc),
         request_writer(participant, request_topic, dds::Qos().reliable().keepLast(16).xcdr1()),
         // Transient-local: gets a reply the daemon wrote before its writer
         // had matched this reader (the history's other replies are ignored).
@@ -134,7 +134,7 @@ std::optional<CommandReplyInfo> SensorClient::Impl::send(Request& req,
   // other clients' requests delayed or pushed out ours. The daemon answers a
   // repeated STOP / SET_PATTERN with its first reply (RequestGuard), so a
   // retry never turns "stopped" into "not running".
-  const bool idempotent = req.command != sl_msgs_msg_COMMAND_START;
+  const bool idempotent = req.command != sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START;
   auto interval = std::chrono::milliseconds(500);
   bool written = request_writer.write(req);
   if (!written && !idempotent) return std::nullopt;
@@ -171,11 +171,11 @@ std::optional<CommandReplyInfo> SensorClient::request(Command command, const std
   std::string pattern_copy = pattern, recording_copy = recording;
   Request req{};
   switch (command) {
-    case Command::kStart: req.command = sl_msgs_msg_COMMAND_START; break;
-    case Command::kStop: req.command = sl_msgs_msg_COMMAND_STOP; break;
-    case Command::kSetPattern: req.command = sl_msgs_msg_COMMAND_SET_PATTERN; break;
-    case Command::kListPatterns: req.command = sl_msgs_msg_COMMAND_LIST_PATTERNS; break;
-    case Command::kGetConfig: req.command = sl_msgs_msg_COMMAND_GET_CONFIG; break;
+    case Command::kStart: req.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START; break;
+    case Command::kStop: req.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP; break;
+    case Command::kSetPattern: req.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN; break;
+    case Command::kListPatterns: req.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_LIST_PATTERNS; break;
+    case Command::kGetConfig: req.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_GET_CONFIG; break;
   }
   req.pattern = pattern_copy.data();
   req.count = count;
@@ -190,21 +190,21 @@ std::optional<CommandReplyInfo> SensorClient::start(const StartRequest& request,
   std::vector<char*> camera_pointers;
   for (auto& id : cameras) camera_pointers.push_back(id.data());
   Request req{};
-  req.command = sl_msgs_msg_COMMAND_START;
+  req.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START;
   req.pattern = pattern.data();
   req.count = request.count;
   req.recording = recording.data();
-  req.trigger = !request.trigger                              ? sl_msgs_msg_TRIGGER_DEFAULT
-                : *request.trigger == TriggerMode::kSoftware ? sl_msgs_msg_TRIGGER_SOFTWARE
-                                                             : sl_msgs_msg_TRIGGER_HARDWARE;
+  req.trigger = !request.trigger                              ? sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_DEFAULT
+                : *request.trigger == TriggerMode::kSoftware ? sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_SOFTWARE
+                                                             : sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_HARDWARE;
   req.delay_s = request.delay_s;
   req.start_at = toTime(request.start_at_ns);
   req.cameras._maximum = req.cameras._length = static_cast<std::uint32_t>(camera_pointers.size());
   req.cameras._buffer = camera_pointers.data();
   req.cameras._release = false;
-  req.motion_compensation = !request.motion_compensation ? sl_msgs_msg_MOTION_DEFAULT
-                            : *request.motion_compensation ? sl_msgs_msg_MOTION_ON
-                                                           : sl_msgs_msg_MOTION_OFF;
+  req.motion_compensation = !request.motion_compensation ? sl_msgs_msg_dds__CommandRequest_Constants_MOTION_DEFAULT
+                            : *request.motion_compensation ? sl_msgs_msg_dds__CommandRequest_Constants_MOTION_ON
+                                                           : sl_msgs_msg_dds__CommandRequest_Constants_MOTION_OFF;
   return impl_->send(req, timeout);
 }
 
@@ -235,10 +235,10 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       if (!samples.isValid(i)) continue;
       const Status& s = samples[i];
       StatusInfo info;
-      info.state = s.state == sl_msgs_msg_STATE_SCANNING ? ScanState::kScanning
-                   : s.state == sl_msgs_msg_STATE_IDLE   ? ScanState::kIdle
-                   : s.state == sl_msgs_msg_STATE_WAITING ? ScanState::kWaiting
-                   : s.state == sl_msgs_msg_STATE_DEGRADED ? ScanState::kDegraded
+      info.state = s.state == sl_msgs_msg_dds__Status_Constants_STATE_SCANNING ? ScanState::kScanning
+                   : s.state == sl_msgs_msg_dds__Status_Constants_STATE_IDLE   ? ScanState::kIdle
+                   : s.state == sl_msgs_msg_dds__Status_Constants_STATE_WAITING ? ScanState::kWaiting
+                   : s.state == sl_msgs_msg_dds__Status_Constants_STATE_DEGRADED ? ScanState::kDegraded
                                                          : ScanState::kError;
       info.pattern = s.pattern ? s.pattern : "";
       info.scans_done = s.scans_done;
@@ -253,7 +253,7 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.sets_overflow = s.sets_overflow;
       info.writes_timed_out = s.writes_timed_out;
       info.sets_not_recorded = s.sets_not_recorded;
-      info.trigger = s.trigger == sl_msgs_msg_TRIGGER_SOFTWARE ? TriggerMode::kSoftware
+      info.trigger = s.trigger == sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE ? TriggerMode::kSoftware
                                                              : TriggerMode::kHardware;
       info.cameras = toStrings(s.cameras);
       info.motion_compensation = s.motion_compensation;

@@ -13,6 +13,7 @@
 #include "malformed_samples.h"
 #include "reader_acks.h"
 #include "request_dispatch.h"
+#include "service_bridge.h"
 #include "ros_messages.h"
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds.h"
@@ -87,14 +88,14 @@ struct DdsBridge::Impl {
         names(TopicNames::forNamespace(config.ns)),
         participant(config.domain_id),
         points_topic(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc),
-        maps_topic(participant, names.projector_maps, sl_msgs_msg_ProjectorMaps_desc),
-        status_topic(participant, names.status, sl_msgs_msg_Status_desc),
-        request_topic(participant, names.request, sl_msgs_msg_CommandRequest_desc),
-        reply_topic(participant, names.reply, sl_msgs_msg_CommandReply_desc),
+        maps_topic(participant, names.projector_maps, sl_msgs_msg_dds__ProjectorMaps__desc),
+        status_topic(participant, names.status, sl_msgs_msg_dds__Status__desc),
+        request_topic(participant, names.request, sl_msgs_msg_dds__CommandRequest__desc),
+        reply_topic(participant, names.reply, sl_msgs_msg_dds__CommandReply__desc),
         depth_topic(participant, names.depth_image, sensor_msgs_msg_dds__Image__desc),
         shading_topic(participant, names.shading_image, sensor_msgs_msg_dds__Image__desc),
         info_topic(participant, names.camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
-        sets_topic(participant, names.image_sets, sl_msgs_msg_ImageSet_desc),
+        sets_topic(participant, names.image_sets, sl_msgs_msg_dds__ImageSet__desc),
         // Clouds, maps, images: as configured (dds.qos; by default reliable
         // with a short keep-last history: a write waits at most
         // max_blocking_s for acknowledgements, then it is counted as timed out).
@@ -123,6 +124,7 @@ struct DdsBridge::Impl {
         waitset(participant) {
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);
+    services.attach(waitset, 3);
     if (config.points_qos.reliable) points_acks.emplace(points_writer.handle(), config.points_qos.depth);
     if (points_writer.borrowing())
       logInfo("points: clouds are sent from their own memory (no serialization copy)");
@@ -148,7 +150,7 @@ struct DdsBridge::Impl {
   const FrameIds frame_ids;
   const pipeline::PinholeModel camera;  // of the first camera, for camera_info
   const TopicNames names;
-  MalformedSampleCounter malformed{names.request, sl_msgs_msg_CommandRequest_desc.m_typename};  // before the reader
+  MalformedSampleCounter malformed{names.request, sl_msgs_msg_dds__CommandRequest__desc.m_typename};  // before the reader
   dds::Participant participant;
   dds::Topic<PointCloud2> points_topic;
   dds::Topic<Maps> maps_topic;
@@ -179,6 +181,8 @@ struct DdsBridge::Impl {
   std::atomic<std::uint64_t> writes_timed_out{0};
   // Requests: sizes, rate limits, retries, counters (request loop only).
   RequestDispatcher dispatcher{config.requests};
+  // ROS 2 services (<ns>/start, stop, ...) through the same dispatcher.
+  ServiceBridge services{participant, config.ns};
   std::uint64_t requests_rejected = 0;  // the request reader's sample-rejected count (status thread)
 
   // Publish-thread buffers of packed clouds (metres, decimated or valid
@@ -198,7 +202,7 @@ EdgeCounters DdsBridge::Impl::edgeCounters() {
   EdgeCounters c;
   c.requests = dispatcher.counters();
   c.replies_timed_out = dispatcher.repliesTimedOut();
-  c.requests_malformed = malformed.count();
+  c.requests_malformed = malformed.count() + services.notServed();
   c.writes_timed_out = writes_timed_out.load();
   // Samples the full request reader refused (reading the status resets its
   // change count).
@@ -305,6 +309,7 @@ void DdsBridge::serve(ScanEngine& engine) {
   while (!d.stopping) {
     d.waitset.wait(DDS_MSECS(100));
     d.serveRequests(target);
+    d.services.serve(d.dispatcher, target, engine.status().pattern);
     const EngineStatus status = engine.status();
     if (status.version != published_version || Clock::now() >= next_periodic) {
       d.publishStatus(status, patterns);

@@ -25,12 +25,12 @@ using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
 using PointField = sensor_msgs_msg_dds__PointField_;
 using Image = sensor_msgs_msg_dds__Image_;
 using CameraInfo = sensor_msgs_msg_dds__CameraInfo_;
-using Request = sl_msgs_msg_CommandRequest;
-using Reply = sl_msgs_msg_CommandReply;
-using Status = sl_msgs_msg_Status;
-using PointsReader = sl_msgs_msg_PointsReader;
-using Maps = sl_msgs_msg_ProjectorMaps;
-using ImageSetMsg = sl_msgs_msg_ImageSet;
+using Request = sl_msgs_msg_dds__CommandRequest_;
+using Reply = sl_msgs_msg_dds__CommandReply_;
+using Status = sl_msgs_msg_dds__Status_;
+using PointsReader = sl_msgs_msg_dds__PointsReader_;
+using Maps = sl_msgs_msg_dds__ProjectorMaps_;
+using ImageSetMsg = sl_msgs_msg_dds__ImageSet_;
 
 constexpr std::uint8_t kFloat32 = 7;  // sensor_msgs/PointField FLOAT32
 
@@ -44,25 +44,25 @@ inline pipeline::TimestampNs fromTime(const builtin_interfaces_msg_dds__Time_& t
 }
 
 // CommandResult codes and their wire values, one row each.
-inline constexpr std::array<std::pair<CommandResult::Code, sl_msgs_msg_ReplyCode>, 9> kReplyCodes{{
-    {CommandResult::Code::kOk, sl_msgs_msg_REPLY_OK},
-    {CommandResult::Code::kUnknownPattern, sl_msgs_msg_REPLY_UNKNOWN_PATTERN},
-    {CommandResult::Code::kBusy, sl_msgs_msg_REPLY_BUSY},
-    {CommandResult::Code::kInvalidCount, sl_msgs_msg_REPLY_INVALID_COUNT},
-    {CommandResult::Code::kInvalidCommand, sl_msgs_msg_REPLY_INVALID_COMMAND},
-    {CommandResult::Code::kDeviceError, sl_msgs_msg_REPLY_DEVICE_ERROR},
-    {CommandResult::Code::kNotRunning, sl_msgs_msg_REPLY_NOT_RUNNING},
-    {CommandResult::Code::kInvalidOption, sl_msgs_msg_REPLY_INVALID_OPTION},
-    {CommandResult::Code::kUnsupported, sl_msgs_msg_REPLY_UNSUPPORTED},
+inline constexpr std::array<std::pair<CommandResult::Code, std::uint8_t>, 9> kReplyCodes{{
+    {CommandResult::Code::kOk, sl_msgs_msg_dds__CommandReply_Constants_REPLY_OK},
+    {CommandResult::Code::kUnknownPattern, sl_msgs_msg_dds__CommandReply_Constants_REPLY_UNKNOWN_PATTERN},
+    {CommandResult::Code::kBusy, sl_msgs_msg_dds__CommandReply_Constants_REPLY_BUSY},
+    {CommandResult::Code::kInvalidCount, sl_msgs_msg_dds__CommandReply_Constants_REPLY_INVALID_COUNT},
+    {CommandResult::Code::kInvalidCommand, sl_msgs_msg_dds__CommandReply_Constants_REPLY_INVALID_COMMAND},
+    {CommandResult::Code::kDeviceError, sl_msgs_msg_dds__CommandReply_Constants_REPLY_DEVICE_ERROR},
+    {CommandResult::Code::kNotRunning, sl_msgs_msg_dds__CommandReply_Constants_REPLY_NOT_RUNNING},
+    {CommandResult::Code::kInvalidOption, sl_msgs_msg_dds__CommandReply_Constants_REPLY_INVALID_OPTION},
+    {CommandResult::Code::kUnsupported, sl_msgs_msg_dds__CommandReply_Constants_REPLY_UNSUPPORTED},
 }};
 
-inline sl_msgs_msg_ReplyCode toReplyCode(CommandResult::Code code) {
+inline std::uint8_t toReplyCode(CommandResult::Code code) {
   for (const auto& [ours, wire] : kReplyCodes)
     if (ours == code) return wire;
-  return sl_msgs_msg_REPLY_INVALID_COMMAND;
+  return sl_msgs_msg_dds__CommandReply_Constants_REPLY_INVALID_COMMAND;
 }
 
-inline CommandResult::Code fromReplyCode(sl_msgs_msg_ReplyCode code) {
+inline CommandResult::Code fromReplyCode(std::uint8_t code) {
   for (const auto& [ours, wire] : kReplyCodes)
     if (wire == code) return ours;
   return CommandResult::Code::kInvalidCommand;  // a value this build does not know

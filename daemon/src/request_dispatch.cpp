@@ -14,15 +14,15 @@ StartRequest toStartRequest(const Request& request, std::string& error) {
   r.count = request.count;
   r.recording = request.recording ? request.recording : "";
   switch (request.trigger) {
-    case sl_msgs_msg_TRIGGER_DEFAULT: break;
-    case sl_msgs_msg_TRIGGER_HARDWARE: r.trigger = TriggerMode::kHardware; break;
-    case sl_msgs_msg_TRIGGER_SOFTWARE: r.trigger = TriggerMode::kSoftware; break;
+    case sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_DEFAULT: break;
+    case sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_HARDWARE: r.trigger = TriggerMode::kHardware; break;
+    case sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_SOFTWARE: r.trigger = TriggerMode::kSoftware; break;
     default: error = "unknown trigger mode " + std::to_string(static_cast<int>(request.trigger));
   }
   switch (request.motion_compensation) {
-    case sl_msgs_msg_MOTION_DEFAULT: break;
-    case sl_msgs_msg_MOTION_ON: r.motion_compensation = true; break;
-    case sl_msgs_msg_MOTION_OFF: r.motion_compensation = false; break;
+    case sl_msgs_msg_dds__CommandRequest_Constants_MOTION_DEFAULT: break;
+    case sl_msgs_msg_dds__CommandRequest_Constants_MOTION_ON: r.motion_compensation = true; break;
+    case sl_msgs_msg_dds__CommandRequest_Constants_MOTION_OFF: r.motion_compensation = false; break;
     default:
       error = "unknown motion compensation value " +
               std::to_string(static_cast<int>(request.motion_compensation));
@@ -38,40 +38,40 @@ namespace {
 // " count N" and the options that differ from the defaults, for the log.
 std::string describeStart(const Request& request) {
   std::string text = " count " + std::to_string(request.count);
-  if (request.trigger == sl_msgs_msg_TRIGGER_HARDWARE) text += " trigger hardware";
-  if (request.trigger == sl_msgs_msg_TRIGGER_SOFTWARE) text += " trigger software";
+  if (request.trigger == sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_HARDWARE) text += " trigger hardware";
+  if (request.trigger == sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_SOFTWARE) text += " trigger software";
   if (request.delay_s != 0) text += " delay " + std::to_string(request.delay_s) + " s";
   if (fromTime(request.start_at) != 0) text += " at " + std::to_string(fromTime(request.start_at)) + " ns";
   if (request.cameras._length > 0) {
     text += " cameras";
     for (const auto& id : toStrings(request.cameras)) text += " " + id;
   }
-  if (request.motion_compensation == sl_msgs_msg_MOTION_ON) text += " motion on";
-  if (request.motion_compensation == sl_msgs_msg_MOTION_OFF) text += " motion off";
+  if (request.motion_compensation == sl_msgs_msg_dds__CommandRequest_Constants_MOTION_ON) text += " motion on";
+  if (request.motion_compensation == sl_msgs_msg_dds__CommandRequest_Constants_MOTION_OFF) text += " motion off";
   return text;
 }
 
 bool changesState(const Request& request) {
-  return request.command == sl_msgs_msg_COMMAND_START || request.command == sl_msgs_msg_COMMAND_STOP ||
-         request.command == sl_msgs_msg_COMMAND_SET_PATTERN;
+  return request.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START || request.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP ||
+         request.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN;
 }
 
 }  // namespace
 
 CommandResult RequestDispatcher::carryOut(const Request& request, CommandTarget& target) {
   switch (request.command) {
-    case sl_msgs_msg_COMMAND_START: {
+    case sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START: {
       std::string error;
       const StartRequest start = toStartRequest(request, error);
       return error.empty() ? target.start(start)
                            : CommandResult{CommandResult::Code::kInvalidOption, error};
     }
-    case sl_msgs_msg_COMMAND_STOP:
+    case sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP:
       return target.stop();
-    case sl_msgs_msg_COMMAND_SET_PATTERN:
+    case sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN:
       return target.selectPattern(request.pattern ? request.pattern : "");
-    case sl_msgs_msg_COMMAND_LIST_PATTERNS:
-    case sl_msgs_msg_COMMAND_GET_CONFIG:
+    case sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_LIST_PATTERNS:
+    case sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_GET_CONFIG:
       return {};  // every reply lists the patterns; the config text is the detail
     default:
       return {CommandResult::Code::kInvalidCommand,
@@ -121,11 +121,11 @@ std::optional<ReplyValues> RequestDispatcher::dispatch(const Request& request, C
             excerpt(request.client_id, 64) + ": " +
             (command >= 0 && command < 5 ? kCommands[command] : "unknown") +
             (pattern.empty() ? "" : " '" + excerpt(request.pattern, 64) + "'") +
-            (request.command == sl_msgs_msg_COMMAND_START && size_problem.empty() ? describeStart(request)
+            (request.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START && size_problem.empty() ? describeStart(request)
                                                                                  : "") +
             (reply.result.accepted() ? ": accepted" : ": rejected: " + reply.result.reason));
   reply.patterns = target.patterns();
-  if (request.command == sl_msgs_msg_COMMAND_GET_CONFIG) reply.detail = target.configText();
+  if (request.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_GET_CONFIG) reply.detail = target.configText();
   return reply;
 }
 

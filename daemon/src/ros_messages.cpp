@@ -168,15 +168,15 @@ ImageSetMessage::ImageSetMessage(const pipeline::ImageSet& set, std::vector<std:
   borrow(msg_.images, images_.data(), images_.size());
 }
 
-sl_msgs_msg_State toState(ScanState s) {
+std::uint8_t toState(ScanState s) {
   switch (s) {
-    case ScanState::kIdle: return sl_msgs_msg_STATE_IDLE;
-    case ScanState::kScanning: return sl_msgs_msg_STATE_SCANNING;
-    case ScanState::kError: return sl_msgs_msg_STATE_ERROR;
-    case ScanState::kWaiting: return sl_msgs_msg_STATE_WAITING;
-    case ScanState::kDegraded: return sl_msgs_msg_STATE_DEGRADED;
+    case ScanState::kIdle: return sl_msgs_msg_dds__Status_Constants_STATE_IDLE;
+    case ScanState::kScanning: return sl_msgs_msg_dds__Status_Constants_STATE_SCANNING;
+    case ScanState::kError: return sl_msgs_msg_dds__Status_Constants_STATE_ERROR;
+    case ScanState::kWaiting: return sl_msgs_msg_dds__Status_Constants_STATE_WAITING;
+    case ScanState::kDegraded: return sl_msgs_msg_dds__Status_Constants_STATE_DEGRADED;
   }
-  return sl_msgs_msg_STATE_ERROR;
+  return sl_msgs_msg_dds__Status_Constants_STATE_ERROR;
 }
 
 StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::string>& patterns,
@@ -204,8 +204,8 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.sets_overflow = s.sets_overflow;
   msg.writes_timed_out = edge.writes_timed_out;
   msg.sets_not_recorded = s.sets_not_recorded;
-  msg.trigger = s.trigger == TriggerMode::kSoftware ? sl_msgs_msg_TRIGGER_SOFTWARE
-                                                    : sl_msgs_msg_TRIGGER_HARDWARE;
+  msg.trigger = s.trigger == TriggerMode::kSoftware ? sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE
+                                                    : sl_msgs_msg_dds__Status_Constants_TRIGGER_HARDWARE;
   borrow(msg.cameras, camera_pointers_.data(), camera_pointers_.size());
   msg.motion_compensation = s.motion_compensation;
   msg.start_at = toTime(s.start_at_ns);

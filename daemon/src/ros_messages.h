@@ -128,7 +128,7 @@ struct EdgeCounters {
   std::vector<MatchedReaderState> points_readers;
 };
 
-sl_msgs_msg_State toState(ScanState s);
+std::uint8_t toState(ScanState s);
 
 // sl_msgs/Status at `stamp_ns` (system clock).
 class StatusMessage : NonMovable {

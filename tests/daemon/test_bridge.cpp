@@ -112,22 +112,22 @@ TEST_CASE("requests refused by the full request reader are counted") {
   const std::string ns = sl::test::uniqueNamespace("rejected");
   InProcessDaemon daemon(ns);  // not serving yet: nothing takes the requests
   sl::dds::Participant participant(0);
-  sl::dds::Topic<sl_msgs_msg_CommandRequest> topic(participant, "rq/" + ns + "/commandRequest",
-                                                   sl_msgs_msg_CommandRequest_desc);
+  sl::dds::Topic<sl_msgs_msg_dds__CommandRequest_> topic(participant, "rq/" + ns + "/commandRequest",
+                                                   sl_msgs_msg_dds__CommandRequest__desc);
   // Each write waits at most 20 ms for a full reader (in one process, Cyclone
   // delivers to the reader synchronously and retries a refused sample until
   // then), then gives the request up.
-  sl::dds::Writer<sl_msgs_msg_CommandRequest> writer(
+  sl::dds::Writer<sl_msgs_msg_dds__CommandRequest_> writer(
       participant, topic, sl::dds::Qos().reliable(DDS_MSECS(20)).keepAll().xcdr1());
   REQUIRE(writer.waitForReaders(1, DDS_SECS(10)));
   constexpr int kRequests = 300;
   int written = 0;
   for (int i = 0; i < kRequests; ++i) {
     std::string client_id = "flood" + std::to_string(i), empty;
-    sl_msgs_msg_CommandRequest request{};
+    sl_msgs_msg_dds__CommandRequest_ request{};
     request.client_id = client_id.data();
     request.request_id = 1;
-    request.command = sl_msgs_msg_COMMAND_LIST_PATTERNS;
+    request.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_LIST_PATTERNS;
     request.pattern = request.recording = empty.data();
     if (writer.write(request)) ++written;
   }
@@ -156,9 +156,9 @@ TEST_CASE("a flooding client neither starves another client nor loses requests u
   const auto honest = connectTo(ns);
 
   sl::dds::Participant participant(0);
-  sl::dds::Topic<sl_msgs_msg_CommandRequest> topic(participant, "rq/" + ns + "/commandRequest",
-                                                   sl_msgs_msg_CommandRequest_desc);
-  sl::dds::Writer<sl_msgs_msg_CommandRequest> writer(
+  sl::dds::Topic<sl_msgs_msg_dds__CommandRequest_> topic(participant, "rq/" + ns + "/commandRequest",
+                                                   sl_msgs_msg_dds__CommandRequest__desc);
+  sl::dds::Writer<sl_msgs_msg_dds__CommandRequest_> writer(
       participant, topic, sl::dds::Qos().reliable(DDS_MSECS(500)).keepAll().xcdr1());
   REQUIRE(writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
   // The flood: at least the probe's 20k requests, and on until the honest
@@ -170,10 +170,10 @@ TEST_CASE("a flooding client neither starves another client nor loses requests u
   std::thread flood([&] {
     std::string client_id = "flooder", empty;
     for (int i = 0; i < kFloodMax && (i < kFloodMin || !honest_done); ++i) {
-      sl_msgs_msg_CommandRequest request{};
+      sl_msgs_msg_dds__CommandRequest_ request{};
       request.client_id = client_id.data();
       request.request_id = static_cast<std::uint32_t>(i + 1);  // all distinct: none is a repeat
-      request.command = sl_msgs_msg_COMMAND_LIST_PATTERNS;
+      request.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_LIST_PATTERNS;
       request.pattern = request.recording = empty.data();
       if (writer.write(request)) ++written;
     }

@@ -332,27 +332,27 @@ TEST_CASE("request/reply round trip", "[dds]") {
   const Qos qos = Qos().reliable().keepLast(16);
 
   Participant client;
-  Topic<sl_msgs_msg_CommandRequest> client_rq(client, request_name,
-                                              sl_msgs_msg_CommandRequest_desc);
-  Topic<sl_msgs_msg_CommandReply> client_rr(client, reply_name, sl_msgs_msg_CommandReply_desc);
-  Writer<sl_msgs_msg_CommandRequest> request_writer(client, client_rq, qos);
-  Reader<sl_msgs_msg_CommandReply> reply_reader(client, client_rr, qos);
+  Topic<sl_msgs_msg_dds__CommandRequest_> client_rq(client, request_name,
+                                              sl_msgs_msg_dds__CommandRequest__desc);
+  Topic<sl_msgs_msg_dds__CommandReply_> client_rr(client, reply_name, sl_msgs_msg_dds__CommandReply__desc);
+  Writer<sl_msgs_msg_dds__CommandRequest_> request_writer(client, client_rq, qos);
+  Reader<sl_msgs_msg_dds__CommandReply_> reply_reader(client, client_rr, qos);
 
   Participant server;
-  Topic<sl_msgs_msg_CommandRequest> server_rq(server, request_name,
-                                              sl_msgs_msg_CommandRequest_desc);
-  Topic<sl_msgs_msg_CommandReply> server_rr(server, reply_name, sl_msgs_msg_CommandReply_desc);
-  Reader<sl_msgs_msg_CommandRequest> request_reader(server, server_rq, qos);
-  Writer<sl_msgs_msg_CommandReply> reply_writer(server, server_rr, qos);
+  Topic<sl_msgs_msg_dds__CommandRequest_> server_rq(server, request_name,
+                                              sl_msgs_msg_dds__CommandRequest__desc);
+  Topic<sl_msgs_msg_dds__CommandReply_> server_rr(server, reply_name, sl_msgs_msg_dds__CommandReply__desc);
+  Reader<sl_msgs_msg_dds__CommandRequest_> request_reader(server, server_rq, qos);
+  Writer<sl_msgs_msg_dds__CommandReply_> reply_writer(server, server_rr, qos);
 
   REQUIRE(request_writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
   REQUIRE(reply_writer.waitForReaders(1, DDS_SECS(10) * sl::test::kTimeScale));
 
   // Client: a stack sample pointing at literals (the writer only reads it).
-  sl_msgs_msg_CommandRequest request = {};
+  sl_msgs_msg_dds__CommandRequest_ request = {};
   request.client_id = const_cast<char*>("test-client");
   request.request_id = 42;
-  request.command = sl_msgs_msg_COMMAND_START;
+  request.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START;
   request.pattern = const_cast<char*>("3+3");
   request.count = 0;
   REQUIRE(request_writer.write(request));
@@ -367,16 +367,16 @@ TEST_CASE("request/reply round trip", "[dds]") {
     const auto& got = requests[0];
     CHECK(std::string(got.client_id) == "test-client");
     CHECK(got.request_id == 42);
-    CHECK(got.command == sl_msgs_msg_COMMAND_START);
+    CHECK(got.command == sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START);
     CHECK(std::string(got.pattern) == "3+3");
     CHECK(got.count == 0);
 
     auto* reply =
-        static_cast<sl_msgs_msg_CommandReply*>(dds_alloc(sizeof(sl_msgs_msg_CommandReply)));
+        static_cast<sl_msgs_msg_dds__CommandReply_*>(dds_alloc(sizeof(sl_msgs_msg_dds__CommandReply_)));
     reply->client_id = dds_string_dup(got.client_id);
     reply->request_id = got.request_id;
     reply->accepted = true;
-    reply->code = sl_msgs_msg_REPLY_OK;
+    reply->code = sl_msgs_msg_dds__CommandReply_Constants_REPLY_OK;
     reply->reason = dds_string_dup("");
     reply->patterns._length = reply->patterns._maximum = 2;
     reply->patterns._buffer = dds_sequence_string_allocbuf(2);
@@ -384,7 +384,7 @@ TEST_CASE("request/reply round trip", "[dds]") {
     reply->patterns._buffer[0] = dds_string_dup("3+3");
     reply->patterns._buffer[1] = dds_string_dup("gray+phase");
     const bool written = reply_writer.write(*reply);
-    sl_msgs_msg_CommandReply_free(reply, DDS_FREE_ALL);
+    sl_msgs_msg_dds__CommandReply__free(reply, DDS_FREE_ALL);
     REQUIRE(written);
   }
 
@@ -396,7 +396,7 @@ TEST_CASE("request/reply round trip", "[dds]") {
   CHECK(std::string(reply.client_id) == "test-client");
   CHECK(reply.request_id == 42);
   CHECK(reply.accepted);
-  CHECK(reply.code == sl_msgs_msg_REPLY_OK);
+  CHECK(reply.code == sl_msgs_msg_dds__CommandReply_Constants_REPLY_OK);
   CHECK(std::string(reply.reason).empty());
   REQUIRE(reply.patterns._length == 2);
   CHECK(std::string(reply.patterns._buffer[0]) == "3+3");
@@ -406,9 +406,9 @@ TEST_CASE("request/reply round trip", "[dds]") {
 TEST_CASE("WaitSet::wait returns false after the timeout", "[dds]") {
   useLoopbackConfig();
   Participant participant;
-  Topic<sl_msgs_msg_CommandRequest> topic(participant, uniqueTopic("quiet"),
-                                          sl_msgs_msg_CommandRequest_desc);
-  Reader<sl_msgs_msg_CommandRequest> reader(participant, topic);
+  Topic<sl_msgs_msg_dds__CommandRequest_> topic(participant, uniqueTopic("quiet"),
+                                          sl_msgs_msg_dds__CommandRequest__desc);
+  Reader<sl_msgs_msg_dds__CommandRequest_> reader(participant, topic);
   ReadCondition has_data(reader);
   WaitSet waitset(participant);
   waitset.attach(has_data, 1);

@@ -261,9 +261,9 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
   SECTION("several clients at once each get exactly one reply, their own") {
     // A raw reader of the reply topic sees every reply of every client.
     sl::dds::Participant participant(0);
-    sl::dds::Topic<sl_msgs_msg_CommandReply> topic(participant, "rr/" + ns + "/commandReply",
-                                                   sl_msgs_msg_CommandReply_desc);
-    sl::dds::Reader<sl_msgs_msg_CommandReply> replies(participant, topic,
+    sl::dds::Topic<sl_msgs_msg_dds__CommandReply_> topic(participant, "rr/" + ns + "/commandReply",
+                                                   sl_msgs_msg_dds__CommandReply__desc);
+    sl::dds::Reader<sl_msgs_msg_dds__CommandReply_> replies(participant, topic,
                                                       sl::dds::Qos().reliable().keepLast(256));
     REQUIRE(replies.waitForWriters(1, DDS_SECS(10) * kTimeScale));
     constexpr int kClients = 3, kRequests = 5;
@@ -312,18 +312,18 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     // answers it while no reader of the reply topic is matched (what happens
     // to a client whose reader the daemon discovers after its request).
     sl::dds::Participant participant(0);
-    sl::dds::Topic<sl_msgs_msg_CommandRequest> request_topic(
-        participant, "rq/" + ns + "/commandRequest", sl_msgs_msg_CommandRequest_desc);
-    sl::dds::Writer<sl_msgs_msg_CommandRequest> writer(
+    sl::dds::Topic<sl_msgs_msg_dds__CommandRequest_> request_topic(
+        participant, "rq/" + ns + "/commandRequest", sl_msgs_msg_dds__CommandRequest__desc);
+    sl::dds::Writer<sl_msgs_msg_dds__CommandRequest_> writer(
         participant, request_topic, sl::dds::Qos().reliable().keepLast(16).xcdr1());
     REQUIRE(writer.waitForReaders(1, DDS_SECS(10) * kTimeScale));
     const auto before = client.status(scaledBound(5s));
     REQUIRE(before);
     std::string client_id = "late_reader", empty;
-    sl_msgs_msg_CommandRequest request{};
+    sl_msgs_msg_dds__CommandRequest_ request{};
     request.client_id = client_id.data();
     request.request_id = 7;
-    request.command = sl_msgs_msg_COMMAND_LIST_PATTERNS;
+    request.command = sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_LIST_PATTERNS;
     request.pattern = empty.data();
     request.recording = empty.data();
     REQUIRE(writer.write(request));
@@ -333,9 +333,9 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     REQUIRE(s);
     REQUIRE(s->requests_answered == before->requests_answered + 1);
     // Only now a reader of the replies, as a client's: it gets that reply.
-    sl::dds::Topic<sl_msgs_msg_CommandReply> reply_topic(
-        participant, "rr/" + ns + "/commandReply", sl_msgs_msg_CommandReply_desc);
-    sl::dds::Reader<sl_msgs_msg_CommandReply> replies(
+    sl::dds::Topic<sl_msgs_msg_dds__CommandReply_> reply_topic(
+        participant, "rr/" + ns + "/commandReply", sl_msgs_msg_dds__CommandReply__desc);
+    sl::dds::Reader<sl_msgs_msg_dds__CommandReply_> replies(
         participant, reply_topic, sl::dds::Qos().reliable().transientLocal().keepLast(64));
     REQUIRE(replies.waitForWriters(1, DDS_SECS(10) * kTimeScale));
     bool found = false;
@@ -428,9 +428,9 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   REQUIRE(daemon.started());
 
   sl::dds::Participant participant(0);
-  sl::dds::Topic<sl_msgs_msg_ProjectorMaps> topic(participant, "rt/" + ns + "/projector_maps",
-                                                  sl_msgs_msg_ProjectorMaps_desc);
-  sl::dds::Reader<sl_msgs_msg_ProjectorMaps> reader(participant, topic,
+  sl::dds::Topic<sl_msgs_msg_dds__ProjectorMaps_> topic(participant, "rt/" + ns + "/projector_maps",
+                                                  sl_msgs_msg_dds__ProjectorMaps__desc);
+  sl::dds::Reader<sl_msgs_msg_dds__ProjectorMaps_> reader(participant, topic,
                                                     sl::dds::Qos().reliable().keepLast(8));
   const auto client_owner = connect(ns, /*points=*/false);
   sl::daemon::SensorClient& client = *client_owner;
@@ -892,8 +892,8 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   REQUIRE(daemon.terminate(5s) == 0);
 }
 
-// Requests that Cyclone cannot deserialize (an out-of-range enum from a
-// look-alike type without type information) never reach the daemon's
+// Requests that Cyclone cannot deserialize (a string without its terminating
+// NUL, from a look-alike type without type information) never reach the daemon's
 // reader; they are counted in requests_malformed, and a good request is
 // still answered.
 TEST_CASE("requests that fail to deserialize are counted, not lost without a trace") {
@@ -1289,11 +1289,11 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
 
-  using SetMsg = sl_msgs_msg_ImageSet;
+  using SetMsg = sl_msgs_msg_dds__ImageSet_;
   using CloudMsg = sensor_msgs_msg_dds__PointCloud2_;
   sl::dds::Participant participant(0);
   sl::dds::Topic<SetMsg> sets_topic(participant, "rt/" + ns + "/image_sets",
-                                    sl_msgs_msg_ImageSet_desc);
+                                    sl_msgs_msg_dds__ImageSet__desc);
   sl::dds::Topic<CloudMsg> points_topic(participant, "rt/" + ns + "/points",
                                         sensor_msgs_msg_dds__PointCloud2__desc);
   sl::dds::Reader<SetMsg> sets_reader(participant, sets_topic, sl::dds::Qos().reliable().keepLast(4));

@@ -236,13 +236,13 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   edge.points_readers = {{"1:2:3:4", true, false, 7}, {"5:6:7:8", false, true, 0}};
   const msg::StatusMessage message(s, {"a", "b", "c"}, edge, kStamp + 1);
   const msg::Status& m = message.sample();
-  CHECK(m.state == sl_msgs_msg_STATE_DEGRADED);
+  CHECK(m.state == sl_msgs_msg_dds__Status_Constants_STATE_DEGRADED);
   CHECK(str(m.pattern) == "3+3_horizontal");
   CHECK(m.scans_done == 7);
   CHECK(m.sets_dropped == 2 + 5);
   CHECK(m.sets_overflow == 2);
   CHECK(m.writes_timed_out == 5);
-  CHECK(m.trigger == sl_msgs_msg_TRIGGER_SOFTWARE);
+  CHECK(m.trigger == sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE);
   CHECK(strings(m.cameras) == std::vector<std::string>{"top", "side"});
   CHECK(strings(m.patterns) == std::vector<std::string>{"a", "b", "c"});
   CHECK(str(m.degraded_reason) == "camera 'top': no frame for 2.4 s");
@@ -262,8 +262,8 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK_FALSE(m.points_readers._buffer[1].reliable);
   CHECK(m.stamp.nanosec == 250'000'001u);
   CHECK(m.last_error_stamp.sec == 1'700'000'001);
-  CHECK(msg::toState(ScanState::kIdle) == sl_msgs_msg_STATE_IDLE);
-  CHECK(msg::toState(ScanState::kWaiting) == sl_msgs_msg_STATE_WAITING);
+  CHECK(msg::toState(ScanState::kIdle) == sl_msgs_msg_dds__Status_Constants_STATE_IDLE);
+  CHECK(msg::toState(ScanState::kWaiting) == sl_msgs_msg_dds__Status_Constants_STATE_WAITING);
 }
 
 TEST_CASE("reply: every result code has its wire value and comes back as itself") {
@@ -317,7 +317,7 @@ struct RequestSample {
   std::vector<std::string> cameras;
   std::vector<char*> camera_pointers;
   msg::Request r{};
-  explicit RequestSample(sl_msgs_msg_Command command, std::uint64_t id = 1) {
+  explicit RequestSample(std::uint8_t command, std::uint64_t id = 1) {
     r.command = command;
     r.request_id = id;
   }
@@ -341,13 +341,13 @@ constexpr std::int64_t kSecond = 1'000'000'000;
 TEST_CASE("dispatch: a start's options reach the sensor; every reply lists the patterns") {
   FakeSensor sensor;
   RequestDispatcher dispatcher(RequestLimits{});
-  RequestSample start(sl_msgs_msg_COMMAND_START, 5);
+  RequestSample start(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 5);
   start.pattern = "p2";
   start.recording = "rec";
   start.cameras = {"top"};
   start.r.count = 3;
-  start.r.trigger = sl_msgs_msg_TRIGGER_SOFTWARE;
-  start.r.motion_compensation = sl_msgs_msg_MOTION_OFF;
+  start.r.trigger = sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_SOFTWARE;
+  start.r.motion_compensation = sl_msgs_msg_dds__CommandRequest_Constants_MOTION_OFF;
   start.r.start_at = {1'700'000'000, 5};
   const auto reply = dispatcher.dispatch(start.sample(), sensor, kSecond);
   REQUIRE(reply);
@@ -371,15 +371,15 @@ TEST_CASE("dispatch: a start's options reach the sensor; every reply lists the p
   CHECK(dispatcher.counters().answered == 1);
   CHECK(dispatcher.repliesTimedOut() == 1);
 
-  RequestSample config(sl_msgs_msg_COMMAND_GET_CONFIG, 6);
+  RequestSample config(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_GET_CONFIG, 6);
   const auto config_reply = dispatcher.dispatch(config.sample(), sensor, kSecond);
   REQUIRE(config_reply);
   CHECK(config_reply->detail == "sensor: sim\n");
-  RequestSample select(sl_msgs_msg_COMMAND_SET_PATTERN, 7);
+  RequestSample select(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 7);
   select.pattern = "p1";
   CHECK(dispatcher.dispatch(select.sample(), sensor, kSecond)->result.accepted());
   CHECK(sensor.selected == std::vector<std::string>{"p1"});
-  RequestSample stop(sl_msgs_msg_COMMAND_STOP, 8);
+  RequestSample stop(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP, 8);
   CHECK(dispatcher.dispatch(stop.sample(), sensor, kSecond)->result.code == Code::kNotRunning);
   CHECK(sensor.stops == 1);
 }
@@ -390,20 +390,20 @@ TEST_CASE("dispatch: bad values are refused before the sensor sees them; retries
   limits.max_string = 16;
   RequestDispatcher dispatcher(limits);
 
-  RequestSample bad_enum(sl_msgs_msg_COMMAND_START, 1);
-  bad_enum.r.trigger = static_cast<sl_msgs_msg_TriggerMode>(9);
+  RequestSample bad_enum(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 1);
+  bad_enum.r.trigger = static_cast<std::uint8_t>(9);
   auto reply = dispatcher.dispatch(bad_enum.sample(), sensor, kSecond);
   CHECK(reply->result.code == Code::kInvalidOption);
   CHECK_THAT(reply->result.reason, Catch::Contains("unknown trigger mode 9"));
 
-  RequestSample long_pattern(sl_msgs_msg_COMMAND_SET_PATTERN, 2);
+  RequestSample long_pattern(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 2);
   long_pattern.pattern = std::string(100, 'x');
   reply = dispatcher.dispatch(long_pattern.sample(), sensor, kSecond);
   CHECK(reply->result.code == Code::kInvalidOption);
   CHECK_THAT(reply->result.reason, Catch::Contains("pattern is 100 bytes"));
   CHECK(dispatcher.counters().invalid == 1);
 
-  RequestSample unknown(static_cast<sl_msgs_msg_Command>(17), 3);
+  RequestSample unknown(static_cast<std::uint8_t>(17), 3);
   reply = dispatcher.dispatch(unknown.sample(), sensor, kSecond);
   CHECK(reply->result.code == Code::kInvalidCommand);
   CHECK_THAT(reply->result.reason, Catch::Contains("unknown command 17"));
@@ -411,7 +411,7 @@ TEST_CASE("dispatch: bad values are refused before the sensor sees them; retries
   CHECK(sensor.selected.empty());
 
   // A retry (same client, same id) of a start: answered again, started once.
-  RequestSample start(sl_msgs_msg_COMMAND_START, 4);
+  RequestSample start(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 4);
   CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
   CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
   CHECK(sensor.starts.size() == 1);
@@ -428,7 +428,7 @@ TEST_CASE("dispatch: over the rate limit a request is counted, not answered and 
   RequestDispatcher dispatcher(limits);
   int answered = 0;
   for (std::uint64_t id = 1; id <= 5; ++id) {
-    RequestSample select(sl_msgs_msg_COMMAND_SET_PATTERN, id);
+    RequestSample select(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, id);
     select.pattern = "p1";
     answered += dispatcher.dispatch(select.sample(), sensor, kSecond).has_value();
   }
@@ -437,6 +437,6 @@ TEST_CASE("dispatch: over the rate limit a request is counted, not answered and 
   CHECK(dispatcher.counters().received == 5);
   CHECK(dispatcher.counters().rate_limited == 2);
   // A second later one token is back.
-  RequestSample later(sl_msgs_msg_COMMAND_SET_PATTERN, 6);
+  RequestSample later(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 6);
   CHECK(dispatcher.dispatch(later.sample(), sensor, 2 * kSecond + kSecond / 100).has_value());
 }

@@ -11,7 +11,8 @@ target_include_directories(test_e2e PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)  #
 add_dependencies(test_e2e sl_sensord malformed_writer points_subscriber sl_view)  # sl_view record
 
 # A client whose requests the daemon cannot deserialize (test_e2e): a
-# look-alike CommandRequest without type information, enums as int32.
+# look-alike CommandRequest without type information (a string sent without
+# its terminating NUL).
 set(_lookalike_dir ${CMAKE_CURRENT_BINARY_DIR}/lookalike)
 find_program(SL_IDLC idlc REQUIRED)  # Debian's cyclonedds-tools (as idlc_generate uses)
 add_custom_command(

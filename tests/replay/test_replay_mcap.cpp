@@ -3,7 +3,7 @@
 // file without image sets, truncated or corrupt is refused naming the file.
 // The files here are written with the project's MCAP writer
 // (tools/common/mcap_writer.h, itself checked by @mcap/core in view_wire) and
-// an ImageSet CDR encoder written from idl/sl_msgs/msg/ImageSet.idl; the
+// an ImageSet CDR encoder written from ros2/sl_msgs/msg/ImageSet.msg; the
 // daemon's own bytes are replayed end to end in tests/view/mcap_replay_test.sh.
 #include <catch2/catch.hpp>
 

@@ -174,16 +174,15 @@ TEST_CASE("ros2Schema: the standard fields and their dependencies; unknown types
 }
 
 // The project's own types: the ROS 2 schema Foxglove and rosbag2 decode
-// with must list the IDL's members, in order (a member the schema lacks
-// misplaces every field after it: the ImageSet schema lacked camera_ids and
-// bit_depths until view_image_sets caught it; Status lacked the request
-// counters).
+// with must list the members of the DDS IDL the daemon's types are compiled
+// from, in order (a member the schema lacks misplaces every field after it).
+// Both are generated from ros2/sl_msgs/msg/*.msg (idl/ros2_to_dds_idl.py).
 namespace {
 std::vector<std::string> idlMembers(const std::string& type) {
-  std::ifstream in(std::string(SL_SOURCE_DIR) + "/idl/sl_msgs/msg/" + type + ".idl");
+  std::ifstream in(std::string(SL_BINARY_DIR) + "/idl/dds_idl/sl_msgs/msg/" + type + ".idl");
   std::string text, line;
   while (std::getline(in, line)) text += line.substr(0, line.find("//")) + "\n";
-  const auto begin = text.find("struct " + type + " {");
+  const auto begin = text.find("struct " + type + "_ {");
   REQUIRE(begin != std::string::npos);
   const auto end = text.find("};", begin);
   std::vector<std::string> names;

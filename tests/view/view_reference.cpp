@@ -32,7 +32,7 @@ namespace {
 using Cloud = sensor_msgs_msg_dds__PointCloud2_;
 using Image = sensor_msgs_msg_dds__Image_;
 using Info = sensor_msgs_msg_dds__CameraInfo_;
-using Status = sl_msgs_msg_Status;
+using Status = sl_msgs_msg_dds__Status_;
 namespace dds = sl::dds;
 
 Json::Value time(const builtin_interfaces_msg_dds__Time_& t) {
@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
   dds::Topic<Image> depth_t(p, "rt/" + ns + "/depth/image", sensor_msgs_msg_dds__Image__desc);
   dds::Topic<Image> shading_t(p, "rt/" + ns + "/shading/image", sensor_msgs_msg_dds__Image__desc);
   dds::Topic<Info> info_t(p, "rt/" + ns + "/camera_info", sensor_msgs_msg_dds__CameraInfo__desc);
-  dds::Topic<Status> status_t(p, "rt/" + ns + "/status", sl_msgs_msg_Status_desc);
+  dds::Topic<Status> status_t(p, "rt/" + ns + "/status", sl_msgs_msg_dds__Status__desc);
   // Keep-all: nothing is overwritten while this program writes files (the
   // check asks for every sample the bridge or a recording saw).
   const auto qos = dds::Qos().reliable().keepAll();

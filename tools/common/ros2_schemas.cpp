@@ -3,6 +3,8 @@
 #include <map>
 #include <stdexcept>
 
+#include "sl_msgs/ros2_definitions.h"
+
 namespace sl::tools {
 
 namespace {
@@ -12,7 +14,8 @@ const char* const kSeparator =
 
 // Field lists, one type each (the standard ROS 2 definitions, comments left out).
 const std::map<std::string, std::string>& fieldLists() {
-  static const std::map<std::string, std::string> lists = {
+  static const std::map<std::string, std::string> lists = [] {
+    std::map<std::string, std::string> m = {
       {"builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"},
       {"std_msgs/Header", "builtin_interfaces/Time stamp\nstring frame_id\n"},
       {"sensor_msgs/PointField",
@@ -31,34 +34,11 @@ const std::map<std::string, std::string>& fieldLists() {
        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\n"
        "float64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\n"
        "uint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"},
-      // sl_msgs, from idl/sl_msgs/msg/*.idl (enums are uint32 on the wire).
-      {"sl_msgs/Status",
-       "uint32 STATE_IDLE=0\nuint32 STATE_SCANNING=1\nuint32 STATE_ERROR=2\n"
-       "uint32 STATE_WAITING=3\nuint32 STATE_DEGRADED=4\nuint32 TRIGGER_DEFAULT=0\nuint32 TRIGGER_HARDWARE=1\n"
-       "uint32 TRIGGER_SOFTWARE=2\n"
-       "builtin_interfaces/Time stamp\nuint32 state\nstring pattern\nuint64 scans_done\n"
-       "uint64 scans_requested\nfloat64 scan_rate_hz\nuint64 frames_dropped\n"
-       "uint64 sets_dropped\nuint64 sets_incomplete\nuint64 frames_overflow\n"
-       "uint64 frames_unmatched\nuint64 sets_overflow\nuint64 writes_timed_out\n"
-       "uint64 sets_not_recorded\nstring recording\nuint64 sets_recorded\nstring last_error\n"
-       "string[] patterns\nuint32 trigger\nstring[] cameras\nbool motion_compensation\n"
-       "builtin_interfaces/Time start_at\nfloat64 frame_rate_hz\nuint64 requests_received\n"
-       "uint64 requests_answered\nuint64 requests_rate_limited\nuint64 requests_invalid\n"
-       "uint64 replies_timed_out\nstring degraded_reason\nbuiltin_interfaces/Time last_error_stamp\n"
-       "uint64 errors_reported\nuint64 requests_malformed\nuint64 sets_over_quota\n"
-       "float64 latency_ms\nfloat64 latency_max_ms\nfloat64 wait_ms\nfloat64 processing_ms\n"
-       "float64 publish_ms\n"
-       "uint64 requests_rejected\nuint64 clouds_lost_to_readers\n"
-       "sl_msgs/PointsReader[] points_readers\n"},
-      {"sl_msgs/PointsReader",
-       "string guid\nbool reliable\nbool acknowledging\nuint64 clouds_lost\n"},
-      {"sl_msgs/ImageSet",
-       "std_msgs/Header header\nstring pattern\nuint64 sequence_id\nuint32 camera_count\n"
-       "string[] camera_ids\nuint8[] bit_depths\nsensor_msgs/Image[] images\n"},
-      {"sl_msgs/ProjectorMaps",
-       "std_msgs/Header header\nstring pattern\nuint64 scan_index\nuint32 height\n"
-       "uint32 width\nfloat32[] up\nfloat32[] vp\nfloat32[] modulation\nuint8[] status\n"},
-  };
+    };
+    // sl_msgs: generated from ros2/sl_msgs/msg/*.msg (idl/CMakeLists.txt).
+    for (const auto& d : sl_msgs_definitions::kMessages) m.emplace(d.type, d.fields);
+    return m;
+  }();
   return lists;
 }
 

@@ -1,8 +1,7 @@
 // ROS 2 message definitions (the `ros2msg` schema encoding of MCAP and the
 // Foxglove WebSocket protocol) of the types the daemon publishes: the main
 // type's fields, then every type it uses after a separator line and
-// "MSG: package/Type". IDL enums (sl_msgs) appear as uint32, which is how
-// XCDR1 puts them on the wire.
+// "MSG: package/Type". sl_msgs's are ros2/sl_msgs/msg/*.msg without comments.
 #pragma once
 
 #include <string>

@@ -35,9 +35,9 @@ const dds_topic_descriptor_t& descriptorOf(const std::string& type_name) {
   if (type_name == "sensor_msgs/msg/PointCloud2") return sensor_msgs_msg_dds__PointCloud2__desc;
   if (type_name == "sensor_msgs/msg/Image") return sensor_msgs_msg_dds__Image__desc;
   if (type_name == "sensor_msgs/msg/CameraInfo") return sensor_msgs_msg_dds__CameraInfo__desc;
-  if (type_name == "sl_msgs/msg/Status") return sl_msgs_msg_Status_desc;
-  if (type_name == "sl_msgs/msg/ImageSet") return sl_msgs_msg_ImageSet_desc;
-  if (type_name == "sl_msgs/msg/ProjectorMaps") return sl_msgs_msg_ProjectorMaps_desc;
+  if (type_name == "sl_msgs/msg/Status") return sl_msgs_msg_dds__Status__desc;
+  if (type_name == "sl_msgs/msg/ImageSet") return sl_msgs_msg_dds__ImageSet__desc;
+  if (type_name == "sl_msgs/msg/ProjectorMaps") return sl_msgs_msg_dds__ProjectorMaps__desc;
   throw std::invalid_argument("no DDS type for '" + type_name + "'");
 }
 

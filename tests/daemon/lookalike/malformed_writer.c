@@ -1,6 +1,6 @@
 // Writes requests the daemon cannot deserialize (test_malformed): `count`
-// look-alike CommandRequests on rq/<ns>/commandRequest whose command is
-// out of the enum's range, then waits until the daemon's reader acknowledged
+// look-alike CommandRequests on rq/<ns>/commandRequest whose client_id is a
+// string without its terminating NUL, then waits until the daemon's reader acknowledged
 // them. Usage: malformed_writer NAMESPACE COUNT. Exit 0 on success.
 #include <stdio.h>
 #include <stdlib.h>
@@ -21,7 +21,7 @@ int main(int argc, char** argv) {
   const dds_entity_t participant = dds_create_participant(DDS_DOMAIN_DEFAULT, NULL, NULL);
   if (participant < 0) return 1;
   const dds_entity_t topic =
-      dds_create_topic(participant, &sl_msgs_msg_CommandRequest_desc, topic_name, NULL, NULL);
+      dds_create_topic(participant, &sl_msgs_msg_dds__CommandRequest__desc, topic_name, NULL, NULL);
   dds_qos_t* qos = dds_create_qos();
   dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(10));
   dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, 0);
@@ -41,11 +41,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   for (int i = 0; i < count; ++i) {
-    sl_msgs_msg_CommandRequest req;
+    sl_msgs_msg_dds__CommandRequest_ req;
     memset(&req, 0, sizeof req);
-    req.client_id = "malformed";
+    static unsigned char unterminated[] = {'b', 'a', 'd'};  // a CDR string ends in NUL
+    req.client_id._buffer = unterminated;
+    req.client_id._length = req.client_id._maximum = sizeof unterminated;
     req.request_id = (uint64_t)(i + 1);
-    req.command = 99 + i;  // no such Command
+    req.command = 3;  // COMMAND_LIST_PATTERNS: harmless had it been read
     req.pattern = "";
     req.recording = "";
     if (dds_write(writer, &req) != DDS_RETCODE_OK) return 1;

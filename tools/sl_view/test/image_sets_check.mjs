@@ -2,7 +2,7 @@
 // independent reader (@mcap/core, CRCs validated) and Foxglove's ROS 2
 // deserializer with the sl_msgs/msg/ImageSet schema the file carries: every
 // field must come out as the daemon's config and timing make it (so a schema
-// that does not match idl/sl_msgs/msg/ImageSet.idl fails here), and every set
+// that does not match the daemon's ImageSet type fails here), and every set
 // must have its scan's cloud in the file.
 //   node image_sets_check.mjs --mcap FILE --ns NS --camera ID --frames N --width W --height H --count C
 import fs from 'node:fs';

@@ -30,13 +30,13 @@ function readCloud(buf) {
 const kStates = ['idle', 'scanning', 'error', 'waiting', 'degraded'];
 function readStatus(buf) {
   const c = new Cdr(buf), s = {};
-  s.stamp = { sec: c.i32(), nanosec: c.u32() }; s.state = kStates[c.u32()] ?? '?'; s.pattern = c.str();
+  s.stamp = { sec: c.i32(), nanosec: c.u32() }; s.state = kStates[c.u8()] ?? '?'; s.pattern = c.str();
   for (const k of ['scans_done', 'scans_requested']) s[k] = c.u64();
   s.scan_rate_hz = c.f64();
   for (const k of ['frames_dropped', 'sets_dropped', 'sets_incomplete', 'frames_overflow', 'frames_unmatched',
     'sets_overflow', 'writes_timed_out', 'sets_not_recorded']) s[k] = c.u64();
   s.recording = c.str(); s.sets_recorded = c.u64(); s.last_error = c.str(); s.patterns = c.strs();
-  s.trigger = c.u32(); s.cameras = c.strs(); s.motion_compensation = c.u8() !== 0;
+  s.trigger = c.u8(); s.cameras = c.strs(); s.motion_compensation = c.u8() !== 0;
   s.start_at = { sec: c.i32(), nanosec: c.u32() }; s.frame_rate_hz = c.f64();
   return s;
 }

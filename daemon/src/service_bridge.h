@@ -1,0 +1,49 @@
+// The daemon's ROS 2 services (private to daemon/): <ns>/start
+// (sl_msgs/srv/Start), <ns>/stop (std_srvs/srv/Trigger), <ns>/set_pattern,
+// <ns>/list_patterns, <ns>/get_config (sl_msgs/srv), served over Cyclone DDS
+// in rmw_cyclonedds's framing (ros2_service.h). Each request becomes a
+// CommandRequest for the same RequestDispatcher as the command topic, so
+// sizes, rate limits, retries and the status counters are the command
+// topic's: every request is answered, or counted (rate-limited, reply timed
+// out). The client id the dispatcher sees is "ros2:" and the request
+// header's guid in hex, the request id its sequence number.
+//
+// A request from a Fast DDS writer (rmw_fastrtps frames services in the RTPS
+// sample identity, which Cyclone DDS cannot write) is not carried out: it is
+// counted in notServed() and logged (the first 10, then every 1000th).
+//
+// Thread-compatible: the bridge's request loop only.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "request_dispatch.h"
+#include "sl/daemon/dds.h"
+
+namespace sl::daemon {
+
+class ServiceBridge {
+ public:
+  ServiceBridge(const dds::Participant& participant, const std::string& ns);
+  ~ServiceBridge();
+
+  // Attaches every request reader's condition to `waitset` with `cookie`.
+  void attach(dds::WaitSet& waitset, dds_attach_t cookie);
+
+  // Takes every waiting request and answers it through `dispatcher`;
+  // `current_pattern` is list_patterns's `current`.
+  void serve(RequestDispatcher& dispatcher, CommandTarget& target,
+             const std::string& current_pattern);
+
+  // Requests refused before the dispatcher: Fast DDS-framed, plus the
+  // samples Cyclone dropped as undeserializable on the request topics.
+  std::uint64_t notServed() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace sl::daemon
