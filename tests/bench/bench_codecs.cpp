@@ -22,6 +22,9 @@
 //   frames read, the cloud and optionally the maps written), the floor the
 //   processing cannot beat on this machine.
 //
+// - BM_DecodeHealthTally: the cloud-only scan without and with the decode
+//   health tally the daemon gathers per scan.
+//
 // - BM_DecodeGammaCompensation: 3+3 horizontal decode with and without the
 //   projector gamma compensation (decoder.projector_gamma 2.2), same frames.
 //
@@ -48,6 +51,7 @@
 #include <vector>
 
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/projector_response.h"
 #include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/scan_processor.h"
@@ -427,6 +431,38 @@ BENCHMARK(BM_DecodeTriangulatePaced)
     ->ArgNames({"pattern", "proj_iter", "threads"})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(40)
+    ->UseRealTime();
+
+// The daemon's per-scan decode health (docs/decode-health.md): the cloud-only
+// scan of BM_DecodeTriangulate without (tally:0) and with (tally:1) the
+// tally of status and residual that ScanProcessor gathers block by block,
+// plus judgeDecodeTally(); the difference is what decode health costs the
+// daemon.
+void BM_DecodeHealthTally(benchmark::State& state) {
+  const int pattern = int(state.range(0));
+  const CameraImages in = images(pattern);
+  const Triangulator& t = triangulator(2);
+  ScanProcessor processor(int(state.range(1)));
+  const bool with_tally = state.range(2) != 0;
+  DecodeTally tally;
+  for (auto _ : state) {
+    const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam", ScanProcessor::Keep::kCloud,
+                                             with_tally ? &tally : nullptr);
+    benchmark::DoNotOptimize(out.cloud->points.data());
+    if (with_tally) {
+      const DecodeHealth h = judgeDecodeTally(codec(pattern).spec(), codec(pattern).options(), tally);
+      benchmark::DoNotOptimize(h.residual_median);
+    }
+  }
+  reportScans(state);
+}
+
+BENCHMARK(BM_DecodeHealthTally)
+    ->ArgsProduct({{0, 1}, {1, 2}, {0, 1}})
+    ->ArgNames({"pattern", "threads", "tally"})
+    ->Unit(benchmark::kMillisecond)
+    ->MinWarmUpTime(0.3)
+    ->MeasureProcessCPUTime()
     ->UseRealTime();
 
 int main(int argc, char** argv) {
