@@ -221,6 +221,7 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   else if (trigger == "software") r.trigger = TriggerMode::kSoftware;
   else m.fail("trigger", "must be hardware or software, not '" + trigger + "'");
   r.stall_timeout_s = m.get<double>("stall_timeout_s", r.stall_timeout_s);
+  r.publish_implausible = m.get<bool>("publish_implausible", r.publish_implausible);
   if (!(r.stall_timeout_s >= 0.1 && r.stall_timeout_s <= 3600))
     m.fail("stall_timeout_s", "must be in [0.1, 3600] seconds");
   r.prefault_memory = m.get<bool>("prefault_memory", r.prefault_memory);

@@ -224,6 +224,10 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   s.trigger = TriggerMode::kSoftware;
   s.cameras = {"top", "side"};
   s.last_error_ns = kStamp;
+  s.decode_modulated_fraction = 0.61;
+  s.decode_consistent_fraction = 0.58;
+  s.decode_residual_median = 0.25;
+  s.clouds_implausible = 11;
   msg::EdgeCounters edge;
   edge.requests.received = 9;
   edge.requests.answered = 8;
@@ -253,6 +257,10 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK(m.requests_malformed == 4);
   CHECK(m.requests_rejected == 6);
   CHECK(m.clouds_lost_to_readers == 7);
+  CHECK(m.decode_modulated_fraction == 0.61);
+  CHECK(m.decode_consistent_fraction == 0.58);
+  CHECK(m.decode_residual_median == 0.25);
+  CHECK(m.clouds_implausible == 11);
   REQUIRE(m.points_readers._length == 2);
   CHECK(str(m.points_readers._buffer[0].guid) == "1:2:3:4");
   CHECK(m.points_readers._buffer[0].reliable);

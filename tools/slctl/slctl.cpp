@@ -371,6 +371,10 @@ int printStatus(SensorClient& client, const Args& args) {
               u(s->sets_dropped), u(s->sets_overflow), u(s->writes_timed_out),
               u(s->sets_not_recorded));
   std::printf("sets incomplete:  %llu\n", u(s->sets_incomplete));
+  std::printf("decode health:    %.1f %% modulated, %.1f %% of those consistent, residual median "
+              "%.3f; %llu implausible clouds\n",
+              100 * s->decode_modulated_fraction, 100 * s->decode_consistent_fraction,
+              s->decode_residual_median, u(s->clouds_implausible));
   std::printf("recording:        %s (%llu sets recorded, %llu over quota)\n",
               s->recording.empty() ? "-" : s->recording.c_str(), u(s->sets_recorded),
               u(s->sets_over_quota));

@@ -103,6 +103,11 @@ struct RuntimeConfig {
   std::uint64_t recording_max_mb = 0;
   std::uint64_t recording_max_sets = 0;
   std::uint64_t recording_min_free_mb = 1024;
+  // A cloud whose decode health is implausible (the pattern file does not
+  // describe the projected frames: docs/decode-health.md) is counted and
+  // not published, and a finite request ends with the cause; true publishes
+  // it anyway (counted, the scan still degraded).
+  bool publish_implausible = false;
 };
 
 // Which sensor the daemon runs (`sensor:`).
