@@ -136,7 +136,8 @@ void judge(const PatternSpec& spec, const DecodeHealthLimits& limits, DecodeHeal
                            " of modulated pixels fail unwrapping (limit " +
                            percent(limits.max_inconsistent_fraction) +
                            "): does the pattern file match the projected sequence "
-                           "(frequencies and their order, steps, frame order)?");
+                           "(frequencies and their order, steps, frame order), and is the "
+                           "projector's response compensated (decoder.projector_gamma)?");
     if (h.residual_median > limits.max_median_residual)
       h.problems.push_back("median unwrapping residual " + fixed(h.residual_median, 3) +
                            " (limit " + fixed(limits.max_median_residual, 3) +

@@ -760,8 +760,12 @@ TEST_CASE("decoder.projector_gamma takes effect in the engine's decoding", "[eng
     return text.replace(at, from.size(), to);
   };
   const std::string shipped = sl::test::shippedSimConfigText();
-  const auto scan = [&](const std::string& text) {
-    const auto config = atTestRate(sl::daemon::parseConfig(text, std::string(SL_SOURCE_DIR) + "/config/sim.yaml"));
+  // With `publish_implausible`, a cloud whose decode health is implausible
+  // is published too (counted); without, the request ends with the cause.
+  std::string last_error;
+  const auto scan = [&](const std::string& text, bool publish_implausible = false) {
+    auto config = atTestRate(sl::daemon::parseConfig(text, std::string(SL_SOURCE_DIR) + "/config/sim.yaml"));
+    config.runtime.publish_implausible = publish_implausible;
     const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
     std::mutex mutex;
     std::shared_ptr<const sl::pipeline::PointCloud> cloud;
@@ -778,13 +782,27 @@ TEST_CASE("decoder.projector_gamma takes effect in the engine's decoding", "[eng
       }
       std::this_thread::sleep_for(50ms);
     }
+    if (!publish_implausible) {
+      // Without a cloud the request ends at once (an implausible decode).
+      for (int i = 0; i < 100 * sl::test::kTimeScale && engine.status().state != ScanState::kIdle; ++i)
+        std::this_thread::sleep_for(20ms);
+    }
     std::lock_guard<std::mutex> lock(mutex);
-    REQUIRE(cloud);
-    return cloud->validCount();
+    last_error = engine.status().last_error;
+    return cloud ? cloud->validCount() : std::size_t{0};
   };
   const std::string gamma_sim = replaced(shipped, "projector_gamma: 1.0", "projector_gamma: 2.2");
   const std::size_t linear = scan(shipped);
-  const std::size_t uncompensated = scan(gamma_sim);
+  CHECK(linear > 0);
+  // A gamma-2.2 projector decoded as linear: the 3-step phase errors are
+  // amplified 40 times by the 40:1 unwrapping, the fringe orders are random
+  // (docs/decode-health.md): implausible, no cloud, the cause named ...
+  CHECK(scan(gamma_sim) == 0);
+  INFO("last error: " << last_error);
+  CHECK(last_error.find("implausible") != std::string::npos);
+  CHECK(last_error.find("projector_gamma") != std::string::npos);
+  // ... and published on request, with fewer valid points.
+  const std::size_t uncompensated = scan(gamma_sim, true);
   const std::size_t compensated =
       scan(replaced(gamma_sim, "max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_gamma: 2.2"));
   WARN("valid points: linear projector " << linear << ", gamma 2.2 uncompensated " << uncompensated
