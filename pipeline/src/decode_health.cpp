@@ -10,6 +10,10 @@
 #include <stdexcept>
 #include <utility>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "frame_layout.h"
 
 namespace sl::pipeline {
@@ -195,21 +199,54 @@ bool hasConsistencyTest(const PatternSpec& spec) {
   return false;
 }
 
-void DecodeTally::addRows(const ProjectorMaps& maps, int row_begin, int row_end, bool with_residual) {
+namespace {
+
+// Adds to n[k] the count of bytes equal to k (k = 0..3) in st[0, width).
+void countStatusRow(const std::uint8_t* st, int width, std::uint32_t* n) {
+  int x = 0;
+#if defined(__SSE2__)
+  // Byte lanes count up to 255 compares, then are summed (sad against 0).
+  const __m128i zero = _mm_setzero_si128();
+  const __m128i k[4] = {_mm_set1_epi8(0), _mm_set1_epi8(1), _mm_set1_epi8(2), _mm_set1_epi8(3)};
+  while (x + 16 <= width) {
+    __m128i a[4] = {zero, zero, zero, zero};
+    for (int i = 0; i < 255 && x + 16 <= width; ++i, x += 16) {
+      const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(st + x));
+      for (int c = 0; c < 4; ++c) a[c] = _mm_sub_epi8(a[c], _mm_cmpeq_epi8(v, k[c]));
+    }
+    for (int c = 0; c < 4; ++c) {
+      const __m128i s = _mm_sad_epu8(a[c], zero);
+      n[c] += static_cast<std::uint32_t>(_mm_cvtsi128_si32(s) + _mm_extract_epi16(s, 4));
+    }
+  }
+#endif
+  for (; x < width; ++x)
+    if (st[x] < 4) ++n[st[x]];
+}
+
+}  // namespace
+
+void DecodeTally::addRows(const ProjectorMaps& maps, int row_begin, int row_end, bool with_residual,
+                          int image_row) {
   const int width = maps.status.cols;
   for (int y = row_begin; y < row_end; ++y) {
     const auto* st = maps.status.ptr<std::uint8_t>(y);
-    const float* r = with_residual ? maps.residual.ptr<float>(y) : nullptr;
-    for (int x = 0; x < width; ++x) {
-      const int s = std::min<int>(st[x], 4);
-      ++status[static_cast<std::size_t>(s)];
+    std::uint32_t n[4] = {0, 0, 0, 0};  // the first four codes; the rest is 4
+    countStatusRow(st, width, n);
+    status[0] += n[0];
+    status[1] += n[1];
+    status[2] += n[2];
+    status[3] += n[3];
+    status[4] += static_cast<std::int64_t>(width) - n[0] - n[1] - n[2] - n[3];
+    if (!with_residual || (image_row + (y - row_begin)) % kResidualStep != 0) continue;
+    const float* r = maps.residual.ptr<float>(y);
+    for (int x = 0; x < width; x += kResidualStep) {
       // Valid (0), inconsistent (3) and out of range (4) are modulated.
-      if (r != nullptr && (s == 0 || s >= 3)) {
-        const float bin = r[x] * static_cast<float>(1.0 / kBinWidth);
-        // NaN and anything from 0.5 up land in the last bin.
-        const int b = bin >= 0.0f && bin < static_cast<float>(kBins) ? static_cast<int>(bin) : kBins;
-        ++residual[static_cast<std::size_t>(b)];
-      }
+      if (st[x] == 1 || st[x] == 2) continue;
+      const float bin = r[x] * static_cast<float>(1.0 / kBinWidth);
+      // NaN and anything from 0.5 up land in the last bin.
+      const int b = bin >= 0.0f && bin < static_cast<float>(kBins) ? static_cast<int>(bin) : kBins;
+      ++residual[static_cast<std::size_t>(b)];
     }
   }
 }

@@ -99,7 +99,7 @@ ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triang
     workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int thread) {
       ProjectorMaps& band = bands_[thread];
       codec.decodeBand(frames, bit_depth, begin, end, band);
-      if (tally != nullptr) tallies_[thread].addRows(band, 0, end - begin, with_residual);
+      if (tally != nullptr) tallies_[thread].addRows(band, 0, end - begin, with_residual, begin);
       triangulator.triangulateBand(triangulatorView(band, direction, triangulator), begin, end,
                                    *cloud);
     });
@@ -116,7 +116,7 @@ ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triang
   cloud->stamp_ns = stamp_ns;
   workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int thread) {
     codec.decodeRows(frames, bit_depth, begin, end, *maps);
-    if (tally != nullptr) tallies_[thread].addRows(*maps, begin, end, with_residual);
+    if (tally != nullptr) tallies_[thread].addRows(*maps, begin, end, with_residual, begin);
     triangulator.triangulateRows(view, begin, end, *cloud);
   });
   mergeTallies();

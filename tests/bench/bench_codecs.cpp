@@ -439,11 +439,11 @@ BENCHMARK(BM_DecodeTriangulatePaced)
 // plus judgeDecodeTally(); the difference is what decode health costs the
 // daemon.
 void BM_DecodeHealthTally(benchmark::State& state) {
-  const int pattern = int(state.range(0));
+  const bool with_tally = state.range(0) != 0;
+  const int pattern = int(state.range(1));
   const CameraImages in = images(pattern);
   const Triangulator& t = triangulator(2);
-  ScanProcessor processor(int(state.range(1)));
-  const bool with_tally = state.range(2) != 0;
+  ScanProcessor processor(int(state.range(2)));
   DecodeTally tally;
   for (auto _ : state) {
     const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam", ScanProcessor::Keep::kCloud,
@@ -457,9 +457,26 @@ void BM_DecodeHealthTally(benchmark::State& state) {
   reportScans(state);
 }
 
+// The tally alone over a decoded scan's maps (all rows at once, one thread):
+// Arg 0 = status counts only (a code without consistency test), 1 = with
+// the residual grid.
+void BM_DecodeTallyOnly(benchmark::State& state) {
+  const int pattern = 0;
+  const ProjectorMaps maps = codec(pattern).decode(frames(pattern), 8);
+  const bool with_residual = state.range(0) != 0;
+  for (auto _ : state) {
+    DecodeTally tally;
+    tally.addRows(maps, 0, maps.status.rows, with_residual, 0);
+    benchmark::DoNotOptimize(tally.status.data());
+  }
+  reportScans(state);
+}
+
+BENCHMARK(BM_DecodeTallyOnly)->ArgName("residual")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
 BENCHMARK(BM_DecodeHealthTally)
-    ->ArgsProduct({{0, 1}, {1, 2}, {0, 1}})
-    ->ArgNames({"pattern", "threads", "tally"})
+    ->ArgsProduct({{0, 1}, {0, 1}, {1, 2}})
+    ->ArgNames({"tally", "pattern", "threads"})
     ->Unit(benchmark::kMillisecond)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()
