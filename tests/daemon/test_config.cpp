@@ -321,7 +321,7 @@ TEST_CASE("a missing file and malformed YAML are one clear error") {
     sl::daemon::loadConfig("/nonexistent/sl.yaml");
     FAIL("no error");
   } catch (const sl::daemon::ConfigError& e) {
-    CHECK(std::string(e.what()) == "/nonexistent/sl.yaml: cannot open config file");
+    CHECK(std::string(e.what()) == "/nonexistent/sl.yaml: cannot open: No such file or directory (config file)");
   }
   const std::string message = errorOf("sensor: sim\nsim: {seed: [1,\n");
   CHECK(message.rfind("test.yaml:", 0) == 0);
