@@ -110,8 +110,9 @@ ScanImages::ScanImages(const pipeline::PointCloud& cloud, double cloud_unit_m, i
 }
 
 CameraInfoMessage::CameraInfoMessage(const pipeline::PinholeModel& camera, pipeline::TimestampNs stamp_ns,
-                                     std::string frame_id)
+                                     std::string frame_id, bool rectified)
     : frame_id_(std::move(frame_id)), d_(camera.distortion.begin(), camera.distortion.end()) {
+  if (rectified) d_.assign(d_.size(), 0.0);
   msg_.header.stamp = toTime(stamp_ns);
   msg_.header.frame_id = frame_id_.data();
   msg_.height = static_cast<std::uint32_t>(camera.height);
@@ -126,6 +127,21 @@ CameraInfoMessage::CameraInfoMessage(const pipeline::PinholeModel& camera, pipel
   std::copy(std::begin(p), std::end(p), msg_.p);
   msg_.binning_x = msg_.binning_y = 0;
   msg_.roi = {0, 0, 0, 0, false};
+}
+
+RectifiedDepthMessage::RectifiedDepthMessage(const std::vector<float>& raw_depth,
+                                             const DepthRectifier& rectifier,
+                                             pipeline::TimestampNs stamp_ns, std::string frame_id)
+    : frame_id_(std::move(frame_id)) {
+  rectifier.rectify(raw_depth, depth_);
+  msg_.header.stamp = toTime(stamp_ns);
+  msg_.header.frame_id = frame_id_.data();
+  msg_.height = static_cast<std::uint32_t>(rectifier.height());
+  msg_.width = static_cast<std::uint32_t>(rectifier.width());
+  msg_.encoding = encoding_.data();
+  msg_.is_bigendian = 0;
+  msg_.step = msg_.width * 4;
+  borrow(msg_.data, reinterpret_cast<std::uint8_t*>(depth_.data()), depth_.size() * 4);
 }
 
 ImageSetMessage::ImageSetMessage(const pipeline::ImageSet& set, std::vector<std::string> optical_frames)
