@@ -117,6 +117,45 @@ class RectifiedDepthMessage : NonMovable {
   Image msg_{};
 };
 
+// sensor_msgs/CompressedImage of a mono8 or mono16 `image` as
+// image_transport's compressed plugin writes it in png mode
+// (compressed_image_transport: format "<encoding>; png compressed ", data a
+// PNG of the image). `png_level`: zlib level 0..9. Throws
+// std::invalid_argument for another encoding.
+class CompressedPngMessage : NonMovable {
+ public:
+  CompressedPngMessage(const Image& image, int png_level);
+  const CompressedImage& sample() const { return msg_; }
+
+ private:
+  std::string frame_id_, format_;
+  std::vector<std::uint8_t> png_;
+  CompressedImage msg_{};
+};
+
+// sensor_msgs/CompressedImage of a 32FC1 depth image (metres, NaN invalid)
+// in image_transport's compressedDepth format, png mode
+// (compressed_depth_image_transport, codec.cpp encodeCompressedDepthImage):
+// format "32FC1; compressedDepth png"; data = ConfigHeader {int32 format =
+// INV_DEPTH (0), float32 depthParam[2] = {A, B}} (12 bytes, little endian)
+// followed by a 16-bit grey PNG of the inverse depth q = A / z + B
+// (truncated), 0 where z is NaN, >= depth_max_m or too near for 16 bits; with
+// A = quantization * (quantization + 1), B = 1 - A / depth_max_m. A reader
+// gets z = A / (q - B). image_transport's defaults: depth_max 10 m,
+// quantization 100.
+class CompressedDepthMessage : NonMovable {
+ public:
+  static constexpr double kDepthMaxM = 10.0;
+  static constexpr double kQuantization = 100.0;
+  CompressedDepthMessage(const Image& depth, int png_level);
+  const CompressedImage& sample() const { return msg_; }
+
+ private:
+  std::string frame_id_, format_;
+  std::vector<std::uint8_t> data_;
+  CompressedImage msg_{};
+};
+
 // sl_msgs/ImageSet: every image of one sequence as acquired, camera-major,
 // each stamped with its exposure time and framed by `optical_frames` (one
 // per camera of `set`, in its order). The frames are borrowed (copied only

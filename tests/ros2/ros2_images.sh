@@ -2,7 +2,8 @@
 # The daemon's images as image_transport / depth_image_proc take them (issue
 # 31 item 6): sl_sensord on the simulated sensor (lens with distortion),
 # publish_images on; one scan's /points, depth/image_rect,
-# depth/camera_info, depth/image, camera_info and shading/camera_info taken
+# depth/camera_info, depth/image, camera_info, shading/camera_info and the
+# compressed siblings (shading/image/compressed, .../compressedDepth) taken
 # as raw samples (raw_topic_dump) and checked by
 # tools/sl_view/test/images_check.mjs with Foxglove's ROS 2 deserializer.
 # Files (issue 31 item 7): that scan's PLY (slctl's default: metres) and a
@@ -29,7 +30,9 @@ mkdir -p "$work/samples"
   "points=rt/$ns/points=PointCloud2" \
   "rect=rt/$ns/depth/image_rect=Image" "rect_info=rt/$ns/depth/camera_info=CameraInfo" \
   "raw=rt/$ns/depth/image=Image" "raw_info=rt/$ns/camera_info=CameraInfo" \
-  "shading_info=rt/$ns/shading/camera_info=CameraInfo" \
+  "shading_info=rt/$ns/shading/camera_info=CameraInfo" "shading=rt/$ns/shading/image=Image" \
+  "shading_png=rt/$ns/shading/image/compressed=CompressedImage" \
+  "depth_png=rt/$ns/depth/image_rect/compressedDepth=CompressedImage" \
   > "$work/dump.log" 2>&1 &
 dump_pid=$!
 sl_track "$dump_pid"

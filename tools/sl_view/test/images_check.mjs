@@ -12,10 +12,19 @@
 //   plumb_bob model (camera_info: D, K), meets the raw grid where /points,
 //   interpolated bilinearly, lies on that ray (lateral error) at that depth;
 // - the same measure for the raw depth/image with the raw camera_info's P,
-//   the way depth_image_proc would have used it before (printed: old vs new).
+//   the way depth_image_proc would have used it before (printed: old vs new);
+// - shading/image/compressed (image_transport's compressed, png) decodes to
+//   shading/image exactly, and depth/image_rect/compressedDepth
+//   (compressed_depth_image_transport, png: 12-byte ConfigHeader {int32
+//   INV_DEPTH, float A, float B}, then a 16-bit PNG of q = A / z + B) to
+//   depth/image_rect within its quantization step, NaN where it is NaN. The
+//   PNGs are decoded here (node's zlib and PNG's filters), not by OpenCV,
+//   which encoded them.
 //   node images_check.mjs DIR   (DIR: points_1.cdr, rect_1.cdr, rect_info_1.cdr,
-//                                raw_1.cdr, raw_info_1.cdr, shading_info_1.cdr)
+//                                raw_1.cdr, raw_info_1.cdr, shading_info_1.cdr,
+//                                shading_1.cdr, shading_png_1.cdr, depth_png_1.cdr)
 import fs from 'node:fs';
+import zlib from 'node:zlib';
 import { MessageReader } from '@foxglove/rosmsg2-serialization';
 import { ros2humble } from '@foxglove/rosmsg-msgs-common';
 
@@ -156,5 +165,83 @@ check(fresh.depth[fresh.depth.length - 1] < 1e-5, `depth error max ${mm(fresh.de
 // The measure itself sees the lens: the raw grid read as rectified is off.
 check(quantile(old.lateral, 0.5) > 100 * quantile(fresh.lateral, 0.5), 'the raw grid is measurably off (the check has teeth)');
 
+// --- compressed siblings -----------------------------------------------------------
+// A PNG of 8- or 16-bit grey, non-interlaced -> { width, height, depth, pixels[] }.
+function decodePng(bytes) {
+  const sig = [137, 80, 78, 71, 13, 10, 26, 10];
+  if (!sig.every((b, i) => bytes[i] === b)) throw new Error('not a PNG');
+  let width = 0, height = 0, depth = 0, colour = 0, interlace = 0;
+  const idat = [];
+  for (let o = 8; o < bytes.length;) {
+    const len = bytes.readUInt32BE(o), type = bytes.toString('latin1', o + 4, o + 8);
+    const body = bytes.subarray(o + 8, o + 8 + len);
+    if (type === 'IHDR') {
+      width = body.readUInt32BE(0); height = body.readUInt32BE(4);
+      depth = body[8]; colour = body[9]; interlace = body[12];
+    } else if (type === 'IDAT') idat.push(body);
+    o += 12 + len;
+  }
+  if (colour !== 0 || interlace !== 0 || (depth !== 8 && depth !== 16))
+    throw new Error(`PNG colour type ${colour}, depth ${depth}, interlace ${interlace}: not plain grey`);
+  const raw = zlib.inflateSync(Buffer.concat(idat));
+  const bpp = depth / 8, stride = width * bpp;
+  const out = Buffer.alloc(stride * height);
+  for (let y = 0; y < height; y++) {
+    const filter = raw[y * (stride + 1)], line = raw.subarray(y * (stride + 1) + 1, (y + 1) * (stride + 1));
+    for (let x = 0; x < stride; x++) {
+      const a = x >= bpp ? out[y * stride + x - bpp] : 0, b = y > 0 ? out[(y - 1) * stride + x] : 0;
+      const c = x >= bpp && y > 0 ? out[(y - 1) * stride + x - bpp] : 0;
+      let p;
+      switch (filter) {
+        case 0: p = 0; break;
+        case 1: p = a; break;
+        case 2: p = b; break;
+        case 3: p = (a + b) >> 1; break;
+        case 4: { const q = a + b - c, pa = Math.abs(q - a), pb = Math.abs(q - b), pc = Math.abs(q - c);
+          p = pa <= pb && pa <= pc ? a : pb <= pc ? b : c; break; }
+        default: throw new Error(`PNG filter ${filter}`);
+      }
+      out[y * stride + x] = (line[x] + p) & 255;
+    }
+  }
+  const pixels = depth === 8 ? Array.from(out) : Array.from({ length: width * height }, (_, i) => out.readUInt16BE(2 * i));
+  return { width, height, depth, pixels };
+}
+const shading = decode('sensor_msgs/Image', 'shading_1.cdr');
+const shadingPng = decode('sensor_msgs/CompressedImage', 'shading_png_1.cdr');
+const depthPng = decode('sensor_msgs/CompressedImage', 'depth_png_1.cdr');
+for (const [name, m] of Object.entries({ shadingPng, depthPng })) {
+  check(stampOf(m) === stampOf(cloud) && m.header.frame_id === cloud.header.frame_id, `${name}: the cloud's stamp and frame`);
+}
+check(shadingPng.format === 'mono8; png compressed ', `shading/image/compressed format '${shadingPng.format}'`);
+const sp = decodePng(Buffer.from(shadingPng.data));
+check(sp.width === shading.width && sp.height === shading.height && sp.depth === 8, `shading PNG ${sp.width}x${sp.height}, ${sp.depth} bit`);
+let shadingDiff = 0;
+for (let i = 0; i < sp.pixels.length; i++) shadingDiff += sp.pixels[i] !== shading.data[i];
+check(shadingDiff === 0, `${shadingDiff} shading pixels differ after PNG`);
+console.log(`shading/image/compressed: ${shadingPng.data.length} bytes for ${shading.data.length} (${(shading.data.length / shadingPng.data.length).toFixed(1)}:1), pixel for pixel equal`);
+
+check(depthPng.format === '32FC1; compressedDepth png', `compressedDepth format '${depthPng.format}'`);
+const cd = Buffer.from(depthPng.data);
+const [kind, A, B] = [cd.readInt32LE(0), cd.readFloatLE(4), cd.readFloatLE(8)];
+check(kind === 0, `ConfigHeader format ${kind}, INV_DEPTH (0) expected`);
+const dp = decodePng(cd.subarray(12));
+check(dp.width === W && dp.height === H && dp.depth === 16, `compressedDepth PNG ${dp.width}x${dp.height}, ${dp.depth} bit`);
+const rdv = new DataView(rect.data.buffer, rect.data.byteOffset, rect.data.byteLength);
+let depthWorst = 0, depthNanMismatch = 0, depthCompared = 0;
+for (let i = 0; i < W * H; i++) {
+  const z = rdv.getFloat32(4 * i, true), q = dp.pixels[i];
+  const got = q ? Math.fround(A / Math.fround(q - B)) : NaN;
+  if (Number.isNaN(z) || Number.isNaN(got)) { depthNanMismatch += Number.isNaN(z) !== Number.isNaN(got); continue; }
+  // One quantization step at z: dz = z^2 / A (q = A / z + B truncated).
+  depthWorst = Math.max(depthWorst, Math.abs(got - z) / (z * z / A));
+  depthCompared++;
+}
+console.log(`depth/image_rect/compressedDepth: ${cd.length} bytes for ${rect.data.length} (${(rect.data.length / cd.length).toFixed(1)}:1), ` +
+  `A ${A}, B ${B}, ${depthCompared} depths within ${depthWorst.toFixed(3)} quantization steps`);
+check(depthCompared === rebuilt.length, `${depthCompared} depths decoded, depth/image_rect has ${rebuilt.length}`);
+check(depthNanMismatch === 0, `${depthNanMismatch} pixels NaN in one of compressedDepth and depth/image_rect only`);
+check(depthWorst <= 1.001, `a compressedDepth depth is ${depthWorst} quantization steps off`);
+
 if (failures) { console.error(`${failures} check(s) failed`); process.exit(1); }
-console.log('ok: depth/image_rect with depth/camera_info rebuilds /points as depth_image_proc does');
+console.log('ok: depth/image_rect with depth/camera_info rebuilds /points as depth_image_proc does; the compressed siblings decode to their images');
