@@ -50,8 +50,7 @@ struct DdsConfig {
   std::string frame_id = "sl_camera_optical_frame";
   bool publish_projector_maps = false;
   bool publish_image_sets = false;
-  // Depth (32FC1, m; raw and rectified) and shading (mono8) images, their
-  // camera_infos and compressed siblings, ROS 2 types (docs/ros2.md "Images").
+  // Depth (32FC1, m) and shading (mono8) images and camera_info, ROS 2 types.
   bool publish_images = false;
   // What rt/<ns>/points carries: dds.points_decimation, dds.points_valid_only.
   CloudLayout points_layout;
