@@ -141,7 +141,7 @@ struct DdsBridge::Impl {
         request_condition(request_reader),
         wake(participant),
         waitset(participant) {
-    if (config.publish_images && camera.width > 0 && camera.height > 0 && camera.fx > 0 && camera.fy > 0)
+    if (config.publish_images && camera.width >= 2 && camera.height >= 2 && camera.fx > 0 && camera.fy > 0)
       rectifier.emplace(camera);
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);

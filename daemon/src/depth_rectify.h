@@ -5,6 +5,7 @@
 // P = [K | 0]). Private to daemon/.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "sl/pipeline/camera_model.h"
@@ -33,8 +34,11 @@ class DepthRectifier {
 
  private:
   int width_ = 0, height_ = 0;
-  // Per rectified pixel: the raw image's column and row its ray meets (px).
-  std::vector<float> raw_u_, raw_v_;
+  // Per rectified pixel, where its ray meets the raw image: the index of the
+  // raw pixel up and left of that place (-1: outside the raw image) and the
+  // bilinear weights of the pixels right of and below it.
+  std::vector<std::int32_t> raw_index_;
+  std::vector<float> weight_u_, weight_v_;
 };
 
 }  // namespace sl::daemon
