@@ -22,6 +22,7 @@
 #include <opencv2/core.hpp>
 
 #include "sl/daemon/config.h"
+#include "sl/daemon/pattern_config.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/drivers/forwarding.h"
 #include "sl/drivers/recording.h"
@@ -745,6 +746,37 @@ TEST_CASE("a recording stops at its quota with the reason, counting the sets it 
     CHECK(r.reason.find("below runtime.recording_min_free_mb") != std::string::npos);
     CHECK(engine.status().state == ScanState::kIdle);
   }
+  std::filesystem::remove_all(root);
+}
+
+// Each recorded set keeps the description of its pattern (pattern.yml), so
+// that sl_process can refuse a pattern file of the same name with another
+// sequence (issue 32).
+TEST_CASE("a recorded set keeps its pattern's description", "[engine][record]") {
+  auto config = simConfig();
+  const std::string root = std::filesystem::temp_directory_path() /
+                           ("sl_described_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  config.runtime.recording_root = root;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [](const sl::daemon::ScanResult&) {});
+  REQUIRE(engine.start("", 1, "described").accepted());
+  const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(30s);
+  while (engine.status().sets_recorded < 1 && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(50ms);
+  REQUIRE(engine.status().sets_recorded == 1);
+  const auto sets = sl::drivers::listRecordedSets(root + "/described");
+  REQUIRE(sets.size() == 1);
+  const sl::pipeline::ImageSet set = sl::drivers::readRecordedSet(sets[0], false);
+  const sl::pipeline::PatternSpec* pattern = config.findPattern(set.pattern_name);
+  REQUIRE(pattern != nullptr);
+  const std::string described = sets[0] + "/pattern.yml";
+  REQUIRE(std::filesystem::exists(described));
+  const sl::pipeline::PatternSpec recorded = sl::daemon::loadPattern(described);
+  CHECK(recorded.name == pattern->name);
+  CHECK(recorded.frequencies == pattern->frequencies);
+  CHECK(sl::daemon::patternDifferences(recorded, *pattern).empty());
   std::filesystem::remove_all(root);
 }
 
