@@ -16,6 +16,8 @@
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <regex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -734,6 +736,9 @@ TEST_CASE("sl_calibrate: saturated poses say so with numbers, --keep-saturated, 
     CHECK(skipped >= 3);
     CHECK(r.exit_code == 1);  // fewer than 3 usable poses
     CHECK(count(r.output, "% saturated") >= skipped);
+    // The corners, counted: found in the shading image, with a projector coordinate.
+    CHECK(count(r.output, "corners found in the shading image: 117 of 117; pixels: ") >= skipped);
+    CHECK(count(r.output, " of 117 corners have a projector coordinate") >= skipped);
     CHECK(r.output.find("% decoded") != std::string::npos);
     CHECK(r.output.find("--keep-saturated") != std::string::npos);
     const CliRun kept = runCli("sl_calibrate --poses" + poses(folders) + board +
@@ -772,20 +777,53 @@ TEST_CASE("sl_calibrate: saturated poses say so with numbers, --keep-saturated, 
   }
 }
 
-TEST_CASE("sl_calibrate and sl_patterns --help list their options and exit 0", "[cli]") {
+// Every option a tool's parser compares against (a "--name" literal of its
+// source; sl_calibrate's --camera-/--projector- flags are composed, so they
+// are listed here) has a line of its own in --help, and --help exits 0.
+TEST_CASE("sl_process, sl_calibrate and sl_patterns --help list every option, exit 0", "[cli]") {
   const fs::path log = fs::path(SL_BINARY_DIR) / "test_calibration_help.txt";
-  const CliRun calibrate = runCli("sl_calibrate --help", log);
-  CHECK(calibrate.exit_code == 0);
-  for (const char* option : {"--poses", "--board", "--square", "--pattern", "--keep-saturated",
-                             "--max-rms", "--accept", "--out", "--help"}) {
-    INFO(option);
-    CHECK(calibrate.output.find(std::string(" ") + option + " ") != std::string::npos);
-  }
-  const CliRun patterns = runCli("sl_patterns --help", log);
-  CHECK(patterns.exit_code == 0);
-  CHECK(patterns.output.find("sl_patterns: help") == std::string::npos);
-  for (const char* option : {"--out", "--lightcrafter", "--calibration", "--ramp", "--help"}) {
-    INFO(option);
-    CHECK(patterns.output.find(std::string(" ") + option + " ") != std::string::npos);
+  const std::regex literal("\"(--[a-z0-9]+(-[a-z0-9]+)*)\"");
+  for (const auto& [tool, source] :
+       std::vector<std::pair<std::string, std::string>>{
+           {"sl_process", "tools/sl_process/main.cpp"},
+           {"sl_calibrate", "tools/sl_calibrate/sl_calibrate.cpp"},
+           {"sl_patterns", "tools/sl_patterns/main.cpp"}}) {
+    std::ifstream in(fs::path(SL_SOURCE_DIR) / source);
+    REQUIRE(in);
+    std::stringstream text;
+    text << in.rdbuf();
+    const std::string code = text.str();
+    std::set<std::string> options;
+    for (auto it = std::sregex_iterator(code.begin(), code.end(), literal);
+         it != std::sregex_iterator(); ++it)
+      options.insert((*it)[1].str());
+    if (tool == "sl_calibrate")
+      for (const char* device : {"camera", "projector"})
+        for (const char* flag : {"fix-principal-point", "fix-aspect-ratio", "no-tangential",
+                                 "radial-terms"})
+          options.insert(std::string("--") + device + "-" + flag);
+    INFO(tool << ": " << options.size() << " options");
+    CHECK(options.size() >= 5);
+    CHECK(options.count("--help") == 1);
+    const CliRun help = runCli(tool + " --help", log);
+    CHECK(help.exit_code == 0);
+    CHECK(help.output.rfind("usage: " + tool, 0) == 0);
+    CHECK(help.output.find(tool + ": help") == std::string::npos);
+    // The lines that introduce an option: "  --name ..." or "  -h, --help ...".
+    std::vector<std::string> lines;
+    std::stringstream output(help.output);
+    for (std::string line; std::getline(output, line);) lines.push_back(line + " ");
+    for (const std::string& option : options) {
+      INFO(tool << " " << option << "\n" << help.output);
+      int introduced = 0;
+      for (const std::string& line : lines) {
+        const auto first = line.find_first_not_of(' ');
+        if (first == 0 || first == std::string::npos) continue;  // not indented: no option line
+        const std::string start = line.substr(first);
+        if (start.rfind(option + " ", 0) == 0 || start.rfind("-h, " + option + " ", 0) == 0)
+          ++introduced;
+      }
+      CHECK(introduced == 1);
+    }
   }
 }

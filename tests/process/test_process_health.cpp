@@ -190,6 +190,27 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
   }
 }
 
+TEST_CASE("sl_process: a calibration file of other keys points to --calibration-keys",
+          "[process][cli]") {
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_process_keys";
+  fs::create_directories(dir);
+  // An OpenCV FileStorage calibration with keys of another tool (K1, D1, ...).
+  writeFile(dir / "stereo.yaml",
+            "%YAML:1.0\n---\nK1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+            "   data: [ 1000., 0., 320., 0., 1000., 240., 0., 0., 1. ]\n");
+  writeFile(dir / "own.yaml", "format: sl-sensor-calibration/1\ncam: {}\n");
+  for (const char* file : {"stereo.yaml", "own.yaml"}) {
+    const Run r = slProcess("--pattern " + std::string(SL_SOURCE_DIR) +
+                            "/config/patterns/paper_3+3_horizontal.yaml --images " + dir.string() +
+                            " --calibration " + (dir / file).string() + " --out " +
+                            (dir / "out").string());
+    INFO(r.output);
+    CHECK(r.exit_code == 1);
+    CHECK(r.output.find((dir / file).string()) != std::string::npos);
+    CHECK(r.output.find("--calibration-keys") != std::string::npos);
+  }
+}
+
 TEST_CASE("patternYaml() gives every preset back; patternDifferences() names what differs",
           "[process][health]") {
   int presets = 0;

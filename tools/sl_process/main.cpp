@@ -150,13 +150,21 @@ int main(int argc, char** argv) {
   try {
     const sl::pipeline::PatternSpec pattern = sl::daemon::loadPattern(pattern_path);
     std::optional<sl::pipeline::CameraProjectorCalibration> calibration;
-    if (!calibration_path.empty())
-      calibration = calibration_keys.empty()
-                        ? sl::daemon::loadCalibration(calibration_path).calibration
-                        : sl::daemon::loadOpenCvCalibration(
-                              calibration_path,
-                              sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
-                              .calibration;
+    if (!calibration_path.empty() && calibration_keys.empty()) {
+      try {
+        calibration = sl::daemon::loadCalibration(calibration_path).calibration;
+      } catch (const std::exception& e) {
+        // A file of another tool's keys reads as one with missing keys.
+        const std::string message = e.what();
+        if (message.find("key '") == std::string::npos) throw;
+        throw std::runtime_error(message +
+                                 "; a calibration of another tool: name its keys with "
+                                 "--calibration-keys (sl_process --help, docs/calibration.md)");
+      }
+    } else if (!calibration_path.empty())
+      calibration = sl::daemon::loadOpenCvCalibration(
+                        calibration_path, sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
+                        .calibration;
     // Before reading any image: a pattern made for another projector, a
     // recording made with another pattern.
     if (calibration) sl::tools::checkPatternFitsCalibration(pattern, *calibration);
