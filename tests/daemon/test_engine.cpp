@@ -22,6 +22,7 @@
 #include <opencv2/core.hpp>
 
 #include "sl/daemon/config.h"
+#include "sl/daemon/devices.h"
 #include "sl/daemon/pattern_config.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/drivers/forwarding.h"
@@ -777,6 +778,55 @@ TEST_CASE("a recorded set keeps its pattern's description", "[engine][record]") 
   CHECK(recorded.name == pattern->name);
   CHECK(recorded.frequencies == pattern->frequencies);
   CHECK(sl::daemon::patternDifferences(recorded, *pattern).empty());
+  std::filesystem::remove_all(root);
+}
+
+// A replayed recording whose sets describe their pattern otherwise than the
+// config's pattern of that name (sim.yaml's 3+3_horizontal recorded at 40
+// periods, replayed with a config that says 16) is refused when the devices
+// open, naming the set's pattern.yml and the difference.
+TEST_CASE("a replay refuses a config pattern other than the recorded description",
+          "[engine][record]") {
+  auto config = simConfig();
+  const std::string root = std::filesystem::temp_directory_path() /
+                           ("sl_replay_described_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  const sl::pipeline::PatternSpec* recorded = config.findPattern("3+3_horizontal");
+  REQUIRE(recorded != nullptr);
+  REQUIRE(recorded->frequencies == std::vector<double>{40, 1});
+  sl::pipeline::ImageSet set;
+  set.sequence_id = 1;
+  set.pattern_name = recorded->name;
+  sl::pipeline::CameraImages camera;
+  camera.camera_id = "sim_top";
+  camera.bit_depth = 8;
+  for (int f = 0; f < recorded->frameCount(); ++f) {
+    camera.frames.push_back(cv::Mat(config.calibration.camera.height,
+                                    config.calibration.camera.width, CV_8UC1, cv::Scalar(100)));
+    camera.stamps_ns.push_back(1'000'000'000 + f * 100'000'000);
+  }
+  set.cameras = {camera};
+  sl::drivers::createRecording(root, "test");
+  sl::drivers::writeRecordedSet(root, 1, set, sl::daemon::patternYaml(*recorded));
+  config.sensor = sl::daemon::SensorKind::kReplay;
+  config.replay.dir = root;
+  std::shared_ptr<void> keep_alive;
+  // As recorded: opens.
+  CHECK_NOTHROW(sl::daemon::openDevices(config, keep_alive));
+  keep_alive.reset();
+  // The same name at 16 periods: refused, naming the file and the difference.
+  for (auto& pattern : config.patterns)
+    if (pattern.name == "3+3_horizontal") pattern.frequencies = {16, 1};
+  try {
+    sl::daemon::openDevices(config, keep_alive);
+    FAIL("opened a replay whose recorded pattern differs from the config's");
+  } catch (const std::runtime_error& e) {
+    const std::string message = e.what();
+    INFO(message);
+    CHECK(message.find(root + "/set_000001/pattern.yml") != std::string::npos);
+    CHECK(message.find("'3+3_horizontal'") != std::string::npos);
+    CHECK(message.find("frequencies: [40, 1] vs [16, 1]") != std::string::npos);
+  }
   std::filesystem::remove_all(root);
 }
 
