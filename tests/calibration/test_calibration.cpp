@@ -673,7 +673,12 @@ CliRun runCli(const std::string& args, const fs::path& log) {
 
 // Five board poses on the simulator as pose folders of PNG frames (3+3_both,
 // sl_calibrate's built-in pattern), with the projector `brightness_dn` bright.
-std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightness_dn) {
+// With `moved_mm`, the board of each pose is that much nearer the camera
+// (farther for odd poses) in the column frames (0-5) than in the row frames
+// (6-11): a board knocked during the sequence. The shading image blends the
+// two, nearly alike; the projector columns disagree with the corners.
+std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightness_dn,
+                                             double moved_mm = 0) {
   const Checkerboard board{13, 9, 15.0};
   PhaseShift33Pattern pattern;
   pattern.name = "3+3_both";
@@ -691,13 +696,17 @@ std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightn
     config.scene.planes = {boardPlane(board, poses[i])};
     config.projector_brightness_dn = brightness_dn;
     const auto sensor = sl::drivers::SimulatedSensor::create(config);
+    BoardPose moved = poses[i];
+    moved.centre_mm.z() += (i % 2 ? moved_mm : -moved_mm);
+    config.scene.planes = {boardPlane(board, moved)};
+    const auto moved_sensor = sl::drivers::SimulatedSensor::create(config);
     const fs::path folder = dir / ("pose" + std::to_string(i));
     fs::create_directories(folder);
     for (int f = 0; f < pattern.frameCount(); ++f) {
       char name[32];
       std::snprintf(name, sizeof name, "frame_%02d.png", f);
-      REQUIRE(cv::imwrite((folder / name).string(),
-                          sensor->render(pattern.name, f, 1000 * i + f)));
+      const auto& source = f < pattern.frameCount() / 2 ? moved_sensor : sensor;
+      REQUIRE(cv::imwrite((folder / name).string(), source->render(pattern.name, f, 1000 * i + f)));
     }
     folders.push_back(folder.string());
   }
@@ -774,6 +783,18 @@ TEST_CASE("sl_calibrate: saturated poses say so with numbers, --keep-saturated, 
     INFO(accepted.output);
     CHECK(accepted.exit_code == 0);
     CHECK(fs::exists(dir / "accepted.yaml"));
+  }
+  SECTION("a board knocked during every sequence: beyond the default 2 px, exit 3") {
+    const auto folders = writeSimulatedPoses(dir / "moved", 220.0, 15.0);
+    const CliRun r = runCli("sl_calibrate --poses" + poses(folders) + board + " --out " +
+                                (dir / "moved.yaml").string(),
+                            log);
+    INFO(r.output);
+    CHECK(r.exit_code == 3);
+    CHECK(r.output.find("RMS reprojection error: camera") != std::string::npos);
+    CHECK(r.output.find("per pose (RMS px):") != std::string::npos);
+    CHECK(r.output.find("beyond --max-rms 2 px") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "moved.yaml"));
   }
 }
 
