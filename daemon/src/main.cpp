@@ -28,6 +28,7 @@
 namespace {
 
 std::atomic<bool> startup_done{false};
+std::atomic<bool> reload_asked_in_startup{false};  // SIGHUP before the main loop
 std::thread startup_watch;  // watchStartup() until the daemon is ready
 
 void endStartupWatch() {
@@ -165,7 +166,7 @@ int run(const std::string& config_path, const sigset_t& signals) {
   const auto tick = watchdog ? std::chrono::duration_cast<std::chrono::milliseconds>(*watchdog / 3)
                              : std::chrono::milliseconds(500);
   ReloadWorker reloads(loadConfig, kReloadDeadline);
-  int signal_number = 0;
+  int signal_number = reload_asked_in_startup ? SIGHUP : 0;
   while (signal_number <= 0 || signal_number == SIGHUP) {
     if (signal_number == SIGHUP) beginReload(config_path, reloads, engine);
     if (auto outcome = reloads.poll()) finishReload(std::move(*outcome), config, engine, bridge);
@@ -195,7 +196,9 @@ void watchStartup(const sigset_t& signals) {
                           " during start-up, exiting");
       std::_Exit(0);
     }
-    // SIGHUP before READY: nothing to reload yet.
+    // SIGHUP before READY: reloaded once the main loop runs (the file may
+    // have changed since start-up read it).
+    if (signal_number == SIGHUP) reload_asked_in_startup = true;
   }
 }
 
