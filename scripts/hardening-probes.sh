@@ -36,7 +36,9 @@ sim_config() {  # sim_config NS > file
   sed "s/^  namespace: sl$/  namespace: $1/" "$src/config/sim.yaml"
 }
 
+index=0
 for bin in "$@"; do
+  index=$((index + 1))
   echo "=== $bin"
   # --- start-up inputs (item 1) ---
   mkfifo "$work/fifo.yaml"
@@ -81,7 +83,7 @@ for bin in "$@"; do
 
   # --- reloads (item 5): a FIFO texture, a FIFO MCAP recording, then SIGTERM ---
   for kind in texture mcap config; do
-    d=$work/reload_$kind; mkdir -p "$d"; ns=probe_reload_${kind}_$$
+    d=$work/reload_${index}_$kind; mkdir -p "$d"; ns=probe_reload_${index}_${kind}_$$
     sim_config "$ns" > "$d/good.yaml"
     ln -s good.yaml "$d/sl.yaml"
     "$bin" --config "$d/sl.yaml" > "$d/daemon.log" 2>&1 & pid=$!
