@@ -9,6 +9,8 @@
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <map>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 
@@ -45,7 +47,21 @@ std::string holderPid(int fd) {
   return "";
 }
 
+// The lock files this process holds (descriptor -> path).
+std::mutex held_mutex;
+std::map<int, std::string> held_files;
+
 }  // namespace
+
+void removeHeldInstanceLockFiles() {
+  std::lock_guard<std::mutex> lock(held_mutex);
+  for (const auto& [fd, path] : held_files) {
+    if (::ftruncate(fd, 0) != 0) {
+    }
+    ::unlink(path.c_str());
+  }
+  held_files.clear();
+}
 
 std::string instanceLockDirectory() {
   std::string runtime = environment("RUNTIME_DIRECTORY");
@@ -65,48 +81,76 @@ std::string instanceLockName(int domain_id, const std::string& ns) {
 
 InstanceLock::InstanceLock(const std::string& directory, int domain_id, const std::string& ns)
     : path_(directory + "/" + instanceLockName(domain_id, ns)) {
-  // Another user's lock file in a sticky directory (/tmp, /run/lock) may not
-  // be opened for writing or with O_CREAT (fs.protected_regular): read-only
-  // is enough to lock it.
-  fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
-  writable_ = fd_ >= 0;
-  if (fd_ < 0 && (errno == EACCES || errno == EPERM))
-    fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
-  if (fd_ < 0)
-    throw std::runtime_error(path_ + ": cannot open the instance lock: " + std::strerror(errno));
-  int rc;
-  do rc = ::flock(fd_, LOCK_EX | LOCK_NB);
-  while (rc != 0 && errno == EINTR);
-  if (rc != 0) {
-    const int error = errno;
-    if (error == EWOULDBLOCK) {
-      const std::string pid = holderPid(fd_);
+  // The holder removes the file when it exits (below), so a lock taken on a
+  // file that is no longer at the path (removed, or replaced by another
+  // daemon's new file, between our open and our lock) does not count: then
+  // open the path again. A few rounds settle any interleaving of exits.
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    // Another user's lock file in a sticky directory (/tmp, /run/lock) may
+    // not be opened for writing or with O_CREAT (fs.protected_regular):
+    // read-only is enough to lock it.
+    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
+    writable_ = fd_ >= 0;
+    if (fd_ < 0 && (errno == EACCES || errno == EPERM))
+      fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+    if (fd_ < 0)
+      throw std::runtime_error(path_ + ": cannot open the instance lock: " + std::strerror(errno));
+    int rc;
+    do rc = ::flock(fd_, LOCK_EX | LOCK_NB);
+    while (rc != 0 && errno == EINTR);
+    if (rc != 0) {
+      const int error = errno;
+      if (error == EWOULDBLOCK) {
+        const std::string pid = holderPid(fd_);
+        ::close(fd_);
+        fd_ = -1;
+        throw ConfigError("another sl_sensord (" +
+                          (pid.empty() ? std::string("pid unknown") : "pid " + pid) +
+                          ") already serves domain " + std::to_string(domain_id) + ", namespace '" +
+                          ns + "' on this host (it holds " + path_ +
+                          "); stop it, or give this one its own dds.namespace");
+      }
       ::close(fd_);
       fd_ = -1;
-      throw ConfigError("another sl_sensord (" + (pid.empty() ? std::string("pid unknown") : "pid " + pid) +
-                        ") already serves domain " + std::to_string(domain_id) + ", namespace '" +
-                        ns + "' on this host (it holds " + path_ +
-                        "); stop it, or give this one its own dds.namespace");
+      throw std::runtime_error(path_ + ": cannot lock: " + std::strerror(error));
     }
-    ::close(fd_);
+    struct stat held {}, named {};
+    if (::fstat(fd_, &held) == 0 && ::stat(path_.c_str(), &named) == 0 &&
+        held.st_dev == named.st_dev && held.st_ino == named.st_ino) {
+      if (writable_) {
+        const std::string pid = std::to_string(::getpid()) + "\n";
+        if (::ftruncate(fd_, 0) != 0 ||
+            ::pwrite(fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
+          // The lock holds without the pid; a refused daemon then says "pid unknown".
+        }
+      }
+      std::lock_guard<std::mutex> lock(held_mutex);
+      held_files[fd_] = path_;
+      return;
+    }
+    ::close(fd_);  // a file no longer at the path: try again
     fd_ = -1;
-    throw std::runtime_error(path_ + ": cannot lock: " + std::strerror(error));
   }
-  if (writable_) {
-    const std::string pid = std::to_string(::getpid()) + "\n";
-    if (::ftruncate(fd_, 0) != 0 ||
-        ::pwrite(fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
-      // The lock holds without the pid; a refused daemon then says "pid unknown".
-    }
-  }
+  throw std::runtime_error(path_ + ": cannot lock: the file keeps being replaced");
 }
 
 InstanceLock::~InstanceLock() {
   if (fd_ < 0) return;
-  // Emptied on a clean exit: a daemon refused at the next start never reads
-  // a pid that is no longer the holder's (only a killed holder leaves one).
+  {
+    std::lock_guard<std::mutex> lock(held_mutex);
+    if (held_files.erase(fd_) == 0) {  // removed already (removeHeldInstanceLockFiles)
+      ::close(fd_);
+      return;
+    }
+  }
+  // Removed while still locked (a daemon that opened it meanwhile sees it
+  // gone and opens the path again); emptied first, in case the directory
+  // does not let this process remove it (another user's file in /tmp), so
+  // that a refused daemon never reads a pid that is no longer the holder's.
+  // Only a killed holder leaves its file (and pid) behind.
   if (writable_ && ::ftruncate(fd_, 0) != 0) {
   }
+  ::unlink(path_.c_str());
   ::close(fd_);
 }
 

@@ -21,6 +21,11 @@ std::string instanceLockDirectory();
 // '+' (neither '-' nor '+' can occur in a namespace: one file per pair).
 std::string instanceLockName(int domain_id, const std::string& ns);
 
+// Empties and removes the files of the locks this process holds, for an
+// exit that skips destructors (std::_Exit during start-up); the locks go with
+// the process.
+void removeHeldInstanceLockFiles();
+
 class InstanceLock {
  public:
   // Takes the lock <directory>/instanceLockName(domain_id, ns) without

@@ -194,6 +194,7 @@ void watchStartup(const sigset_t& signals) {
     if (signal_number == SIGINT || signal_number == SIGTERM) {
       sl::daemon::logInfo(std::string("received ") + strsignal(signal_number) +
                           " during start-up, exiting");
+      sl::daemon::removeHeldInstanceLockFiles();
       std::_Exit(0);
     }
     // SIGHUP before READY: reloaded once the main loop runs (the file may

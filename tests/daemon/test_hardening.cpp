@@ -93,7 +93,10 @@ TEST_CASE("the instance lock admits one holder and names it to the next", "[lock
     InstanceLock other_namespace(dir.path.string(), 7, "a");  // no contention
     InstanceLock other_domain(dir.path.string(), 8, "a/b");
   }
-  InstanceLock again(dir.path.string(), 7, "a/b");  // released with its holder
+  // Released with its holder, which removes the file.
+  CHECK(!std::filesystem::exists(dir / sl::daemon::instanceLockName(7, "a/b")));
+  InstanceLock again(dir.path.string(), 7, "a/b");
+  CHECK(std::filesystem::exists(again.path()));
   CHECK(!sl::daemon::instanceLockDirectory().empty());
 }
 
