@@ -1,6 +1,9 @@
 #include "aravis_config_yaml.h"
 
+#include <cstdint>
 #include <set>
+
+#include "sl/daemon/calibration_io.h"
 
 namespace sl::daemon {
 
@@ -51,6 +54,14 @@ AravisCameraConfig parseCamera(const YamlMap& m) {
   if (c.offset_y < 0) roi.fail("y", "must be >= 0");
   if (c.width < 0) roi.fail("width", "must be >= 0 (0 = the rest of the sensor)");
   if (c.height < 0) roi.fail("height", "must be >= 0 (0 = the rest of the sensor)");
+  // Bounded before any buffer is sized by them.
+  if (c.offset_x + std::int64_t{c.width} > kMaxImageSide)
+    roi.fail("width", "x + width must be at most " + std::to_string(kMaxImageSide));
+  if (c.offset_y + std::int64_t{c.height} > kMaxImageSide)
+    roi.fail("height", "y + height must be at most " + std::to_string(kMaxImageSide));
+  if (std::int64_t{c.width} * c.height > kMaxImagePixels)
+    roi.fail("height", std::to_string(c.width) + " x " + std::to_string(c.height) + " is more than " +
+                           std::to_string(kMaxImagePixels / 1'000'000) + " megapixels");
   roi.done();
   const YamlMap binning = m.optionalMap("binning");
   c.binning_horizontal = binning.get<int>("horizontal", c.binning_horizontal);

@@ -22,6 +22,7 @@
 #include <opencv2/core.hpp>
 
 #include "calibration_yaml.h"
+#include "sl/daemon/input_file.h"
 #include "sl/pipeline/projector_response.h"
 
 namespace sl::daemon {
@@ -95,15 +96,10 @@ bool hasSuffix(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-CalibrationFile loadOwnYaml(const std::string& path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw ConfigError(path + ": cannot open calibration file");
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(path + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
-  }
+// `text`: the file's contents, read by readInputFile (one YAML document,
+// aliases bounded by parseInputYaml).
+CalibrationFile loadOwnYaml(const std::string& path, const std::string& text) {
+  const YAML::Node root = parseInputYaml(text, path);
   const YamlMap m(root, path, "");
   const std::string format = m.get<std::string>("format", "sl-sensor-calibration/1");
   if (format != "sl-sensor-calibration/1")
@@ -145,31 +141,36 @@ void checkWellFormedXml(const std::string& path, const std::string& text) {
                     ": malformed XML: " + XML_ErrorString(XML_GetErrorCode(parser.get())));
 }
 
+// OpenCV 4.6's XML parser dereferences null on malformed XML: a NUL byte
+// inside a tag, a truncated declaration (`<?xml versiveorsn=`), both found
+// by fuzz_calibration. Text files never hold a NUL byte, and XML (what
+// starts with '<') reaches OpenCV only once expat found it well-formed.
+void checkStorageText(const std::string& path, const std::string& text) {
+  if (text.find('\0') != std::string::npos)
+    throw ConfigError(path + ": contains a NUL byte, not a text calibration file");
+  const std::size_t first = text.find_first_not_of(" \t\r\n");
+  if (first != std::string::npos && text[first] == '<') checkWellFormedXml(path, text);
+}
+
+// Opens `text` (the contents of `path`, read by readInputFile) in OpenCV
+// from memory: OpenCV never opens the path itself (no FIFO, device or file
+// swapped after the checks reaches it).
+void openStorage(cv::FileStorage& fs, const std::string& path, const std::string& text) {
+  checkStorageText(path, text);
+  fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
+}
+
 // An OpenCV FileStorage file opened for reading, with typed accessors that
 // throw ConfigError naming the file and the key. `expected` describes the
 // file's format in the message for a missing key.
 class StorageReader {
  public:
   StorageReader(const std::string& path, std::string expected)
+      : StorageReader(path, readInputFile(path, InputKind::kCalibration), std::move(expected)) {}
+  StorageReader(const std::string& path, const std::string& text, std::string expected)
       : path_(path), expected_(std::move(expected)) {
-    // OpenCV 4.6's XML parser dereferences null on malformed XML: a NUL byte
-    // inside a tag, a truncated declaration (`<?xml versiveorsn=`), both found
-    // by fuzz_calibration. Text files never hold a NUL byte, and XML (what
-    // starts with '<') reaches OpenCV only once expat found it well-formed.
-    {
-      std::ifstream in(path, std::ios::binary);
-      std::string text;
-      char buffer[4096];
-      while (in.read(buffer, sizeof buffer) || in.gcount() > 0) {
-        if (std::memchr(buffer, 0, static_cast<std::size_t>(in.gcount())))
-          throw ConfigError(path + ": contains a NUL byte, not a text calibration file");
-        text.append(buffer, static_cast<std::size_t>(in.gcount()));
-      }
-      const std::size_t first = text.find_first_not_of(" \t\r\n");
-      if (first != std::string::npos && text[first] == '<') checkWellFormedXml(path, text);
-    }
     try {
-      fs_.open(path, cv::FileStorage::READ);
+      openStorage(fs_, path, text);
     } catch (const std::length_error&) {
       throw ConfigError(path + ": cannot parse as OpenCV FileStorage");
     } catch (const cv::Exception& e) {
@@ -268,9 +269,9 @@ class StorageReader {
 
 constexpr const char* kSlStudioKeys = "SLStudio's calibration.xml: Kc, kc, Kp, kp, Rp, Tp";
 
-// SLStudio's calibration.xml (OpenCV FileStorage).
-CalibrationFile loadSlStudioXml(const std::string& path) {
-  const StorageReader fs(path, kSlStudioKeys);
+// SLStudio's calibration.xml (OpenCV FileStorage); `text`: its contents.
+CalibrationFile loadSlStudioXml(const std::string& path, const std::string& text) {
+  const StorageReader fs(path, text, kSlStudioKeys);
   if (!fs.has("Kc") && fs.has("intrinsic_mat"))
     throw ConfigError(path + ": this is an sl_sensor " +
                       (fs.has("extrinsic_rot") ? "camera" : "projector") +
@@ -289,12 +290,7 @@ CalibrationFile loadSlStudioXml(const std::string& path) {
   return file;
 }
 
-bool startsWithOpenCvYamlHeader(const std::string& path) {
-  std::ifstream in(path);
-  std::string first;
-  std::getline(in, first);
-  return first.rfind("%YAML", 0) == 0;
-}
+bool startsWithOpenCvYamlHeader(const std::string& text) { return text.rfind("%YAML", 0) == 0; }
 
 void writePinhole(std::ostream& out, const char* name, const pipeline::PinholeModel& m) {
   out << name << ":\n"
@@ -311,18 +307,15 @@ CalibrationFile loadCalibration(const std::string& path) {
   const auto status = std::filesystem::status(path, error);
   if (error || !std::filesystem::exists(status))
     throw ConfigError(path + ": calibration file not found");
-  if (std::filesystem::is_directory(status))
-    throw ConfigError(path + ": is a directory, not a calibration file");
-  if (!std::filesystem::is_regular_file(status))
-    throw ConfigError(path + ": is not a regular file (a device or FIFO?), not a calibration file");
-  constexpr std::uintmax_t kMaxCalibrationBytes = 16 << 20;  // real ones are a few KB
-  if (std::filesystem::file_size(path, error) > kMaxCalibrationBytes)
-    throw ConfigError(path + ": more than 16 MiB, not a calibration file");
-  if (hasSuffix(path, ".xml")) return loadSlStudioXml(path);
-  if (hasSuffix(path, ".yaml") || hasSuffix(path, ".yml"))
-    return startsWithOpenCvYamlHeader(path) ? loadSlStudioXml(path) : loadOwnYaml(path);
-  throw ConfigError(path + ": unknown calibration format (expected .yaml/.yml in the project's "
-                    "format or SLStudio's calibration .xml)");
+  const bool xml = hasSuffix(path, ".xml");
+  if (!xml && !hasSuffix(path, ".yaml") && !hasSuffix(path, ".yml"))
+    throw ConfigError(path + ": unknown calibration format (expected .yaml/.yml in the project's "
+                      "format or SLStudio's calibration .xml)");
+  // Regular files only, 16 MiB at most (real ones are a few KB), read once:
+  // the parsers below see this text, never the path.
+  const std::string text = readInputFile(path, InputKind::kCalibration);
+  if (xml) return loadSlStudioXml(path, text);
+  return startsWithOpenCvYamlHeader(text) ? loadSlStudioXml(path, text) : loadOwnYaml(path, text);
 }
 
 void saveCalibration(const CalibrationFile& file, const std::string& path) {
@@ -433,12 +426,7 @@ OpenCvCalibrationKeys parseOpenCvCalibrationKeys(const std::string& text) {
     if (!std::filesystem::is_regular_file(text, no_file))
       throw ConfigError(text + ": neither a key-mapping file nor inline pairs "
                                "(camera.matrix=K1,...)");
-    YAML::Node root;
-    try {
-      root = YAML::LoadFile(text);
-    } catch (const YAML::Exception& e) {
-      throw ConfigError(text + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
-    }
+    const YAML::Node root = loadInputYaml(text, InputKind::kCalibration);
     const YamlMap m(root, text, "");
     for (auto [name, device] : {std::pair{"camera", &k.camera}, std::pair{"projector", &k.projector}}) {
       const YamlMap d = m.map(name);
@@ -492,9 +480,10 @@ OpenCvCalibrationKeys parseOpenCvCalibrationKeys(const std::string& text) {
 CalibrationFile loadOpenCvCalibration(const std::string& path, const OpenCvCalibrationKeys& keys) {
   if (!std::filesystem::exists(path)) throw ConfigError(path + ": calibration file not found");
   const std::string expected = "the keys of " + keys.origin;
+  const std::string text = readInputFile(path, InputKind::kCalibration);
   cv::FileStorage fs;
   try {
-    fs.open(path, cv::FileStorage::READ);
+    openStorage(fs, path, text);
   } catch (const cv::Exception& e) {
     throw ConfigError(path + ": cannot parse as OpenCV FileStorage: " + e.msg);
   }
@@ -606,14 +595,7 @@ CalibrationFile loadOpenCvCalibration(const std::string& path, const OpenCvCalib
 }
 
 std::vector<float> loadProjectorResponse(const std::string& path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw ConfigError(path + ": cannot open projector response file");
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(path + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
-  }
+  const YAML::Node root = loadInputYaml(path, InputKind::kProjectorResponse);
   const YamlMap m(root, path, "");
   const std::string format = m.get<std::string>("format", "sl-sensor-projector-response/1");
   if (format != "sl-sensor-projector-response/1")

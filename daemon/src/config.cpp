@@ -1,6 +1,7 @@
 #include "sl/daemon/config.h"
 #include "sim_config_yaml.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -253,7 +254,7 @@ void parseSoftwareTrigger(const YamlMap& m, SoftwareTriggerConfig& s) {
 // camera frame rate (from the first set's frame stamps), which the
 // synchroniser's windows need.
 double parseReplay(const YamlMap& m, const std::filesystem::path& base_dir,
-                   drivers::ReplayConfig& replay) {
+                   drivers::ReplayConfig& replay, std::vector<std::string>& camera_ids) {
   const bool has_dir = m.has("dir"), has_file = m.has("file");
   if (has_dir == has_file)
     m.fail(has_dir ? "file" : "dir", "give the recording as dir (a folder) or file (an MCAP file), one of them");
@@ -274,11 +275,81 @@ double parseReplay(const YamlMap& m, const std::filesystem::path& base_dir,
   } catch (const std::exception& e) {
     m.fail(key, e.what());
   }
+  for (const auto& camera : first.cameras) camera_ids.push_back(camera.camera_id);
   const auto& stamps = first.cameras.front().stamps_ns;
   if (stamps.size() < 2) return 30.0;
   const double interval_s = (stamps.back() - stamps.front()) * 1e-9 / double(stamps.size() - 1);
   if (!(interval_s > 0)) m.fail("dir", "the recording's frame stamps do not increase");
   return 1.0 / interval_s;
+}
+
+// The cameras the config declares, in the devices' order: the simulated
+// ones, `cameras:` (hardware, fake_gige), or a recording's (replay).
+std::vector<std::string> declaredCameraIds(const DaemonConfig& config,
+                                           const std::vector<std::string>& replay_ids) {
+  std::vector<std::string> ids;
+  switch (config.sensor) {
+    case SensorKind::kSim:
+      ids.push_back(config.sim.camera_id);
+      if (config.sim.second_camera) ids.push_back(config.sim.second_camera->camera_id);
+      break;
+    case SensorKind::kHardware:
+    case SensorKind::kFakeGige:
+      for (const auto& c : config.aravis.cameras) ids.push_back(c.name);
+      break;
+    case SensorKind::kReplay:
+      ids = replay_ids;
+      break;
+  }
+  return ids;
+}
+
+// Cross-references that need no device, checked at load so that a mistake
+// is a config error (exit 2) before any device is opened: the cameras named
+// by patterns[].cameras, patterns[].intensity_camera and calibrations: are
+// cameras the config declares, each with a calibration (the first camera
+// has calibration:); a region of interest matches its camera's calibration.
+// The engine checks the pattern cameras again against the opened devices.
+void checkCameraReferences(const YamlMap& root, const DaemonConfig& config,
+                           const std::vector<std::string>& replay_ids) {
+  const std::vector<std::string> ids = declaredCameraIds(config, replay_ids);
+  if (ids.empty()) return;
+  std::string list;
+  for (const auto& id : ids) list += (list.empty() ? "" : ", ") + id;
+  const auto declared = [&](const std::string& id) {
+    return std::find(ids.begin(), ids.end(), id) != ids.end();
+  };
+  const auto check = [&](const std::string& pattern, const std::string& id, const char* role) {
+    if (!declared(id))
+      root.fail("patterns", "pattern '" + pattern + "' " + role + " camera '" + id +
+                                "', which the sensor does not have (its cameras: " + list + ")");
+    if (id != ids.front() && !config.extra_calibrations.count(id))
+      root.fail("patterns", "pattern '" + pattern + "' " + role + " camera '" + id +
+                                "', which has no calibration (calibration: is the first camera's, '" +
+                                ids.front() + "'; give the others in calibrations:)");
+  };
+  for (const auto& [pattern, cameras] : config.pattern_cameras)
+    for (const auto& id : cameras) check(pattern, id, "names");
+  for (const auto& [pattern, id] : config.pattern_intensity_camera)
+    check(pattern, id, "takes its intensity from");
+  if (config.sensor != SensorKind::kSim)  // the simulated second camera's rig is added by the loader
+    for (const auto& [id, calibration] : config.extra_calibrations)
+      if (!declared(id))
+        root.fail("calibrations", "camera '" + id + "' is not a camera of the sensor (its cameras: " +
+                                      list + ")");
+  for (std::size_t i = 0; i < config.aravis.cameras.size(); ++i) {
+    const auto& c = config.aravis.cameras[i];
+    const auto extra = config.extra_calibrations.find(c.name);
+    const pipeline::PinholeModel* model =
+        i == 0 ? &config.calibration.camera
+               : extra != config.extra_calibrations.end() ? &extra->second.camera : nullptr;
+    if (!model) continue;
+    if ((c.width != 0 && c.width != model->width) || (c.height != 0 && c.height != model->height))
+      root.fail("cameras", "camera '" + c.name + "': roi " + std::to_string(c.width) + "x" +
+                               std::to_string(c.height) + " differs from its calibration's " +
+                               std::to_string(model->width) + "x" + std::to_string(model->height) +
+                               " images");
+  }
 }
 
 DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
@@ -301,7 +372,8 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   if (simulated) parseSim(root.map("sim"), base_dir, config.sim);
   const bool replay = config.sensor == SensorKind::kReplay;
   double replay_fps = 0;
-  if (replay) replay_fps = parseReplay(root.map("replay"), base_dir, config.replay);
+  std::vector<std::string> replay_camera_ids;
+  if (replay) replay_fps = parseReplay(root.map("replay"), base_dir, config.replay, replay_camera_ids);
 
   // `calibration:` sim, a file path, or {file, keys} for a foreign OpenCV
   // FileStorage file read through a key mapping (calibration_io.h).
@@ -408,6 +480,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
     throw ConfigError(origin + ": key 'runtime.default_pattern': no pattern named '" +
                       config.runtime.default_pattern + "'");
   }
+  checkCameraReferences(root, config, replay_camera_ids);
   root.done();
   return config;
 }

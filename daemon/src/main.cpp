@@ -7,6 +7,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <iostream>
+#include <optional>
+#include <algorithm>
+#include <cstdio>
 #include <string>
 #include <thread>
 
@@ -18,11 +21,14 @@
 #include "sl/daemon/log.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/daemon/systemd_notify.h"
+#include "instance_lock.h"
 #include "other_daemon.h"
+#include "reload_worker.h"
 
 namespace {
 
 std::atomic<bool> startup_done{false};
+std::atomic<bool> reload_asked_in_startup{false};  // SIGHUP before the main loop
 std::thread startup_watch;  // watchStartup() until the daemon is ready
 
 void endStartupWatch() {
@@ -42,31 +48,63 @@ constexpr const char* kUsage =
 // SIGHUP: re-reads the config file and applies what can change at run time
 // (decoder, triangulator, motion_compensation, dds.status_period_s). A file
 // that does not load, or that changes anything else, is rejected as a whole
-// with a message; the daemon keeps running as it was.
-void reload(const std::string& path, const sl::daemon::DaemonConfig& running,
-            sl::daemon::ScanEngine& engine, sl::daemon::DdsBridge& bridge) {
+// with a message; the daemon keeps running as it was. The file is loaded by
+// a ReloadWorker (its own thread, the bounded reader, kReloadDeadline): the
+// main loop keeps taking signals meanwhile, and a load past the deadline is
+// refused. Every refusal is in the status (last_error, source "reload").
+constexpr std::chrono::milliseconds kReloadDeadline{5000};
+
+void beginReload(const std::string& path, sl::daemon::ReloadWorker& reloads,
+                 sl::daemon::ScanEngine& engine) {
   using namespace sl::daemon;
-  systemdNotify("RELOADING=1");
-  try {
-    const DaemonConfig loaded = loadConfig(path);
-    const std::vector<std::string> changed = keysNeedingRestart(running, loaded);
-    if (!changed.empty()) {
-      std::string keys;
-      for (const auto& k : changed) keys += (keys.empty() ? "'" : ", '") + k + "'";
-      const std::string message = "config reload rejected: " + keys +
-                                  " changed, which needs a restart; nothing was applied";
-      logWarning(message);
-      engine.reportError(message, "reload");
-    } else {
-      engine.applyRuntimeSettings(loaded);
-      engine.clearError("reload");  // an earlier reload's error no longer holds
-      bridge.setStatusPeriod(loaded.dds.status_period_s);
-      logInfo("config reloaded from " + path +
-              " (decoder, triangulator, motion_compensation, dds.status_period_s)");
+  const std::string busy = reloads.begin(path);
+  if (busy.empty()) {
+    systemdNotify("RELOADING=1");
+    return;
+  }
+  const std::string message = "config reload refused: " + busy + "; nothing was applied";
+  logWarning(message);
+  engine.reportError(message, "reload");
+}
+
+void finishReload(sl::daemon::ReloadWorker::Outcome outcome, const sl::daemon::DaemonConfig& running,
+                  sl::daemon::ScanEngine& engine, sl::daemon::DdsBridge& bridge) {
+  using namespace sl::daemon;
+  using Kind = ReloadWorker::Outcome::Kind;
+  const std::string& path = outcome.path;
+  if (outcome.kind == Kind::kTimedOut) {
+    const std::string message =
+        "config reload refused: loading " + path + " did not finish within " +
+        std::to_string(kReloadDeadline.count() / 1000) +
+        " s (a file that blocks, e.g. a FIFO, or a file system that does not answer); nothing "
+        "was applied";
+    logWarning(message);
+    engine.reportError(message, "reload");
+  } else if (outcome.kind == Kind::kFailed) {
+    logWarning("config reload failed, keeping the running config: " + outcome.error);
+    engine.reportError("config reload failed: " + outcome.error, "reload");
+  } else {
+    try {
+      const DaemonConfig& loaded = *outcome.config;
+      const std::vector<std::string> changed = keysNeedingRestart(running, loaded);
+      if (!changed.empty()) {
+        std::string keys;
+        for (const auto& k : changed) keys += (keys.empty() ? "'" : ", '") + k + "'";
+        const std::string message = "config reload rejected: " + keys +
+                                    " changed, which needs a restart; nothing was applied";
+        logWarning(message);
+        engine.reportError(message, "reload");
+      } else {
+        engine.applyRuntimeSettings(loaded);
+        engine.clearError("reload");  // an earlier reload's error no longer holds
+        bridge.setStatusPeriod(loaded.dds.status_period_s);
+        logInfo("config reloaded from " + path +
+                " (decoder, triangulator, motion_compensation, dds.status_period_s)");
+      }
+    } catch (const std::exception& e) {
+      logWarning(std::string("config reload failed, keeping the running config: ") + e.what());
+      engine.reportError(std::string("config reload failed: ") + e.what(), "reload");
     }
-  } catch (const std::exception& e) {
-    logWarning(std::string("config reload failed, keeping the running config: ") + e.what());
-    engine.reportError(std::string("config reload failed: ") + e.what(), "reload");
   }
   systemdNotify("READY=1");
 }
@@ -93,6 +131,14 @@ int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
   const DaemonConfig config = loadConfig(config_path);
   checkDdsEnvironment();
+  // One daemon per domain and namespace on this host: the lock arbitrates
+  // two that start at once; the DDS check below also sees other hosts.
+  std::optional<InstanceLock> instance_lock;
+  if (const std::string dir = instanceLockDirectory(); dir.empty())
+    logWarning("no directory for the instance lock ($RUNTIME_DIRECTORY, /run/lock, "
+               "$XDG_RUNTIME_DIR, /tmp): only the DDS check keeps a second daemon out");
+  else
+    instance_lock.emplace(dir, config.dds.domain_id, config.dds.ns);
   if (otherDaemonServes(config.dds, kOtherDaemonWindow))
     throw ConfigError("another sl_sensord already serves requests on '" +
                       TopicNames::forNamespace(config.dds.ns).request + "' (domain " +
@@ -119,11 +165,15 @@ int run(const std::string& config_path, const sigset_t& signals) {
   const auto watchdog = systemdWatchdogInterval();
   const auto tick = watchdog ? std::chrono::duration_cast<std::chrono::milliseconds>(*watchdog / 3)
                              : std::chrono::milliseconds(500);
-  int signal_number = 0;
+  ReloadWorker reloads(loadConfig, kReloadDeadline);
+  int signal_number = reload_asked_in_startup ? SIGHUP : 0;
   while (signal_number <= 0 || signal_number == SIGHUP) {
-    if (signal_number == SIGHUP) reload(config_path, config, engine, bridge);
-    timespec timeout{static_cast<time_t>(tick.count() / 1000),
-                     static_cast<long>((tick.count() % 1000) * 1'000'000)};
+    if (signal_number == SIGHUP) beginReload(config_path, reloads, engine);
+    if (auto outcome = reloads.poll()) finishReload(std::move(*outcome), config, engine, bridge);
+    // While a reload loads, its outcome is looked at every 50 ms.
+    const auto wait = reloads.pending() ? std::min(tick, std::chrono::milliseconds(50)) : tick;
+    timespec timeout{static_cast<time_t>(wait.count() / 1000),
+                     static_cast<long>((wait.count() % 1000) * 1'000'000)};
     signal_number = sigtimedwait(&signals, nullptr, &timeout);
     // The watchdog is fed only while every pipeline thread is alive.
     if (watchdog && engine.healthy()) systemdNotify("WATCHDOG=1");
@@ -144,9 +194,12 @@ void watchStartup(const sigset_t& signals) {
     if (signal_number == SIGINT || signal_number == SIGTERM) {
       sl::daemon::logInfo(std::string("received ") + strsignal(signal_number) +
                           " during start-up, exiting");
+      sl::daemon::removeHeldInstanceLockFiles();
       std::_Exit(0);
     }
-    // SIGHUP before READY: nothing to reload yet.
+    // SIGHUP before READY: reloaded once the main loop runs (the file may
+    // have changed since start-up read it).
+    if (signal_number == SIGHUP) reload_asked_in_startup = true;
   }
 }
 
@@ -190,6 +243,13 @@ int main(int argc, char** argv) {
   try {
     const int rc = run(config_path, signals);
     endStartupWatch();
+    if (sl::daemon::ReloadWorker::threadsRunning() > 0) {
+      // A reload still blocked in a load: its thread may hold library state
+      // that the static destructors would tear down under it.
+      sl::daemon::logWarning("exiting with a config reload still loading (abandoned)");
+      std::fflush(nullptr);
+      std::_Exit(rc);
+    }
     return rc;
   } catch (const sl::daemon::ConfigError& e) {
     sl::daemon::logError(std::string("config error: ") + e.what());

@@ -8,6 +8,7 @@
 
 #include "calibration_yaml.h"
 #include "sim_config_yaml.h"
+#include "sl/daemon/input_file.h"
 
 namespace sl::daemon {
 
@@ -41,6 +42,9 @@ cv::Mat loadTexture(const YamlMap& m, const std::string& key,
   std::filesystem::path file = m.get<std::string>(key);
   if (file.is_relative()) file = base_dir / file;
   try {
+    // A regular file within the texture limit: OpenCV then reads it by path
+    // (a FIFO would block it, a device feed it without end).
+    if (std::filesystem::exists(file)) checkInputFile(file.string(), InputKind::kTexture);
     return drivers::loadAlbedoTexture(file.string());
   } catch (const std::runtime_error& e) {
     m.fail(key, e.what());
@@ -145,6 +149,7 @@ void parseSceneItems(const std::vector<YamlMap>& items, const std::filesystem::p
       const double scale = positive(p, "scale", 1.0);
       drivers::SimMesh mesh;
       try {
+        if (std::filesystem::exists(file)) checkInputFile(file.string(), InputKind::kMesh);
         mesh = drivers::loadPlyMesh(file.string(), scale);
       } catch (const std::runtime_error& e) {
         p.fail("file", e.what());

@@ -100,7 +100,24 @@ class ChildProcess {
   ChildProcess(const ChildProcess&) = delete;
   ChildProcess& operator=(const ChildProcess&) = delete;
   bool started() const { return pid_ > 0; }
+  pid_t pid() const { return pid_; }
   void signal(int number) const { ::kill(pid_, number); }
+
+  // Waits up to `timeout` (not scaled) for the process to end by itself;
+  // its exit status (128 + signal if killed), or nullopt while it runs.
+  std::optional<int> waitExit(std::chrono::milliseconds timeout) {
+    if (exit_status_) return exit_status_;
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    do {
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+        return exit_status_;
+      }
+      if (timeout.count() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    } while (std::chrono::steady_clock::now() < deadline);
+    return std::nullopt;
+  }
 
   // Sends SIGTERM and waits up to `timeout` (x kTimeScale in sanitizer
   // builds); returns the exit status, or nullopt if the process had to be

@@ -163,13 +163,14 @@ grep -q "^sets incomplete: *0$" "$work/status.log" || fail "stops counted as inc
 echo "ok: rates, stops not counted as incomplete sequences"
 
 # A second daemon on the same domain and namespace refuses to start (exit 2,
-# one line naming the topic); one with its own namespace starts.
+# one line naming the first one's pid and the lock it holds); one with its
+# own namespace starts.
 set +e
 msg=$(timeout "$wait_s" "$bin/daemon/sl_sensord" --config "$work/sim.yaml" 2>&1)
 rc=$?
 set -e
 [ "$rc" -eq 2 ] || fail "second daemon: exit code $rc, expected 2 ($msg)"
-echo "$msg" | grep -q "another sl_sensord already serves requests on 'rq/$ns/commandRequest'" \
+echo "$msg" | grep -Eq "another sl_sensord \(pid [0-9]+\) already serves domain [0-9]+, namespace '$ns' on this host \(it holds .*\.lock\)" \
   || fail "second daemon message: $msg"
 echo "ok: second daemon -> $msg"
 sed "s/^  namespace: $ns$/  namespace: ${ns}_b/" "$work/sim.yaml" > "$work/sim_b.yaml"

@@ -1023,7 +1023,11 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
       " {name: 3+3_vertical, family: phase_shift_3+3, direction: vertical, fringes: 16,"
       "  cameras: [left]}]");
   root["patterns"] = patterns;
-  const sl::daemon::DaemonConfig top = sl::daemon::loadConfig(sl::test::writeConfigFile(root, ns + "_top"));
+  // The simulated rig of the first camera (a sim sensor has no camera
+  // "left": its config lists no pattern cameras, which load checks).
+  YAML::Node rig = YAML::Clone(root);
+  for (auto pattern : rig["patterns"]) pattern.remove("cameras");
+  const sl::daemon::DaemonConfig top = sl::daemon::loadConfig(sl::test::writeConfigFile(rig, ns + "_top"));
   // The "left" rig: projector 150 mm below the camera, turned up by 15.25 deg.
   sl::daemon::DaemonConfig left = top;
   left.sim.camera_id = "left";

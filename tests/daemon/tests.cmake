@@ -45,6 +45,13 @@ sl_add_test(test_messages daemon/test_messages.cpp)
 target_link_libraries(test_messages PRIVATE sl_daemon sl_idl)
 target_include_directories(test_messages PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
 
+# Issue 36 probes: one daemon per namespace (instance lock), reloads that
+# block, config checks before any device, calibration files bounded.
+sl_add_test(test_hardening daemon/test_hardening.cpp)
+target_link_libraries(test_hardening PRIVATE sl_daemon yaml-cpp)
+target_include_directories(test_hardening PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
+add_dependencies(test_hardening sl_sensord)
+
 # Config loading and its error messages.
 sl_add_test(test_config daemon/test_config.cpp sim/test_sim_config.cpp)
 target_link_libraries(test_config PRIVATE sl_daemon opencv_imgcodecs)
