@@ -148,7 +148,7 @@ std::vector<Diagnostic> diagnosticsOf(const EngineStatus& s, const DiagnosticInp
 
 DiagnosticsPublisher::DiagnosticsPublisher(const dds::Participant& participant)
     : topic_(participant, "rt/diagnostics", diagnostic_msgs_msg_dds__DiagnosticArray__desc),
-      writer_(participant, topic_, dds::Qos().reliable(DDS_MSECS(100)).keepLast(10).xcdr1()) {}
+      writer_(participant, topic_, dds::Qos().reliable(DDS_MSECS(100)).keepLast(1).xcdr1()) {}
 
 bool DiagnosticsPublisher::publish(const std::vector<Diagnostic>& statuses, std::int64_t stamp_ns) {
   std::vector<std::vector<diagnostic_msgs_msg_dds__KeyValue_>> values(statuses.size());
@@ -176,7 +176,7 @@ DiscoveryInfoPublisher::DiscoveryInfoPublisher(const dds::Participant& participa
     : participant_(participant.handle()),
       namespace_(std::move(node_namespace)),
       name_(std::move(node_name)),
-      topic_(participant, "rt/ros_discovery_info", rmw_dds_common_msg_dds__ParticipantEntitiesInfo__desc),
+      topic_(participant, "ros_discovery_info", rmw_dds_common_msg_dds__ParticipantEntitiesInfo__desc),
       writer_(participant, topic_, dds::Qos().reliable().transientLocal().keepLast(1).xcdr1()) {}
 
 void DiscoveryInfoPublisher::publish() {
@@ -199,14 +199,15 @@ void DiscoveryInfoPublisher::publish() {
     }
   };
   // Readers and writers sit under the participant's (implicit) subscribers
-  // and publishers; matched-status queries tell which is which.
+  // and publishers: a writer has a publisher, a reader a subscriber (asking
+  // for matched statuses instead would reset them under other waiters).
   std::vector<rmw_dds_common_msg_dds__Gid_> readers, writers;
   for (dds_entity_t parent : children(participant_))
     for (dds_entity_t e : children(parent)) {
       if (e == writer_.handle()) continue;
-      if (dds_get_publication_matched_status(e, nullptr) == DDS_RETCODE_OK)
+      if (dds_get_publisher(e) > 0)
         writers.push_back(gidOf(e));
-      else if (dds_get_subscription_matched_status(e, nullptr) == DDS_RETCODE_OK)
+      else if (dds_get_subscriber(e) > 0)
         readers.push_back(gidOf(e));
     }
   rmw_dds_common_msg_dds__NodeEntitiesInfo_ node{};

@@ -62,7 +62,7 @@ struct DiagnosticInputs {
 std::vector<Diagnostic> diagnosticsOf(const EngineStatus& status, const DiagnosticInputs& inputs);
 
 // rt/diagnostics, diagnostic_msgs/msg/DiagnosticArray (reliable, volatile,
-// keep-last 10, as diagnostic_updater publishes).
+// keep-last 1, as diagnostic_updater creates its publisher: depth 1).
 class DiagnosticsPublisher {
  public:
   explicit DiagnosticsPublisher(const dds::Participant& participant);
@@ -74,10 +74,12 @@ class DiagnosticsPublisher {
   dds::Writer<diagnostic_msgs_msg_dds__DiagnosticArray_> writer_;
 };
 
-// rt/ros_discovery_info, rmw_dds_common/msg/ParticipantEntitiesInfo as
-// rmw_cyclonedds (Humble) writes it: reliable, transient-local, keep-last 1;
-// gid = the participant's 16-byte GUID and 8 zero bytes; one node with the
-// GUIDs of every reader and writer of the participant (but this one).
+// ros_discovery_info (DDS topic name without "rt/": rmw creates it with
+// avoid_ros_namespace_conventions), rmw_dds_common/msg/ParticipantEntitiesInfo
+// as rmw_cyclonedds (Humble) writes it: reliable, transient-local, keep-last
+// 1; gid = the participant's 16-byte GUID and 8 zero bytes; one node with the
+// gids of every reader and writer of the participant but this one (rmw does
+// not list its own ros_discovery_info endpoints either).
 class DiscoveryInfoPublisher {
  public:
   DiscoveryInfoPublisher(const dds::Participant& participant, std::string node_namespace,

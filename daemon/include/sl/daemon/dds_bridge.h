@@ -15,7 +15,7 @@
 //   rr/<ns>/commandReply    sl_msgs CommandReply (one per request)
 //   rt/tf_static            tf2_msgs/TFMessage, the sensor's frames (dds.tf)
 //   rt/diagnostics          diagnostic_msgs/DiagnosticArray, 1 Hz
-//   rt/ros_discovery_info   rmw_dds_common/ParticipantEntitiesInfo: node /<ns>/sl_sensord
+//   ros_discovery_info      rmw_dds_common/ParticipantEntitiesInfo: node /<ns>/sl_sensord
 #pragma once
 
 #include <map>
