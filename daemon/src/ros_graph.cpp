@@ -83,6 +83,11 @@ std::vector<Diagnostic> diagnosticsOf(const EngineStatus& s, const DiagnosticInp
         d.level = kWarn;
         d.message += (d.message.empty() ? "" : "; ") + part;
       }
+    // An error the device reported and that has not recovered yet.
+    if (startsWith(s.last_error, prefix)) {
+      d.level = kError;
+      d.message = s.last_error + (d.message.empty() ? "" : "; " + d.message);
+    }
     if (d.level == kOk) d.message = scanning ? "delivering" : "idle";
     d.values.emplace_back("state", toString(s.state));
     return d;
@@ -136,8 +141,13 @@ std::vector<Diagnostic> diagnosticsOf(const EngineStatus& s, const DiagnosticInp
   for (const auto& r : in.points_readers)
     add("clouds lost by points reader " + r.guid,
         r.reliable ? std::to_string(r.lost) : std::string("best effort (not seen)"));
+  add("decode_modulated_fraction", number(s.decode_modulated_fraction));
+  add("decode_consistent_fraction", number(s.decode_consistent_fraction));
+  add("decode_residual_median", number(s.decode_residual_median));
+  add("clouds_implausible", std::to_string(s.clouds_implausible));
   add("requests_received", std::to_string(in.requests.received));
   add("requests_answered", std::to_string(in.requests.answered));
+  add("requests_rate_limited", std::to_string(in.requests.rate_limited));
   add("degraded_reason", s.degraded_reason);
   add("last_error", s.last_error);
   add("errors_reported", std::to_string(s.errors_reported));

@@ -57,8 +57,10 @@ struct DiagnosticInputs {
 // pipeline, levels from the daemon's state: idle / waiting / scanning OK;
 // degraded WARN on the pipeline and on each device its cause names (the
 // cause's parts "camera '<id>': ..." and "trigger source: ..."); error ERROR
-// on the pipeline with the last error. A points reader that lost clouds
-// makes the pipeline WARN when it would be OK.
+// on the pipeline with the last error. A device whose error is the last
+// error (it starts "camera '<id>'" / "trigger source") is ERROR until the
+// engine clears it. A points reader that lost clouds makes the pipeline WARN
+// when it would be OK.
 std::vector<Diagnostic> diagnosticsOf(const EngineStatus& status, const DiagnosticInputs& inputs);
 
 // rt/diagnostics, diagnostic_msgs/msg/DiagnosticArray (reliable, volatile,
