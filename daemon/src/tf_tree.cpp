@@ -1,7 +1,8 @@
 #include "tf_tree.h"
 
 #include <cmath>
-#include <set>
+#include <map>
+#include <utility>
 
 #include "sl/daemon/config_error.h"
 #include "yaml_reader.h"
@@ -77,13 +78,17 @@ Eigen::Matrix3d opticalToBody() {
 std::vector<FrameTransform> sensorTransforms(const TfConfig& tf, const std::vector<CameraFrame>& cameras) {
   std::vector<FrameTransform> out;
   if (cameras.empty()) return out;
-  std::set<std::string> names{tf.base_frame, tf.projector_frame};
-  if (!tf.parent_frame.empty()) names.insert(tf.parent_frame);
-  const std::size_t expected = 2 + (tf.parent_frame.empty() ? 0 : 1) + cameras.size();
-  for (const auto& c : cameras) names.insert(c.frame_id);
-  if (names.size() != expected)
-    throw ConfigError("dds.tf: the frames parent_frame, base_frame, projector_frame, dds.frame_id and "
-                      "'<camera id>_optical_frame' must all differ (two share a name)");
+  std::vector<std::pair<std::string, std::string>> frames{{"dds.tf.base_frame", tf.base_frame},
+                                                          {"dds.tf.projector_frame", tf.projector_frame}};
+  if (!tf.parent_frame.empty()) frames.emplace_back("dds.tf.parent_frame", tf.parent_frame);
+  frames.emplace_back("dds.frame_id", cameras.front().frame_id);
+  for (std::size_t i = 1; i < cameras.size(); ++i)
+    frames.emplace_back("the optical frame of camera '" + cameras[i].id + "'", cameras[i].frame_id);
+  std::map<std::string, std::string> seen;  // frame -> what named it first
+  for (const auto& [what, frame] : frames)
+    if (const auto [it, fresh] = seen.emplace(frame, what); !fresh)
+      throw ConfigError("dds.tf: " + what + " and " + it->second + " are both '" + frame +
+                        "' (the sensor's tf frames must all differ)");
   if (!tf.parent_frame.empty()) {
     FrameTransform mount{tf.parent_frame, tf.base_frame, Eigen::Isometry3d::Identity()};
     mount.pose.linear() =

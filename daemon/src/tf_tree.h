@@ -42,7 +42,7 @@ Eigen::Matrix3d opticalToBody();
 // their calibrations against the common projector), and the first camera's
 // optical frame -> projector_frame (X_p = R X_c + t inverted). `cameras`:
 // camera id -> (its frame id, its calibration), the first camera's frame
-// being `first_frame`. Throws ConfigError when two frames share a name.
+// being `first_frame`. Throws ConfigError naming both keys when two frames share a name.
 struct CameraFrame {
   std::string id;
   std::string frame_id;

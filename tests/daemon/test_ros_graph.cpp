@@ -140,7 +140,9 @@ TEST_CASE("sensorTransforms: mount, optical frames of every camera, projector", 
       sl::daemon::sensorTransforms(tf, cameras);
       FAIL("no ConfigError");
     } catch (const ConfigError& e) {
-      CHECK(contains(e.what(), "dds.tf"));
+      CHECK(contains(e.what(), "dds.tf.projector_frame"));
+      CHECK(contains(e.what(), "camera 'right'"));
+      CHECK(contains(e.what(), "'right_optical'"));
     }
   }
 }
