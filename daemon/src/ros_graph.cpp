@@ -211,10 +211,16 @@ void DiscoveryInfoPublisher::publish() {
   // Readers and writers sit under the participant's (implicit) subscribers
   // and publishers: a writer has a publisher, a reader a subscriber (asking
   // for matched statuses instead would reset them under other waiters).
+  // Built-in readers (DCPS* topics: entity kinds 0xc_) are not the node's,
+  // as rmw skips them.
+  auto builtIn = [](dds_entity_t e) {
+    dds_guid_t guid{};
+    return dds_get_guid(e, &guid) == DDS_RETCODE_OK && (guid.v[15] & 0xc0) == 0xc0;
+  };
   std::vector<rmw_dds_common_msg_dds__Gid_> readers, writers;
   for (dds_entity_t parent : children(participant_))
     for (dds_entity_t e : children(parent)) {
-      if (e == writer_.handle()) continue;
+      if (e == writer_.handle() || builtIn(e)) continue;
       if (dds_get_publisher(e) > 0)
         writers.push_back(gidOf(e));
       else if (dds_get_subscriber(e) > 0)
