@@ -145,14 +145,16 @@ struct DdsBridge::Impl {
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);
     services.attach(waitset, 3);
-    if (config.tf.publish)
-      tf_static.emplace(participant, sensorTransforms(config.tf, cameras), pipeline::systemClockNs());
-    discovery.publish();  // after every reader and writer exists
     if (config.points_qos.reliable) points_acks.emplace(points_writer.handle(), config.points_qos.depth);
     if (points_writer.borrowing())
       logInfo("points: clouds are sent from their own memory (no serialization copy)");
     else
       logInfo("points: clouds are serialized by dds_write: " + points_writer.whyNotBorrowing());
+
+    // ROS 2's graph (ros_graph.h).
+    if (config.tf.publish)
+      tf_static.emplace(participant, sensorTransforms(config.tf, cameras), pipeline::systemClockNs());
+    discovery.publish();  // after every reader and writer exists
   }
 
   // A buffer for a packed cloud that no earlier sample still borrows. The
