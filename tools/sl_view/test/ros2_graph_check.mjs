@@ -132,7 +132,7 @@ try {
     'daemon "ready:"');
   if (daemon.proc.exitCode !== null) throw new Error(`sl_sensord exited (${daemon.proc.exitCode})`);
   await sleep(1500);  // /tf_static and ros_discovery_info are written before the listener exists
-  listener = spawnLines(listenerExe, ['9'], 'listener');
+  listener = spawnLines(listenerExe, ['11'], 'listener');
   const diagnosticsCount = () => listener.lines.filter((l) => l.startsWith('sample rt/diagnostics ')).length;
   await until(() => diagnosticsCount() >= 3, 8000, 'three /diagnostics samples while idle');
   const idleCount = diagnosticsCount();
@@ -193,11 +193,16 @@ try {
 
   // --- /diagnostics ------------------------------------------------------------------
   const diag = of('rt/diagnostics');
-  check(diag.length >= 6, `${diag.length} /diagnostics samples in 9 s, expected >= 6 at 1 Hz`);
+  check(diag.length >= 8, `${diag.length} /diagnostics samples in 11 s, expected >= 8 at 1 Hz`);
   const stamps = diag.map((s) => s.msg.header.stamp.sec + s.msg.header.stamp.nanosec * 1e-9);
+  // A fixed 1 s schedule: single periods jitter with the machine's load,
+  // their mean does not drift.
   for (let i = 1; i < stamps.length; i++)
-    check(stamps[i] - stamps[i - 1] > 0.75 && stamps[i] - stamps[i - 1] < 1.3,
+    check(stamps[i] - stamps[i - 1] > 0.5 && stamps[i] - stamps[i - 1] < 2,
       `diagnostics period ${(stamps[i] - stamps[i - 1]).toFixed(3)} s, expected about 1 s`);
+  const meanPeriod = (stamps[stamps.length - 1] - stamps[0]) / (stamps.length - 1);
+  check(meanPeriod > 0.95 && meanPeriod < 1.1, `mean diagnostics period ${meanPeriod.toFixed(3)} s, expected 1 s`);
+  console.log(`ok: ${diag.length} /diagnostics, mean period ${meanPeriod.toFixed(3)} s`);
   const names = ['sl_sensord: camera sim_top', 'sl_sensord: trigger source', 'sl_sensord: pipeline'];
   const value = (status, key) => status.values.find((kv) => kv.key === key)?.value;
   for (const [i, s] of diag.entries()) {
