@@ -46,7 +46,7 @@ struct Daemon {
     config = loadConfig(std::string(SL_FUZZ_DIR) + "/data/request_daemon.yaml");
     EngineDevices devices = openDevices(config, owner);
     bridge = std::make_unique<DdsBridge>(config.dds, devices.cameras.front()->id(),
-                                         config.calibration.camera);
+                                         config.calibration, config.extra_calibrations);
     engine = std::make_unique<ScanEngine>(config, std::move(devices),
                                           [this](const ScanResult& r) { bridge->publish(r); },
                                           bridge->resultContents());

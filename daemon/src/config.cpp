@@ -19,6 +19,7 @@
 #include "sl/pipeline/projector_response.h"
 #include "aravis_config_yaml.h"
 #include "sl/drivers/recording.h"
+#include "tf_tree.h"
 #include "yaml_reader.h"
 #include "sl/daemon/input_file.h"
 
@@ -189,6 +190,7 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   r.burst = requests.get<double>("burst", r.burst);
   if (!(r.burst >= 1 && r.burst <= 100000)) requests.fail("burst", "must be in [1, 100000] requests");
   requests.done();
+  parseTfConfig(m.optionalMap("tf"), d.tf);
   m.done();
 }
 

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -15,6 +16,7 @@
 #include "request_dispatch.h"
 #include "request_origin.h"
 #include "service_bridge.h"
+#include "ros_graph.h"
 #include "ros_messages.h"
 #include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/dds.h"
@@ -89,11 +91,28 @@ std::string FrameIds::of(const std::string& camera_id) const {
   return isFirst(camera_id) ? first_frame_id : camera_id + "_optical_frame";
 }
 
+namespace {
+
+// Every camera, the first first, with its frame and calibration.
+std::vector<CameraFrame> cameraFrames(
+    const FrameIds& ids, const pipeline::CameraProjectorCalibration& first,
+    const std::map<std::string, pipeline::CameraProjectorCalibration>& others) {
+  std::vector<CameraFrame> out{{ids.first_camera_id, ids.first_frame_id, first}};
+  for (const auto& [id, calibration] : others)
+    if (id != ids.first_camera_id) out.push_back({id, ids.of(id), calibration});
+  return out;
+}
+
+}  // namespace
+
 struct DdsBridge::Impl {
-  Impl(const DdsConfig& config, const std::string& camera_id, const pipeline::PinholeModel& camera)
+  Impl(const DdsConfig& config, const std::string& camera_id,
+       const pipeline::CameraProjectorCalibration& calibration,
+       const std::map<std::string, pipeline::CameraProjectorCalibration>& other_cameras)
       : config(config),
         frame_ids{camera_id, config.frame_id},
-        camera(camera),
+        camera(calibration.camera),
+        cameras(cameraFrames(frame_ids, calibration, other_cameras)),
         names(TopicNames::forNamespace(config.ns)),
         participant(config.domain_id),
         points_topic(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc),
@@ -151,6 +170,11 @@ struct DdsBridge::Impl {
       logInfo("points: clouds are sent from their own memory (no serialization copy)");
     else
       logInfo("points: clouds are serialized by dds_write: " + points_writer.whyNotBorrowing());
+
+    // ROS 2's graph (ros_graph.h).
+    if (config.tf.publish)
+      tf_static.emplace(participant, sensorTransforms(config.tf, cameras), pipeline::systemClockNs());
+    discovery.publish();  // after every reader and writer exists
   }
 
   // A buffer for a packed cloud that no earlier sample still borrows. The
@@ -170,6 +194,7 @@ struct DdsBridge::Impl {
   const DdsConfig config;
   const FrameIds frame_ids;
   const pipeline::PinholeModel camera;  // of the first camera, for camera_info
+  const std::vector<CameraFrame> cameras;  // every camera, the first first (tf, diagnostics)
   const TopicNames names;
   MalformedSampleCounter malformed{names.request, sl_msgs_msg_dds__CommandRequest__desc.m_typename};  // before the reader
   dds::Participant participant;
@@ -217,6 +242,10 @@ struct DdsBridge::Impl {
   RequestOrigins origins;  // the participant of each request's writer (request loop only)
   // ROS 2 services (<ns>/start, stop, ...) through the same dispatcher.
   ServiceBridge services{participant, config.ns};
+  // ROS 2's graph: /tf_static, /diagnostics (1 Hz), ros_discovery_info.
+  std::optional<TfStaticPublisher> tf_static;
+  DiagnosticsPublisher diagnostics{participant};
+  DiscoveryInfoPublisher discovery{participant, "/" + config.ns, "sl_sensord"};
   std::uint64_t requests_rejected = 0;  // the request reader's sample-rejected count (status thread)
 
   // Publish-thread buffers of packed clouds (metres, decimated or valid
@@ -229,8 +258,21 @@ struct DdsBridge::Impl {
 
   EdgeCounters edgeCounters();
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
+  void publishDiagnostics(const EngineStatus& s);
   void serveRequests(CommandTarget& target);
 };
+
+void DdsBridge::Impl::publishDiagnostics(const EngineStatus& status) {
+  const EdgeCounters edge = edgeCounters();
+  DiagnosticInputs in;
+  in.node_name = "sl_sensord";
+  for (const auto& c : cameras) in.camera_ids.push_back(c.id);
+  in.requests = edge.requests;
+  in.writes_timed_out = edge.writes_timed_out;
+  in.clouds_lost_to_readers = edge.clouds_lost_to_readers;
+  in.points_readers = edge.points_readers;
+  diagnostics.publish(diagnosticsOf(status, in), pipeline::systemClockNs());
+}
 
 EdgeCounters DdsBridge::Impl::edgeCounters() {
   EdgeCounters c;
@@ -277,8 +319,9 @@ void DdsBridge::Impl::serveRequests(CommandTarget& target) {
 }
 
 DdsBridge::DdsBridge(const DdsConfig& config, const std::string& camera_id,
-                     const pipeline::PinholeModel& camera)
-    : impl_(std::make_unique<Impl>(config, camera_id, camera)) {}
+                     const pipeline::CameraProjectorCalibration& calibration,
+                     const std::map<std::string, pipeline::CameraProjectorCalibration>& other_cameras)
+    : impl_(std::make_unique<Impl>(config, camera_id, calibration, other_cameras)) {}
 DdsBridge::~DdsBridge() = default;
 
 ResultContents DdsBridge::resultContents() const {
@@ -357,6 +400,7 @@ void DdsBridge::serve(ScanEngine& engine) {
   using Clock = std::chrono::steady_clock;
   std::uint64_t published_version = ~std::uint64_t{0};
   Clock::time_point next_periodic = Clock::now();
+  Clock::time_point next_diagnostics = Clock::now();
   const std::vector<std::string> patterns = engine.patterns();
   while (!d.stopping) {
     d.waitset.wait(DDS_MSECS(100));
@@ -369,6 +413,12 @@ void DdsBridge::serve(ScanEngine& engine) {
       const auto period = std::chrono::duration_cast<Clock::duration>(
           std::chrono::duration<double>(d.status_period_s.load()));
       next_periodic = Clock::now() + period;
+    }
+    // /diagnostics at 1 Hz, whether or not anyone reads it.
+    if (Clock::now() >= next_diagnostics) {
+      d.publishDiagnostics(status);
+      next_diagnostics += std::chrono::seconds(1);
+      if (next_diagnostics < Clock::now()) next_diagnostics = Clock::now() + std::chrono::seconds(1);
     }
   }
 }

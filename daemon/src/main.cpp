@@ -146,7 +146,8 @@ int run(const std::string& config_path, const sigset_t& signals) {
                       "); stop it, or give this one its own dds.namespace");
   std::shared_ptr<void> device_owner;
   EngineDevices devices = openDevices(config, device_owner);
-  DdsBridge bridge(config.dds, devices.cameras.front()->id(), config.calibration.camera);
+  DdsBridge bridge(config.dds, devices.cameras.front()->id(), config.calibration,
+                   config.extra_calibrations);
   if (const std::size_t shm = sl::dds::populateSharedMemoryMappings())
     logInfo("shared memory: page tables of " + std::to_string(shm >> 20) +
             " MiB of iceoryx segments filled in (the first clouds do not fault them)");

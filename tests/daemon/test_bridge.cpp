@@ -40,7 +40,7 @@ struct InProcessDaemon {
     config = sl::daemon::loadConfig(sl::test::writeConfigFile(root, ns));
     sl::daemon::EngineDevices devices = sl::daemon::openDevices(config, owner);
     bridge = std::make_unique<sl::daemon::DdsBridge>(config.dds, devices.cameras.front()->id(),
-                                                     config.calibration.camera);
+                                                     config.calibration, config.extra_calibrations);
     engine = std::make_unique<sl::daemon::ScanEngine>(
         config, std::move(devices), [this](const sl::daemon::ScanResult& r) { bridge->publish(r); },
         bridge->resultContents());

@@ -201,8 +201,9 @@ TEST_CASE("decimated clouds borrowed by a reader's history each arrive as packed
   sl::daemon::DdsConfig config;
   config.ns = sl::test::uniqueNamespace("decimated");
   config.points_layout.decimation = 2;
-  const sl::pipeline::PinholeModel camera{64, 48, 50, 50, 32, 24};  // width, height, fx, fy, cx, cy
-  sl::daemon::DdsBridge bridge(config, "cam", camera);
+  sl::pipeline::CameraProjectorCalibration calibration;
+  calibration.camera = {64, 48, 50, 50, 32, 24};  // width, height, fx, fy, cx, cy
+  sl::daemon::DdsBridge bridge(config, "cam", calibration);
   CHECK_FALSE(bridge.resultContents().keeps_clouds);  // packed: the bridge's buffers are held
   dds::Participant participant;
   const std::string topic_name = sl::daemon::TopicNames::forNamespace(config.ns).points;

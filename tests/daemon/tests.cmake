@@ -41,7 +41,7 @@ target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
 target_include_directories(test_engine PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
 
 # The DDS edge without DDS: message builders, request dispatch, frame ids.
-sl_add_test(test_messages daemon/test_messages.cpp)
+sl_add_test(test_messages daemon/test_messages.cpp daemon/test_ros_graph.cpp)
 target_link_libraries(test_messages PRIVATE sl_daemon sl_idl)
 target_include_directories(test_messages PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)
 

@@ -2,6 +2,7 @@
 // YAML in one place (config.cpp). Components never see YAML.
 #pragma once
 
+#include <array>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -44,6 +45,18 @@ struct RequestLimits {
   std::size_t max_clients = 256;
 };
 
+// The sensor's frames on /tf_static (`dds.tf`, docs/ros2.md "tf"): parent ->
+// base (the mount pose) -> each camera's optical frame; the first camera's
+// optical frame -> the projector's.
+struct TfConfig {
+  bool publish = true;
+  std::string parent_frame;  // "" = no mount transform: base_frame is a root
+  std::string base_frame = "sl_base_link";  // REP 103 axes (x forward, z up) at the first camera
+  std::string projector_frame = "sl_projector_optical_frame";
+  std::array<double, 3> mount_xyz_m{0, 0, 0};       // base_frame's origin in parent_frame
+  std::array<double, 4> mount_xyzw{0, 0, 0, 1};     // its rotation (unit quaternion x y z w)
+};
+
 struct DdsConfig {
   int domain_id = 0;
   std::string ns = "sl";              // topics are rt/<ns>/points, rq/<ns>/commandRequest, ...
@@ -65,6 +78,7 @@ struct DdsConfig {
   TopicQos maps_qos{true, 2, 0.2};
   TopicQos image_sets_qos{true, 2, 0.2};
   RequestLimits requests;
+  TfConfig tf;
 };
 
 // Linear-motion compensation (paper section 2.4.2), off by default.

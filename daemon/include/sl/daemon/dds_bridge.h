@@ -19,8 +19,12 @@
 //   rt/<ns>/status          sl_msgs Status (transient-local)
 //   rq/<ns>/commandRequest  sl_msgs CommandRequest (from clients)
 //   rr/<ns>/commandReply    sl_msgs CommandReply (one per request)
+//   rt/tf_static            tf2_msgs/TFMessage, the sensor's frames (dds.tf)
+//   rt/diagnostics          diagnostic_msgs/DiagnosticArray, 1 Hz
+//   ros_discovery_info      rmw_dds_common/ParticipantEntitiesInfo: node /<ns>/sl_sensord
 #pragma once
 
+#include <map>
 #include <memory>
 #include <string>
 
@@ -54,9 +58,13 @@ class DdsBridge {
  public:
   // Creates the participant, topics, writers and the request reader; throws
   // sl::dds::Error naming the failing call.
-  // `camera_id`, `camera`: the first camera (frame dds.frame_id) and its
-  // model, for camera_info.
-  DdsBridge(const DdsConfig& config, const std::string& camera_id, const pipeline::PinholeModel& camera);
+  // `camera_id`, `calibration`: the first camera (frame dds.frame_id) and its
+  // calibration (camera_info, /tf_static); `other_cameras`: the further
+  // cameras' calibrations by camera id (/tf_static, /diagnostics). Throws
+  // ConfigError when the dds.tf frames collide.
+  DdsBridge(const DdsConfig& config, const std::string& camera_id,
+            const pipeline::CameraProjectorCalibration& calibration,
+            const std::map<std::string, pipeline::CameraProjectorCalibration>& other_cameras = {});
   ~DdsBridge();
 
   // What the engine's results must carry for the configured topics: clouds
