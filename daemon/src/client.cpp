@@ -280,6 +280,10 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.publish_ms = s.publish_ms;
       info.requests_rejected = s.requests_rejected;
       info.clouds_lost_to_readers = s.clouds_lost_to_readers;
+      info.decode_modulated_fraction = s.decode_modulated_fraction;
+      info.decode_consistent_fraction = s.decode_consistent_fraction;
+      info.decode_residual_median = s.decode_residual_median;
+      info.clouds_implausible = s.clouds_implausible;
       for (std::uint32_t k = 0; k < s.points_readers._length; ++k) {
         const auto& r = s.points_readers._buffer[k];
         info.points_readers.push_back(

@@ -19,6 +19,7 @@
 #include "aravis_config_yaml.h"
 #include "sl/drivers/recording.h"
 #include "yaml_reader.h"
+#include "sl/daemon/input_file.h"
 
 namespace sl::daemon {
 
@@ -221,6 +222,7 @@ void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   else if (trigger == "software") r.trigger = TriggerMode::kSoftware;
   else m.fail("trigger", "must be hardware or software, not '" + trigger + "'");
   r.stall_timeout_s = m.get<double>("stall_timeout_s", r.stall_timeout_s);
+  r.publish_implausible = m.get<bool>("publish_implausible", r.publish_implausible);
   if (!(r.stall_timeout_s >= 0.1 && r.stall_timeout_s <= 3600))
     m.fail("stall_timeout_s", "must be in [0.1, 3600] seconds");
   r.prefault_memory = m.get<bool>("prefault_memory", r.prefault_memory);
@@ -434,7 +436,7 @@ DaemonConfig parseText(const std::string& text, const std::string& origin,
                        const std::filesystem::path& base_dir) {
   YAML::Node root;
   try {
-    root = YAML::Load(text);
+    root = parseInputYaml(text, origin);
   } catch (const YAML::Exception& e) {
     throw ConfigError(origin + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " +
                       e.msg);
@@ -459,11 +461,8 @@ DaemonConfig parseConfig(const std::string& yaml_text, const std::string& origin
 }
 
 DaemonConfig loadConfig(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ConfigError(path + ": cannot open config file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parseText(text.str(), path, std::filesystem::path(path).parent_path());
+  return parseText(readInputFile(path, InputKind::kConfig), path,
+                   std::filesystem::path(path).parent_path());
 }
 
 }  // namespace sl::daemon

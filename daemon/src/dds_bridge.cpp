@@ -13,6 +13,7 @@
 #include "malformed_samples.h"
 #include "reader_acks.h"
 #include "request_dispatch.h"
+#include "request_origin.h"
 #include "service_bridge.h"
 #include "ros_messages.h"
 #include "sl/daemon/cloud_layout.h"
@@ -181,6 +182,7 @@ struct DdsBridge::Impl {
   std::atomic<std::uint64_t> writes_timed_out{0};
   // Requests: sizes, rate limits, retries, counters (request loop only).
   RequestDispatcher dispatcher{config.requests};
+  RequestOrigins origins;  // the participant of each request's writer (request loop only)
   // ROS 2 services (<ns>/start, stop, ...) through the same dispatcher.
   ServiceBridge services{participant, config.ns};
   std::uint64_t requests_rejected = 0;  // the request reader's sample-rejected count (status thread)
@@ -231,7 +233,9 @@ void DdsBridge::Impl::serveRequests(CommandTarget& target) {
       const std::int64_t now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
                                       std::chrono::steady_clock::now().time_since_epoch())
                                       .count();
-      const std::optional<ReplyValues> reply = dispatcher.dispatch(requests[i], target, now_ns);
+      const SenderId sender =
+          origins.senderOf(request_reader.handle(), requests.info(i).publication_handle);
+      const std::optional<ReplyValues> reply = dispatcher.dispatch(requests[i], sender, target, now_ns);
       if (!reply) continue;
       const ReplyMessage message(reply->client_id, reply->request_id, reply->result, reply->patterns,
                                  reply->detail);

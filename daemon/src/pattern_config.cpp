@@ -10,6 +10,7 @@
 
 #include "pattern_config_yaml.h"
 #include "sl/daemon/config_error.h"
+#include "sl/daemon/input_file.h"
 
 namespace sl::daemon {
 
@@ -20,18 +21,14 @@ using pipeline::PatternSpec;
 
 YAML::Node loadYaml(const std::string& text, const std::string& origin) {
   try {
-    return YAML::Load(text);
+    return parseInputYaml(text, origin);
   } catch (const YAML::Exception& e) {
     throw ConfigError(origin + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
   }
 }
 
 std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ConfigError(path + ": cannot open pattern file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
+  return readInputFile(path, InputKind::kPattern);
 }
 
 void parseSinusoid(const YamlMap& m, PatternSpec& p) {

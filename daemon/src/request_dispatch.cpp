@@ -79,15 +79,15 @@ CommandResult RequestDispatcher::carryOut(const Request& request, CommandTarget&
   }
 }
 
-std::optional<ReplyValues> RequestDispatcher::dispatch(const Request& request, CommandTarget& target,
-                                                       std::int64_t now_ns) {
+std::optional<ReplyValues> RequestDispatcher::dispatch(const Request& request, SenderId sender,
+                                                       CommandTarget& target, std::int64_t now_ns) {
   ++guard_.counters.received;
-  if (!guard_.admit(request.client_id ? request.client_id : "", now_ns)) {
+  if (!guard_.admit(sender, now_ns)) {
     // Counted, not answered (a flood must not cost a reply each); logged at
     // most every 200 refusals.
     if (guard_.counters.rate_limited++ == rate_limited_logged_) {
       logWarning("requests over the rate limit of " + std::to_string(guard_.limits().rate_hz) +
-                 "/s from client " + excerpt(request.client_id, 64) +
+                 "/s from the participant of client " + excerpt(request.client_id, 64) +
                  " are not answered (counted in status)");
       rate_limited_logged_ = guard_.counters.rate_limited + 200;
     }
@@ -103,7 +103,7 @@ std::optional<ReplyValues> RequestDispatcher::dispatch(const Request& request, C
   reply.request_id = request.request_id;
   const bool changes_state = changesState(request);
   const CommandResult* earlier =
-      changes_state ? guard_.repeated(reply.client_id, request.request_id) : nullptr;
+      changes_state ? guard_.repeated(sender, reply.client_id, request.request_id) : nullptr;
   if (!size_problem.empty()) {
     ++guard_.counters.invalid;
     reply.result = {CommandResult::Code::kInvalidOption, size_problem};
@@ -111,7 +111,7 @@ std::optional<ReplyValues> RequestDispatcher::dispatch(const Request& request, C
     reply.result = *earlier;  // a client's retry: the first answer again
   } else {
     reply.result = carryOut(request, target);
-    if (changes_state) guard_.remember(reply.client_id, request.request_id, reply.result);
+    if (changes_state) guard_.remember(sender, reply.client_id, request.request_id, reply.result);
   }
   static const char* kCommands[] = {"start", "stop", "set_pattern", "list_patterns", "get_config"};
   const int command = static_cast<int>(request.command);

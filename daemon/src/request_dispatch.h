@@ -47,11 +47,12 @@ class RequestDispatcher {
   explicit RequestDispatcher(const RequestLimits& limits) : guard_(limits) {}
 
   // Counts `request` as received and carries it out on `target`: the reply
-  // to write, or nullopt when the client is over its rate limit (counted in
-  // rate_limited, logged at most every 200 refusals). `now_ns`: a steady
-  // clock, for the rate limit.
-  std::optional<ReplyValues> dispatch(const msg::Request& request, CommandTarget& target,
-                                      std::int64_t now_ns);
+  // to write, or nullopt when its sender (the writer's participant,
+  // RequestOrigins) is over its rate limit (counted in rate_limited, logged
+  // at most every 200 refusals). `now_ns`: a steady clock, for the rate
+  // limit.
+  std::optional<ReplyValues> dispatch(const msg::Request& request, SenderId sender,
+                                      CommandTarget& target, std::int64_t now_ns);
   // Whether the reply to the last dispatched request was written (answered)
   // or timed out on the reliable writer (replies_timed_out).
   void replied(bool written);

@@ -43,9 +43,8 @@ bool RequestGuard::take(Bucket& bucket, std::int64_t now_ns) {
   return true;
 }
 
-bool RequestGuard::admit(const std::string& full_client_id, std::int64_t now_ns) {
-  const std::string client_id = full_client_id.substr(0, limits_.max_string);
-  auto it = buckets_.find(client_id);
+bool RequestGuard::admit(SenderId sender, std::int64_t now_ns) {
+  auto it = buckets_.find(sender);
   if (it == buckets_.end()) {
     if (buckets_.size() >= limits_.max_clients) {
       // Forget clients whose bucket has refilled (idle for burst / rate s).
@@ -57,22 +56,23 @@ bool RequestGuard::admit(const std::string& full_client_id, std::int64_t now_ns)
       if (!shared_started_) shared_ = {limits_.burst, now_ns}, shared_started_ = true;
       return take(shared_, now_ns);
     }
-    it = buckets_.emplace(client_id, Bucket{limits_.burst, now_ns}).first;
+    it = buckets_.emplace(sender, Bucket{limits_.burst, now_ns}).first;
   }
   return take(it->second, now_ns);
 }
 
-const RequestGuard::Answer* RequestGuard::repeated(const std::string& client_id,
+const RequestGuard::Answer* RequestGuard::repeated(SenderId sender, const std::string& client_id,
                                                    std::uint64_t request_id) const {
   for (const auto& r : replies_)
-    if (r.request_id == request_id && r.client_id == client_id) return &r.answer;
+    if (r.request_id == request_id && r.sender == sender && r.client_id == client_id)
+      return &r.answer;
   return nullptr;
 }
 
-void RequestGuard::remember(const std::string& client_id, std::uint64_t request_id,
-                            Answer answer) {
+void RequestGuard::remember(SenderId sender, const std::string& client_id,
+                            std::uint64_t request_id, Answer answer) {
   if (replies_.size() >= kRememberedReplies) replies_.pop_front();
-  replies_.push_back({client_id, request_id, std::move(answer)});
+  replies_.push_back({sender, client_id, request_id, std::move(answer)});
 }
 
 }  // namespace sl::daemon

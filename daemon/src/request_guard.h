@@ -1,10 +1,13 @@
 // What the daemon checks of a request before the engine sees it (private to
 // daemon/): string and list sizes (refused with INVALID_OPTION, the value
-// never echoed beyond a short prefix) and a rate limit per client id (a
-// token bucket each, plus one bucket shared by all clients beyond
-// kMaxClients, so rotating ids buys no more). Counters feed the status
-// topic: every request taken from DDS is either answered or counted here.
-// Not thread-safe: used by the bridge's request loop only.
+// never echoed beyond a short prefix) and a rate limit per sender: a token
+// bucket for each DDS participant that writes requests (request_origin.h),
+// not for each self-declared client_id, so that 1,000 made-up ids from one
+// participant share that participant's allowance and a client of another
+// participant keeps its own. Beyond limits.max_clients senders (idle ones
+// are forgotten first) the newcomers share one bucket. Counters feed the
+// status topic: every request taken from DDS is either answered or counted
+// here. Not thread-safe: used by the bridge's request loop only.
 #pragma once
 
 #include <cstdint>
@@ -25,6 +28,10 @@ struct RequestCounters {
   std::uint64_t invalid = 0;       // answered with INVALID_OPTION by the size checks
 };
 
+// Who wrote a request: the DDS instance handle of the writer's participant
+// (RequestOrigins::senderOf), or any value a test picks.
+using SenderId = std::uint64_t;
+
 class RequestGuard {
  public:
   explicit RequestGuard(RequestLimits limits = {}) : limits_(limits) {}
@@ -33,16 +40,18 @@ class RequestGuard {
   // the field, its length and at most 32 of its first bytes, log-safe.
   std::string checkSizes(const msg::Request& request) const;
 
-  // True if the client may send this request now (takes one token).
-  // `client_id` is used up to max_string bytes.
-  bool admit(const std::string& client_id, std::int64_t now_ns);
+  // True if `sender` may send a request now (takes one of its tokens).
+  bool admit(SenderId sender, std::int64_t now_ns);
 
-  // The reply already sent to (client_id, request_id), if it is among the
-  // last kRememberedReplies: a client's retry of a request whose reply it
-  // missed gets the same answer instead of a second execution.
+  // The reply already sent to (sender, client_id, request_id), if it is
+  // among the last kRememberedReplies: a client's retry of a request whose
+  // reply it missed gets the same answer instead of a second execution (and
+  // another participant cannot pre-empt it by reusing its ids).
   using Answer = CommandResult;
-  const Answer* repeated(const std::string& client_id, std::uint64_t request_id) const;
-  void remember(const std::string& client_id, std::uint64_t request_id, Answer answer);
+  const Answer* repeated(SenderId sender, const std::string& client_id,
+                         std::uint64_t request_id) const;
+  void remember(SenderId sender, const std::string& client_id, std::uint64_t request_id,
+                Answer answer);
   static constexpr std::size_t kRememberedReplies = 64;
 
   RequestCounters counters;
@@ -56,9 +65,10 @@ class RequestGuard {
   bool take(Bucket& bucket, std::int64_t now_ns);
 
   RequestLimits limits_;
-  std::unordered_map<std::string, Bucket> buckets_;
+  std::unordered_map<SenderId, Bucket> buckets_;
   Bucket shared_;
   struct Remembered {
+    SenderId sender = 0;
     std::string client_id;
     std::uint64_t request_id = 0;
     Answer answer;

@@ -231,6 +231,10 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.publish_ms = s.publish_ms;
   msg.requests_rejected = edge.requests_rejected;
   msg.clouds_lost_to_readers = edge.clouds_lost_to_readers;
+  msg.decode_modulated_fraction = s.decode_modulated_fraction;
+  msg.decode_consistent_fraction = s.decode_consistent_fraction;
+  msg.decode_residual_median = s.decode_residual_median;
+  msg.clouds_implausible = s.clouds_implausible;
   for (const MatchedReaderState& r : edge.points_readers) reader_guids_.push_back(r.guid);
   points_readers_.resize(edge.points_readers.size());
   for (std::size_t i = 0; i < points_readers_.size(); ++i) {

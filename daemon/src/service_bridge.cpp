@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "malformed_samples.h"
+#include "request_origin.h"
 #include "ros2_service.h"
 #include "sl/daemon/log.h"
 #include "sl_msgs/srv/GetConfig.h"
@@ -93,7 +94,10 @@ struct ServiceBridge::Impl {
         command.request_id = static_cast<std::uint64_t>(request.request_header_seq);
         command.pattern = command.recording = empty.data();
         fill(request, command);
-        const std::optional<ReplyValues> reply = dispatcher.dispatch(command, target, steadyNs());
+        const SenderId sender =
+            origins.senderOf(service.reader().handle(), requests.info(i).publication_handle);
+        const std::optional<ReplyValues> reply =
+            dispatcher.dispatch(command, sender, target, steadyNs());
         if (!reply) continue;  // rate-limited: counted by the dispatcher
         dispatcher.replied(respond(request, requests.info(i), *reply));
       }
@@ -108,6 +112,7 @@ struct ServiceBridge::Impl {
   dds::ServiceEndpoints<ListReq, ListResp> list_patterns;
   dds::ServiceEndpoints<ConfigReq, ConfigResp> get_config;
   std::uint64_t fast_dds = 0;
+  RequestOrigins origins;  // the participant of each request's writer
 };
 
 ServiceBridge::ServiceBridge(const dds::Participant& participant, const std::string& ns)

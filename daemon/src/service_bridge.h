@@ -6,7 +6,8 @@
 // sizes, rate limits, retries and the status counters are the command
 // topic's: every request is answered, or counted (rate-limited, reply timed
 // out). The client id the dispatcher sees is "ros2:" and the request
-// header's guid in hex, the request id its sequence number.
+// header's guid in hex, the request id its sequence number; the rate limit
+// is the writer's participant's, shared with its command-topic requests.
 //
 // A request from a Fast DDS writer (rmw_fastrtps frames services in the RTPS
 // sample identity, which Cyclone DDS cannot write) is not carried out: it is

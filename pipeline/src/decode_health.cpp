@@ -10,6 +10,10 @@
 #include <stdexcept>
 #include <utility>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "frame_layout.h"
 
 namespace sl::pipeline {
@@ -23,22 +27,6 @@ bool modulatedStatus(std::uint8_t s) {
   return s == static_cast<std::uint8_t>(PixelStatus::kValid) ||
          s == static_cast<std::uint8_t>(PixelStatus::kUnwrapInconsistent) ||
          s == static_cast<std::uint8_t>(PixelStatus::kOutOfRange);
-}
-
-bool hasConsistencyTest(const PatternSpec& spec) {
-  switch (spec.family) {
-    case PatternFamily::kPhaseShift:
-    case PatternFamily::kTwoPlusOne:
-    case PatternFamily::kModulatedPhaseShift:
-      return spec.frequencies.size() >= 2;
-    case PatternFamily::kMicroPhaseShift:
-      return true;
-    case PatternFamily::kGrayPhaseShift:
-      return spec.complementary;
-    case PatternFamily::kGrayCode:
-      return false;
-  }
-  return false;
 }
 
 // Value of `sorted` at quantile q (nearest rank).
@@ -138,6 +126,45 @@ std::string fixed(double v, int digits) {
   return text;
 }
 
+// The judgement of `h` (counts and residual quantiles filled in) against
+// `limits`: problems, warnings, implausible.
+void judge(const PatternSpec& spec, const DecodeHealthLimits& limits, DecodeHealth& h) {
+  const std::int64_t modulated = h.modulated();
+  if (modulated < limits.min_modulated_pixels) {
+    h.warnings.push_back(std::to_string(modulated) + " modulated pixels (fewer than " +
+                         std::to_string(limits.min_modulated_pixels) +
+                         "): too few to judge whether the pattern description fits the frames");
+  } else if (h.has_residual) {
+    if (h.inconsistentFraction() > limits.max_inconsistent_fraction)
+      h.problems.push_back(percent(h.inconsistentFraction()) +
+                           " of modulated pixels fail unwrapping (limit " +
+                           percent(limits.max_inconsistent_fraction) +
+                           "): does the pattern file match the projected sequence "
+                           "(frequencies and their order, steps, frame order), and is the "
+                           "projector's response compensated (decoder.projector_gamma)?");
+    if (h.residual_median > limits.max_median_residual)
+      h.problems.push_back("median unwrapping residual " + fixed(h.residual_median, 3) +
+                           " (limit " + fixed(limits.max_median_residual, 3) +
+                           "; 0.25 is what a description that does not fit the frames gives)");
+  }
+  if (modulated >= limits.min_modulated_pixels &&
+      h.outOfRangeFraction() > limits.max_out_of_range_fraction)
+    h.problems.push_back(percent(h.outOfRangeFraction()) +
+                         " of modulated pixels decode outside the projector (limit " +
+                         percent(limits.max_out_of_range_fraction) +
+                         "): is the fringe pitch, period or projector size of the pattern file "
+                         "the projected one?");
+  if (h.saturatedFraction() > limits.max_saturated_fraction)
+    h.warnings.push_back(percent(h.saturatedFraction()) +
+                         " of pixels saturated (limit " + percent(limits.max_saturated_fraction) +
+                         "): lower the exposure, or decode them anyway with --keep-saturated");
+  if (!h.has_residual)
+    h.warnings.push_back("pattern '" + spec.name +
+                         "' has no consistency test (one frequency, or Gray code without the "
+                         "complementary bit): a wrong description cannot be seen in one scan");
+  h.implausible = !h.problems.empty();
+}
+
 }  // namespace
 
 double DecodeHealth::modulatedFraction() const {
@@ -154,6 +181,121 @@ double DecodeHealth::outOfRangeFraction() const {
 }
 double DecodeHealth::saturatedFraction() const {
   return pixels > 0 ? double(saturated) / double(pixels) : 0.0;
+}
+
+bool hasConsistencyTest(const PatternSpec& spec) {
+  switch (spec.family) {
+    case PatternFamily::kPhaseShift:
+    case PatternFamily::kTwoPlusOne:
+    case PatternFamily::kModulatedPhaseShift:
+      return spec.frequencies.size() >= 2;
+    case PatternFamily::kMicroPhaseShift:
+      return true;
+    case PatternFamily::kGrayPhaseShift:
+      return spec.complementary;
+    case PatternFamily::kGrayCode:
+      return false;
+  }
+  return false;
+}
+
+namespace {
+
+// Adds to n[k] the count of bytes equal to k (k = 0..3) in st[0, width).
+void countStatusRow(const std::uint8_t* st, int width, std::uint32_t* n) {
+  int x = 0;
+#if defined(__SSE2__)
+  // Byte lanes count up to 255 compares, then are summed (sad against 0).
+  const __m128i zero = _mm_setzero_si128();
+  const __m128i k[4] = {_mm_set1_epi8(0), _mm_set1_epi8(1), _mm_set1_epi8(2), _mm_set1_epi8(3)};
+  while (x + 16 <= width) {
+    __m128i a[4] = {zero, zero, zero, zero};
+    for (int i = 0; i < 255 && x + 16 <= width; ++i, x += 16) {
+      const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(st + x));
+      for (int c = 0; c < 4; ++c) a[c] = _mm_sub_epi8(a[c], _mm_cmpeq_epi8(v, k[c]));
+    }
+    for (int c = 0; c < 4; ++c) {
+      const __m128i s = _mm_sad_epu8(a[c], zero);
+      n[c] += static_cast<std::uint32_t>(_mm_cvtsi128_si32(s) + _mm_extract_epi16(s, 4));
+    }
+  }
+#endif
+  for (; x < width; ++x)
+    if (st[x] < 4) ++n[st[x]];
+}
+
+}  // namespace
+
+void DecodeTally::addRows(const ProjectorMaps& maps, int row_begin, int row_end, bool with_residual,
+                          int image_row) {
+  const int width = maps.status.cols;
+  for (int y = row_begin; y < row_end; ++y) {
+    const auto* st = maps.status.ptr<std::uint8_t>(y);
+    std::uint32_t n[4] = {0, 0, 0, 0};  // the first four codes; the rest is 4
+    countStatusRow(st, width, n);
+    status[0] += n[0];
+    status[1] += n[1];
+    status[2] += n[2];
+    status[3] += n[3];
+    status[4] += static_cast<std::int64_t>(width) - n[0] - n[1] - n[2] - n[3];
+    if (!with_residual || (image_row + (y - row_begin)) % kResidualStep != 0) continue;
+    const float* r = maps.residual.ptr<float>(y);
+    for (int x = 0; x < width; x += kResidualStep) {
+      // Valid (0), inconsistent (3) and out of range (4) are modulated.
+      if (st[x] == 1 || st[x] == 2) continue;
+      const float bin = r[x] * static_cast<float>(1.0 / kBinWidth);
+      // NaN and anything from 0.5 up land in the last bin.
+      const int b = bin >= 0.0f && bin < static_cast<float>(kBins) ? static_cast<int>(bin) : kBins;
+      ++residual[static_cast<std::size_t>(b)];
+    }
+  }
+}
+
+void DecodeTally::add(const DecodeTally& other) {
+  for (std::size_t i = 0; i < status.size(); ++i) status[i] += other.status[i];
+  for (std::size_t i = 0; i < residual.size(); ++i) residual[i] += other.residual[i];
+}
+
+namespace {
+
+// Quantile q of the tally's residuals, linear within the bin it falls in
+// (the last bin, >= 0.5, counts as 0.5).
+double tallyQuantile(const DecodeTally& t, std::int64_t total, double q) {
+  const double rank = q * static_cast<double>(total);
+  double below = 0;
+  for (int b = 0; b < DecodeTally::kBins; ++b) {
+    const double n = static_cast<double>(t.residual[static_cast<std::size_t>(b)]);
+    if (below + n >= rank && n > 0) return (b + (rank - below) / n) * DecodeTally::kBinWidth;
+    below += n;
+  }
+  return DecodeTally::kBins * DecodeTally::kBinWidth;
+}
+
+}  // namespace
+
+DecodeHealth judgeDecodeTally(const PatternSpec& spec, const DecoderOptions& options,
+                              const DecodeTally& t, const DecodeHealthLimits& limits) {
+  DecodeHealth h;
+  h.has_residual = hasConsistencyTest(spec);
+  h.max_unwrap_error = options.max_unwrap_error;
+  h.valid = t.status[0];
+  h.low_modulation = t.status[1];
+  h.saturated = t.status[2];
+  h.inconsistent = t.status[3];
+  h.out_of_range = t.status[4];
+  h.pixels = h.valid + h.low_modulation + h.saturated + h.inconsistent + h.out_of_range;
+  std::int64_t total = 0;
+  for (std::int64_t n : t.residual) total += n;
+  if (h.has_residual && total > 0) {
+    // Ten fine bins per coarse one (0.05 / 0.005); the last is >= 0.5.
+    for (int b = 0; b <= DecodeTally::kBins; ++b)
+      h.residual_histogram[static_cast<std::size_t>(std::min(b / 10, 10))] +=
+          static_cast<double>(t.residual[static_cast<std::size_t>(b)]) / static_cast<double>(total);
+    h.residual_median = tallyQuantile(t, total, 0.5);
+    h.residual_p90 = tallyQuantile(t, total, 0.9);
+  }
+  judge(spec, limits, h);
+  return h;
 }
 
 DecodeHealth measureDecodeHealth(const PatternSpec& spec, const DecoderOptions& options,
@@ -209,40 +351,7 @@ DecodeHealth measureDecodeHealth(const PatternSpec& spec, const DecoderOptions& 
                      ? modulationPerSet<std::uint8_t>(sets, frames, maps.status, dn_scale)
                      : modulationPerSet<std::uint16_t>(sets, frames, maps.status, dn_scale);
 
-  // Judgement.
-  const std::int64_t modulated = h.modulated();
-  if (modulated < limits.min_modulated_pixels) {
-    h.warnings.push_back(std::to_string(modulated) + " modulated pixels (fewer than " +
-                         std::to_string(limits.min_modulated_pixels) +
-                         "): too few to judge whether the pattern description fits the frames");
-  } else if (h.has_residual) {
-    if (h.inconsistentFraction() > limits.max_inconsistent_fraction)
-      h.problems.push_back(percent(h.inconsistentFraction()) +
-                           " of modulated pixels fail unwrapping (limit " +
-                           percent(limits.max_inconsistent_fraction) +
-                           "): does the pattern file match the projected sequence "
-                           "(frequencies and their order, steps, frame order)?");
-    if (h.residual_median > limits.max_median_residual)
-      h.problems.push_back("median unwrapping residual " + fixed(h.residual_median, 3) +
-                           " (limit " + fixed(limits.max_median_residual, 3) +
-                           "; 0.25 is what a description that does not fit the frames gives)");
-  }
-  if (modulated >= limits.min_modulated_pixels &&
-      h.outOfRangeFraction() > limits.max_out_of_range_fraction)
-    h.problems.push_back(percent(h.outOfRangeFraction()) +
-                         " of modulated pixels decode outside the projector (limit " +
-                         percent(limits.max_out_of_range_fraction) +
-                         "): is the fringe pitch, period or projector size of the pattern file "
-                         "the projected one?");
-  if (h.saturatedFraction() > limits.max_saturated_fraction)
-    h.warnings.push_back(percent(h.saturatedFraction()) +
-                         " of pixels saturated (limit " + percent(limits.max_saturated_fraction) +
-                         "): lower the exposure, or decode them anyway with --keep-saturated");
-  if (!h.has_residual)
-    h.warnings.push_back("pattern '" + spec.name +
-                         "' has no consistency test (one frequency, or Gray code without the "
-                         "complementary bit): a wrong description cannot be seen in one scan");
-  h.implausible = !h.problems.empty();
+  judge(spec, limits, h);
   return h;
 }
 

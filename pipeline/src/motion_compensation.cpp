@@ -120,106 +120,141 @@ inline T bilinearAt(const T* top, const T* bottom, int c0, float a, float b) {
   return T(std::clamp(v, 0.0f, float(std::numeric_limits<T>::max())));
 }
 
-// A run of pixels [begin, end) whose sources are all the same whole offset
-// (dx px, and source row r0) from them, up to resampleRow's margin, and
-// inside the frame: two contiguous source rows, no gathers, so it
-// vectorizes.
+// A cell of pixels [begin, begin + n) of a row whose sources all lie
+// between the same two pixel pairs, up to resampleRow's margin: columns
+// c + dx and c + dx + 1 of source rows r0 and r0 + 1, at weights
+// a0 + w sa (along x) and b0 + w sb (along y), w = c - begin. Two contiguous
+// source rows, no gathers, so it vectorizes.
+struct Cell {
+  int begin, n, dx, r0;
+  float a0, sa, b0, sb;
+};
+
+// kGridStep lanes of floats and of pixels (GCC vector extensions: the
+// clones of SL_MULTIVERSION lower them to their own vector width).
+typedef float CellFloats __attribute__((vector_size(kGridStep * sizeof(float))));
+typedef std::int32_t CellInts __attribute__((vector_size(kGridStep * sizeof(std::int32_t))));
 template <typename T>
-SL_MULTIVERSION void resampleRun(const T* __restrict top, const T* __restrict bottom, const float* __restrict x,
-                        const float* __restrict y, int begin, int end, int dx, int r0, T* __restrict out) {
-  for (int c = begin; c < end; ++c)
-    out[c] = bilinearAt(top + dx, bottom + dx, c, x[c] - float(c + dx), y[c] - float(r0));
+struct CellPixels;
+template <>
+struct CellPixels<std::uint8_t> {
+  typedef std::uint8_t type __attribute__((vector_size(kGridStep)));
+};
+template <>
+struct CellPixels<std::uint16_t> {
+  typedef std::uint16_t type __attribute__((vector_size(kGridStep * 2)));
+};
+
+template <typename T>
+inline CellFloats loadCell(const T* p) {
+  // Widened by a loop (vectorized as one zero extension): GCC lowers
+  // __builtin_convertvector from 8-bit lanes lane by lane.
+  std::int32_t wide[kGridStep];
+  for (int w = 0; w < kGridStep; ++w) wide[w] = p[w];
+  CellInts v;
+  std::memcpy(&v, wide, sizeof(v));
+  return __builtin_convertvector(v, CellFloats);
+}
+
+// One full cell: bilinearAt for each of its kGridStep pixels, the same
+// operations in the same order. Rounding half to even by adding and
+// subtracting 1.5 * 2^23 (exact for |v| < 2^22, the default rounding mode,
+// as std::nearbyint), then saturated.
+template <typename T>
+inline void resampleCell(const T* __restrict top, const T* __restrict bottom, const Cell& cell,
+                         T* __restrict out) {
+  const CellFloats w = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+  static_assert(kGridStep == 16, "the lane indices above");
+  const CellFloats a = cell.a0 + w * cell.sa, b = cell.b0 + w * cell.sb;
+  const CellFloats t0 = loadCell(top), t1 = loadCell(top + 1);
+  const CellFloats u0 = loadCell(bottom), u1 = loadCell(bottom + 1);
+  const CellFloats upper = t0 + a * (t1 - t0);
+  const CellFloats lower = u0 + a * (u1 - u0);
+  CellFloats v = upper + b * (lower - upper);
+  constexpr float kRound = 12582912.0f;  // 1.5 * 2^23
+  v = (v + kRound) - kRound;
+  const float max = float(std::numeric_limits<T>::max());
+  v = v < 0.0f ? CellFloats{} : v;
+  v = v > max ? max + CellFloats{} : v;
+  const typename CellPixels<T>::type pixels =
+      __builtin_convertvector(__builtin_convertvector(v, CellInts), typename CellPixels<T>::type);
+  std::memcpy(out, &pixels, sizeof(pixels));
+}
+
+template <typename T>
+inline void resampleCells(const cv::Mat& frame, const Cell* cells, int count, T* __restrict out) {
+  for (int k = 0; k < count; ++k) {
+    const Cell& cell = cells[k];
+    const T* top = frame.ptr<T>(cell.r0) + cell.begin + cell.dx;
+    const T* bottom = frame.ptr<T>(cell.r0 + 1) + cell.begin + cell.dx;
+    if (cell.n == kGridStep) {
+      resampleCell<T>(top, bottom, cell, out + cell.begin);
+    } else {
+      for (int w = 0; w < cell.n; ++w)
+        out[cell.begin + w] =
+            bilinearAt(top, bottom, w, cell.a0 + float(w) * cell.sa, cell.b0 + float(w) * cell.sb);
+    }
+  }
 }
 
 // Row r of `frame` (width x height) resampled into `out`: out[c] = frame at
 // (c + dx(c), r + dy(c)), the displacement linear over each kGridStep-pixel
 // cell j between displacement[j] and displacement[j + 1] (grid_cols nodes,
 // the last at or beyond the last pixel). A pixel whose source lies even
-// partly outside the frame is 0 and set in `lack`. `x`, `y`: scratch of
-// `width` floats.
+// partly outside the frame is 0 and set in `lack`. `cells`: scratch of at
+// least grid_cols cells.
 //
 // Under motion along one axis nearly every cell's sources are one whole
 // offset from their pixels (it changes where the shift crosses a whole
-// pixel): consecutive such cells are resampled as one run (resampleRun).
+// pixel): such cells are resampled by resampleCells, the others pixel by
+// pixel.
 template <typename T>
-SL_MULTIVERSION void resampleRow(const cv::Mat& frame, int r, const cv::Vec2f* displacement, int grid_cols,
-                                 float* __restrict x, float* __restrict y, T* __restrict out,
-                                 std::uint8_t* __restrict lack) {
+SL_MULTIVERSION void resampleRow(const cv::Mat& frame, int r, const cv::Vec2f* displacement, int grid_cols, Cell* cells,
+                 T* __restrict out, std::uint8_t* __restrict lack) {
   const int width = frame.cols, height = frame.rows;
   const float last_x = float(width - 1), last_y = float(height - 1);
+  // A cell is resampled as one when its sources lie within kMargin of one
+  // whole offset's interval [dx, dx + 1] from their pixels and well inside
+  // the frame (given the range of x - c, y and x over it: linear along the
+  // cell, so its ends bound it). Within kMargin of a node the cell
+  // extrapolates its pair of pixels instead of switching to the next pair:
+  // the bilinear surface's value within kMargin px of the position (0.26 DN
+  // at most for 8 bit), so a shift of nearly whole pixels still takes it.
+  constexpr float kMargin = 1e-3f;
+  int count = 0;
   for (int j = 0; j + 1 < grid_cols && j * kGridStep < width; ++j) {
-    const int c_begin = j * kGridStep, c_end = std::min(width, c_begin + kGridStep);
+    const int c_begin = j * kGridStep, c_end = std::min(width, c_begin + kGridStep), n = c_end - c_begin;
     const cv::Vec2f d0 = displacement[j];
     const cv::Vec2f slope = (displacement[j + 1] - d0) * (1.0f / kGridStep);
-    for (int c = c_begin; c < c_end; ++c) {
-      const float w = float(c - c_begin);
-      x[c] = float(c) + d0[0] + w * slope[0];
-      y[c] = float(r) + d0[1] + w * slope[1];
-    }
-  }
-  // A stretch of pixels [begin, end) is one run when its sources lie within
-  // kMargin of one whole offset's interval [dx, dx + 1] from their pixels
-  // and well inside the frame (given the range of x - c, y and x over it).
-  // Classified cell by cell; consecutive cells of one offset make one run.
-  // Within kMargin of a node the run extrapolates its pair of pixels instead
-  // of switching to the next pair: the bilinear surface's value within
-  // kMargin px of the position (0.26 DN at most for 8 bit), so a shift of
-  // nearly whole pixels still takes the run.
-  constexpr float kMargin = 1e-3f;
-  struct Range {
-    float e_low, e_high, y_low, y_high, x_low, x_high;
-  };
-  auto runOf = [&](const Range& g, int begin, int end, int& dx, int& r0) {
-    dx = int(std::floor(g.e_low + kMargin));
-    r0 = int(std::floor(g.y_low + kMargin));
-    return g.e_high <= float(dx) + 1 + kMargin && g.y_high <= float(r0) + 1 + kMargin && g.y_low >= kMargin &&
-           g.y_high <= last_y - kMargin && r0 >= 0 && r0 + 1 <= height - 1 && g.x_low >= kMargin &&
-           g.x_high <= last_x - kMargin && begin + dx >= 0 && end + dx <= width - 1;
-  };
-  // The range over one cell: x - c and y are linear along it (up to
-  // rounding, ~1e-4 px at 1440 px, well below kMargin), so its ends bound it.
-  auto cellRange = [&](int begin, int end) {
-    const int last = end - 1;
-    const float e0 = x[begin] - float(begin), e1 = x[last] - float(last);
-    return Range{std::min(e0, e1), std::max(e0, e1), std::min(y[begin], y[last]), std::max(y[begin], y[last]),
-                 std::min(x[begin], x[last]), std::max(x[begin], x[last])};
-  };
-  int run_begin = 0, run_dx = 0, run_r0 = 0;
-  bool in_run = false;
-  auto flush = [&](int end) {
-    if (in_run)
-      resampleRun(frame.ptr<T>(run_r0), frame.ptr<T>(run_r0 + 1), x, y, run_begin, end, run_dx, run_r0, out);
-    in_run = false;
-  };
-  // Adds [begin, end) to the current run, or starts one.
-  auto extend = [&](int begin, int dx, int r0) {
-    if (in_run && (dx != run_dx || r0 != run_r0)) flush(begin);
-    if (!in_run) {
-      in_run = true;
-      run_begin = begin;
-      run_dx = dx;
-      run_r0 = r0;
-    }
-  };
-  for (int c_begin = 0; c_begin < width; c_begin += kGridStep) {
-    const int c_end = std::min(width, c_begin + kGridStep);
-    int dx = 0, r0 = 0;
-    if (c_end - c_begin >= 2 && runOf(cellRange(c_begin, c_end), c_begin, c_end, dx, r0)) {
-      extend(c_begin, dx, r0);
+    const float last_w = float(n - 1);
+    const float e0 = d0[0], e1 = d0[0] + last_w * slope[0];
+    const float y0 = float(r) + d0[1], y1 = float(r) + (d0[1] + last_w * slope[1]);
+    const float e_low = std::min(e0, e1), e_high = std::max(e0, e1);
+    const float y_low = std::min(y0, y1), y_high = std::max(y0, y1);
+    const float x_low = std::min(float(c_begin) + e0, float(c_end - 1) + e1);
+    const float x_high = std::max(float(c_begin) + e0, float(c_end - 1) + e1);
+    const int dx = int(std::floor(e_low + kMargin)), r0 = int(std::floor(y_low + kMargin));
+    if (n >= 2 && e_high <= float(dx) + 1 + kMargin && y_high <= float(r0) + 1 + kMargin && y_low >= kMargin &&
+        y_high <= last_y - kMargin && r0 >= 0 && r0 + 1 <= height - 1 && x_low >= kMargin &&
+        x_high <= last_x - kMargin && c_begin + dx >= 0 && c_end + dx <= width - 1) {
+      // b relative to r0 from the integer part first (r - r0 is exact).
+      cells[count++] = Cell{c_begin, n, dx, r0, d0[0] - float(dx), slope[0], float(r - r0) + d0[1], slope[1]};
       continue;
     }
-    flush(c_begin);
     for (int c = c_begin; c < c_end; ++c) {
-      if (!(x[c] >= 0 && y[c] >= 0 && x[c] <= last_x && y[c] <= last_y)) {
+      const float w = float(c - c_begin);
+      const float x = float(c) + d0[0] + w * slope[0];
+      const float y = float(r) + d0[1] + w * slope[1];
+      if (!(x >= 0 && y >= 0 && x <= last_x && y <= last_y)) {
         lack[c] = 1;
         out[c] = 0;
         continue;
       }
-      const int c0 = std::min(int(x[c]), width - 2), row0 = std::min(int(y[c]), height - 2);
-      out[c] = bilinearAt(frame.ptr<T>(row0), frame.ptr<T>(row0 + 1), c0, x[c] - float(c0), y[c] - float(row0));
+      const int c0 = std::min(int(x), width - 2), row0 = std::min(int(y), height - 2);
+      out[c] = bilinearAt(frame.ptr<T>(row0), frame.ptr<T>(row0 + 1), c0, x - float(c0), y - float(row0));
     }
   }
-  flush(width);
+  resampleCells(frame, cells, count, out);
 }
 
 }  // namespace
@@ -531,7 +566,7 @@ cv::Mat MotionCompensator::resample(const cv::Mat& frame, double shift, const Le
   const bool wide = frame.depth() == CV_16U;
   forBlocks(workers, height, kResampleBlockRows, [&](int begin, int end) {
     std::vector<cv::Vec2f> row_displacement(static_cast<std::size_t>(grid_cols));
-    std::vector<float> x(static_cast<std::size_t>(width)), y(static_cast<std::size_t>(width));
+    std::vector<Cell> cells(static_cast<std::size_t>(grid_cols));
     for (int r = begin; r < end; ++r) {
       const int i = lens ? std::min(r / kGridStep, grid_rows - 2) : 0;
       const float t = lens ? float(r - i * kGridStep) / kGridStep : 0.0f;
@@ -539,10 +574,10 @@ cv::Mat MotionCompensator::resample(const cv::Mat& frame, double shift, const Le
       const cv::Vec2f* lower = upper + grid_cols;
       for (int j = 0; j < grid_cols; ++j) row_displacement[std::size_t(j)] = upper[j] + t * (lower[j] - upper[j]);
       if (wide)
-        resampleRow(frame, r, row_displacement.data(), grid_cols, x.data(), y.data(),
+        resampleRow(frame, r, row_displacement.data(), grid_cols, cells.data(),
                     out.ptr<std::uint16_t>(r), lacking.ptr<std::uint8_t>(r));
       else
-        resampleRow(frame, r, row_displacement.data(), grid_cols, x.data(), y.data(),
+        resampleRow(frame, r, row_displacement.data(), grid_cols, cells.data(),
                     out.ptr<std::uint8_t>(r), lacking.ptr<std::uint8_t>(r));
     }
   });

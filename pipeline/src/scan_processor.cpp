@@ -1,5 +1,6 @@
 #include "sl/pipeline/scan_processor.h"
 
+#include <algorithm>
 #include <atomic>
 #include <stdexcept>
 #include <string>
@@ -25,7 +26,8 @@ bool isFree(const std::shared_ptr<T>& pool_ref) {
 
 }  // namespace
 
-ScanProcessor::ScanProcessor(int threads) : workers_(threads), bands_(workers_.threads()) {}
+ScanProcessor::ScanProcessor(int threads)
+    : workers_(threads), bands_(workers_.threads()), tallies_(workers_.threads()) {}
 
 std::shared_ptr<ProjectorMaps> ScanProcessor::freeMaps(Direction direction) {
   for (MapsSlot& slot : maps_pool_) {
@@ -71,8 +73,15 @@ ProjectorMaps triangulatorView(const ProjectorMaps& maps, Direction direction,
 
 ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triangulator,
                                   const CameraImages& images, TimestampNs stamp_ns,
-                                  const std::string& frame_id, Keep keep) {
+                                  const std::string& frame_id, Keep keep, DecodeTally* tally) {
   const std::vector<cv::Mat>& frames = images.frames;
+  const bool with_residual = tally != nullptr && hasConsistencyTest(codec.spec());
+  if (tally != nullptr) std::fill(tallies_.begin(), tallies_.end(), DecodeTally{});
+  auto mergeTallies = [&] {
+    if (tally == nullptr) return;
+    *tally = DecodeTally{};
+    for (const DecodeTally& t : tallies_) tally->add(t);
+  };
   const int bit_depth = images.bit_depth;
   const Direction direction = codec.spec().direction;
   std::shared_ptr<PointCloud> cloud = freeCloud();
@@ -90,9 +99,11 @@ ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triang
     workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int thread) {
       ProjectorMaps& band = bands_[thread];
       codec.decodeBand(frames, bit_depth, begin, end, band);
+      if (tally != nullptr) tallies_[thread].addRows(band, 0, end - begin, with_residual, begin);
       triangulator.triangulateBand(triangulatorView(band, direction, triangulator), begin, end,
                                    *cloud);
     });
+    mergeTallies();
     return ScanOutput{nullptr, std::move(cloud)};
   }
   std::shared_ptr<ProjectorMaps> maps = freeMaps(direction);
@@ -103,10 +114,12 @@ ScanOutput ScanProcessor::process(const Codec& codec, const Triangulator& triang
   triangulator.prepare(view, *cloud);
   cloud->frame_id = frame_id;
   cloud->stamp_ns = stamp_ns;
-  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int) {
+  workers_.run(frames.front().rows, kBlockRows, [&](int begin, int end, int thread) {
     codec.decodeRows(frames, bit_depth, begin, end, *maps);
+    if (tally != nullptr) tallies_[thread].addRows(*maps, begin, end, with_residual, begin);
     triangulator.triangulateRows(view, begin, end, *cloud);
   });
+  mergeTallies();
   return ScanOutput{std::move(maps), std::move(cloud)};
 }
 

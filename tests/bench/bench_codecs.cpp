@@ -22,6 +22,9 @@
 //   frames read, the cloud and optionally the maps written), the floor the
 //   processing cannot beat on this machine.
 //
+// - BM_DecodeHealthTally: the cloud-only scan without and with the decode
+//   health tally the daemon gathers per scan.
+//
 // - BM_DecodeGammaCompensation: 3+3 horizontal decode with and without the
 //   projector gamma compensation (decoder.projector_gamma 2.2), same frames.
 //
@@ -48,6 +51,7 @@
 #include <vector>
 
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/projector_response.h"
 #include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/scan_processor.h"
@@ -427,6 +431,55 @@ BENCHMARK(BM_DecodeTriangulatePaced)
     ->ArgNames({"pattern", "proj_iter", "threads"})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(40)
+    ->UseRealTime();
+
+// The daemon's per-scan decode health (docs/decode-health.md): the cloud-only
+// scan of BM_DecodeTriangulate without (tally:0) and with (tally:1) the
+// tally of status and residual that ScanProcessor gathers block by block,
+// plus judgeDecodeTally(); the difference is what decode health costs the
+// daemon.
+void BM_DecodeHealthTally(benchmark::State& state) {
+  const bool with_tally = state.range(0) != 0;
+  const int pattern = int(state.range(1));
+  const CameraImages in = images(pattern);
+  const Triangulator& t = triangulator(2);
+  ScanProcessor processor(int(state.range(2)));
+  DecodeTally tally;
+  for (auto _ : state) {
+    const ScanOutput out = processor.process(codec(pattern), t, in, 0, "cam", ScanProcessor::Keep::kCloud,
+                                             with_tally ? &tally : nullptr);
+    benchmark::DoNotOptimize(out.cloud->points.data());
+    if (with_tally) {
+      const DecodeHealth h = judgeDecodeTally(codec(pattern).spec(), codec(pattern).options(), tally);
+      benchmark::DoNotOptimize(h.residual_median);
+    }
+  }
+  reportScans(state);
+}
+
+// The tally alone over a decoded scan's maps (all rows at once, one thread):
+// Arg 0 = status counts only (a code without consistency test), 1 = with
+// the residual grid.
+void BM_DecodeTallyOnly(benchmark::State& state) {
+  const int pattern = 0;
+  const ProjectorMaps maps = codec(pattern).decode(frames(pattern), 8);
+  const bool with_residual = state.range(0) != 0;
+  for (auto _ : state) {
+    DecodeTally tally;
+    tally.addRows(maps, 0, maps.status.rows, with_residual, 0);
+    benchmark::DoNotOptimize(tally.status.data());
+  }
+  reportScans(state);
+}
+
+BENCHMARK(BM_DecodeTallyOnly)->ArgName("residual")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+BENCHMARK(BM_DecodeHealthTally)
+    ->ArgsProduct({{0, 1}, {0, 1}, {1, 2}})
+    ->ArgNames({"tally", "pattern", "threads"})
+    ->Unit(benchmark::kMillisecond)
+    ->MinWarmUpTime(0.3)
+    ->MeasureProcessCPUTime()
     ->UseRealTime();
 
 int main(int argc, char** argv) {

@@ -2,6 +2,9 @@
 // ConfigError naming the file, the line and the key.
 #include <catch2/catch.hpp>
 #include <limits>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <filesystem>
 
 #include <fstream>
 #include <regex>
@@ -318,7 +321,7 @@ TEST_CASE("a missing file and malformed YAML are one clear error") {
     sl::daemon::loadConfig("/nonexistent/sl.yaml");
     FAIL("no error");
   } catch (const sl::daemon::ConfigError& e) {
-    CHECK(std::string(e.what()) == "/nonexistent/sl.yaml: cannot open config file");
+    CHECK(std::string(e.what()) == "/nonexistent/sl.yaml: cannot open: No such file or directory (config file)");
   }
   const std::string message = errorOf("sensor: sim\nsim: {seed: [1,\n");
   CHECK(message.rfind("test.yaml:", 0) == 0);
@@ -426,4 +429,49 @@ TEST_CASE("a relative recording_root goes under the user's data folder, not besi
   if (old_home) ::setenv("HOME", saved_home.c_str(), 1); else ::unsetenv("HOME");
   CHECK(xdg.runtime.recording_root == "/home/u/data/sl-sensor/recordings");
   CHECK(home.runtime.recording_root == "/home/u/.local/share/sl-sensor/recordings");
+}
+
+// Issue 36 item 1: inputs that are not regular files or not bounded are one
+// ConfigError naming the file, refused before they are read (main hung on the
+// FIFO, grew without bound on /dev/zero, hung on the alias bomb).
+TEST_CASE("config files that are not regular, bounded, single YAML documents are refused",
+          "[files]") {
+  using sl::daemon::ConfigError;
+  using sl::daemon::loadConfig;
+  const std::string dir = "/tmp/sl_test_files_" + std::to_string(::getpid());
+  std::filesystem::create_directories(dir);
+  const auto refusedWith = [](const std::string& path, const std::string& words) {
+    try {
+      loadConfig(path);
+    } catch (const ConfigError& e) {
+      const std::string what = e.what();
+      INFO(what);
+      CHECK(what.rfind(path, 0) == 0);
+      CHECK(what.find(words) != std::string::npos);
+      return;
+    }
+    FAIL("accepted " << path);
+  };
+  const std::string fifo = dir + "/fifo.yaml";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  refusedWith(fifo, "FIFO");
+  refusedWith("/dev/zero", "device");
+  refusedWith(dir, "directory");
+  {
+    std::ofstream out(dir + "/bomb.yaml");
+    out << "a: &a [x, x, x, x, x, x, x, x, x]\n";
+    for (char c = 'b'; c <= 'z'; ++c)
+      out << c << ": &" << c << " [*" << char(c - 1) << ", *" << char(c - 1) << ", *"
+          << char(c - 1) << ", *" << char(c - 1) << "]\n";
+  }
+  refusedWith(dir + "/bomb.yaml", "aliases");
+  std::ofstream(dir + "/two.yaml") << "sensor: sim\n---\nsensor: hardware\n";
+  refusedWith(dir + "/two.yaml", "more than one YAML document");
+  {
+    std::ofstream out(dir + "/comments.yaml");
+    const std::string line(1023, '#');
+    for (int i = 0; i < 100 * 1024; ++i) out << line << '\n';  // 100 MB of comments
+  }
+  refusedWith(dir + "/comments.yaml", "more than the limit");
+  std::filesystem::remove_all(dir);
 }

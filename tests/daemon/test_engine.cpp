@@ -760,8 +760,12 @@ TEST_CASE("decoder.projector_gamma takes effect in the engine's decoding", "[eng
     return text.replace(at, from.size(), to);
   };
   const std::string shipped = sl::test::shippedSimConfigText();
-  const auto scan = [&](const std::string& text) {
-    const auto config = atTestRate(sl::daemon::parseConfig(text, std::string(SL_SOURCE_DIR) + "/config/sim.yaml"));
+  // With `publish_implausible`, a cloud whose decode health is implausible
+  // is published too (counted); without, the request ends with the cause.
+  std::string last_error;
+  const auto scan = [&](const std::string& text, bool publish_implausible = false) {
+    auto config = atTestRate(sl::daemon::parseConfig(text, std::string(SL_SOURCE_DIR) + "/config/sim.yaml"));
+    config.runtime.publish_implausible = publish_implausible;
     const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
     std::mutex mutex;
     std::shared_ptr<const sl::pipeline::PointCloud> cloud;
@@ -778,13 +782,27 @@ TEST_CASE("decoder.projector_gamma takes effect in the engine's decoding", "[eng
       }
       std::this_thread::sleep_for(50ms);
     }
+    if (!publish_implausible) {
+      // Without a cloud the request ends at once (an implausible decode).
+      for (int i = 0; i < 100 * sl::test::kTimeScale && engine.status().state != ScanState::kIdle; ++i)
+        std::this_thread::sleep_for(20ms);
+    }
     std::lock_guard<std::mutex> lock(mutex);
-    REQUIRE(cloud);
-    return cloud->validCount();
+    last_error = engine.status().last_error;
+    return cloud ? cloud->validCount() : std::size_t{0};
   };
   const std::string gamma_sim = replaced(shipped, "projector_gamma: 1.0", "projector_gamma: 2.2");
   const std::size_t linear = scan(shipped);
-  const std::size_t uncompensated = scan(gamma_sim);
+  CHECK(linear > 0);
+  // A gamma-2.2 projector decoded as linear: the 3-step phase errors are
+  // amplified 40 times by the 40:1 unwrapping, the fringe orders are random
+  // (docs/decode-health.md): implausible, no cloud, the cause named ...
+  CHECK(scan(gamma_sim) == 0);
+  INFO("last error: " << last_error);
+  CHECK(last_error.find("implausible") != std::string::npos);
+  CHECK(last_error.find("projector_gamma") != std::string::npos);
+  // ... and published on request, with fewer valid points.
+  const std::size_t uncompensated = scan(gamma_sim, true);
   const std::size_t compensated =
       scan(replaced(gamma_sim, "max_unwrap_error: 0.3", "max_unwrap_error: 0.3\n  projector_gamma: 2.2"));
   WARN("valid points: linear projector " << linear << ", gamma 2.2 uncompensated " << uncompensated
@@ -857,4 +875,111 @@ TEST_CASE("the status says where each scan's latency went: waiting, processing, 
   CHECK(s.latency_max_ms >= s.latency_ms);
   // The medians of the stages of the same scans add up to about the total's.
   CHECK(s.wait_ms + s.processing_ms + s.publish_ms == Approx(s.latency_ms).epsilon(0.5));
+}
+
+// A pattern file that does not describe the projected frames: the simulator
+// projects sim.yaml's 3+3_horizontal (40 periods and the unit cue), the
+// engine decodes with another description under the same name. Its clouds
+// are implausible: counted, not published, a continuous scan degraded with
+// the cause, a finite request ended with it; the right description
+// publishes and stays healthy.
+TEST_CASE("an implausible decode degrades the scan with its cause; its clouds are not published",
+          "[engine][health]") {
+  const auto truth = simConfig();
+  const auto sim = sl::drivers::SimulatedSensor::create(truth.sim);
+  struct Case {
+    const char* what;
+    std::vector<double> frequencies;  // of the description; the frames have {40, 1}
+    bool plausible;
+  };
+  const Case c = GENERATE(Case{"right", {40, 1}, true}, Case{"reversed frequency list", {1, 40}, false},
+                          Case{"wrong fine frequency", {16, 1}, false});
+  INFO(c.what);
+  auto config = truth;
+  for (auto& p : config.patterns)
+    if (p.name == "3+3_horizontal") p.frequencies = c.frequencies;
+  std::atomic<int> clouds{0};
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [&](const sl::daemon::ScanResult&) { ++clouds; });
+  using sl::daemon::EngineStatus;
+  auto waitFor = [&](const std::function<bool(const EngineStatus&)>& condition, std::chrono::milliseconds bound) {
+    const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(bound);
+    EngineStatus s = engine.status();
+    while (!condition(s) && std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(20ms);
+      s = engine.status();
+    }
+    return s;
+  };
+  SECTION("continuous") {
+    REQUIRE(engine.start("3+3_horizontal", 0).accepted());
+    EngineStatus s;
+    if (c.plausible) {
+      s = waitFor([&](const EngineStatus&) { return clouds >= 4; }, 5000ms);
+      CHECK(clouds >= 4);
+      CHECK(s.state == ScanState::kScanning);
+      CHECK(s.degraded_reason.empty());
+      CHECK(s.clouds_implausible == 0);
+      CHECK(s.decode_modulated_fraction > 0.5);
+      CHECK(s.decode_consistent_fraction > 0.95);
+      CHECK(s.decode_residual_median < 0.08);  // the limit is 0.10
+    } else {
+      s = waitFor([](const EngineStatus& s) { return s.state == ScanState::kDegraded; }, 5000ms);
+      INFO("degraded: " << s.degraded_reason);
+      REQUIRE(s.state == ScanState::kDegraded);
+      CHECK(s.degraded_reason.find("decode of pattern '3+3_horizontal' by camera 'sim_top' implausible") !=
+            std::string::npos);
+      CHECK(s.degraded_reason.find("fail unwrapping") != std::string::npos);
+      CHECK(s.last_error.find("degraded: decode of pattern") != std::string::npos);
+      CHECK(s.clouds_implausible >= 3);  // DecodeWatch::kScansToDegrade
+      CHECK(s.decode_consistent_fraction < 0.85);
+      CHECK(s.decode_residual_median > 0.1);
+      CHECK(clouds == 0);  // none published
+      CHECK(s.scans_done == 0);
+    }
+    WARN(c.what << ": modulated " << s.decode_modulated_fraction << ", consistent "
+                << s.decode_consistent_fraction << ", residual median " << s.decode_residual_median
+                << ", implausible clouds " << s.clouds_implausible << ", published " << clouds);
+    CHECK(engine.stop().accepted());
+    CHECK(engine.status().degraded_reason.empty());
+  }
+  SECTION("finite") {
+    REQUIRE(engine.start("3+3_horizontal", 2).accepted());
+    const EngineStatus s = waitFor([](const EngineStatus& s) { return s.state == ScanState::kIdle; }, 5000ms);
+    REQUIRE(s.state == ScanState::kIdle);
+    INFO("last error: " << s.last_error);
+    if (c.plausible) {
+      CHECK(clouds == 2);
+      CHECK(s.last_error.empty());
+    } else {
+      CHECK(clouds == 0);
+      CHECK(s.clouds_implausible >= 1);
+      CHECK(s.last_error.find("decode of pattern '3+3_horizontal' by camera 'sim_top' implausible") !=
+            std::string::npos);
+      CHECK(s.last_error.find("cloud not published") != std::string::npos);
+    }
+  }
+}
+
+TEST_CASE("runtime.publish_implausible publishes implausible clouds, counted, the scan still degraded",
+          "[engine][health]") {
+  const auto truth = simConfig();
+  const auto sim = sl::drivers::SimulatedSensor::create(truth.sim);
+  auto config = truth;
+  config.runtime.publish_implausible = true;
+  for (auto& p : config.patterns)
+    if (p.name == "3+3_horizontal") p.frequencies = {16, 1};
+  std::atomic<int> clouds{0};
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [&](const sl::daemon::ScanResult&) { ++clouds; });
+  REQUIRE(engine.start("3+3_horizontal", 0).accepted());
+  const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(5000ms);
+  while (engine.status().state != ScanState::kDegraded && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(20ms);
+  const auto s = engine.status();
+  INFO("degraded: " << s.degraded_reason);
+  CHECK(s.state == ScanState::kDegraded);
+  CHECK(s.clouds_implausible >= 3);
+  CHECK(clouds >= 3);
+  CHECK(engine.stop().accepted());
 }

@@ -224,6 +224,10 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   s.trigger = TriggerMode::kSoftware;
   s.cameras = {"top", "side"};
   s.last_error_ns = kStamp;
+  s.decode_modulated_fraction = 0.61;
+  s.decode_consistent_fraction = 0.58;
+  s.decode_residual_median = 0.25;
+  s.clouds_implausible = 11;
   msg::EdgeCounters edge;
   edge.requests.received = 9;
   edge.requests.answered = 8;
@@ -253,6 +257,10 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK(m.requests_malformed == 4);
   CHECK(m.requests_rejected == 6);
   CHECK(m.clouds_lost_to_readers == 7);
+  CHECK(m.decode_modulated_fraction == 0.61);
+  CHECK(m.decode_consistent_fraction == 0.58);
+  CHECK(m.decode_residual_median == 0.25);
+  CHECK(m.clouds_implausible == 11);
   REQUIRE(m.points_readers._length == 2);
   CHECK(str(m.points_readers._buffer[0].guid) == "1:2:3:4");
   CHECK(m.points_readers._buffer[0].reliable);
@@ -335,6 +343,8 @@ struct RequestSample {
 };
 
 constexpr std::int64_t kSecond = 1'000'000'000;
+// Senders: the DDS participants that wrote the requests (RequestOrigins).
+constexpr SenderId kSenderA = 0x1001, kSenderB = 0x2002;
 
 }  // namespace
 
@@ -349,7 +359,7 @@ TEST_CASE("dispatch: a start's options reach the sensor; every reply lists the p
   start.r.trigger = sl_msgs_msg_dds__CommandRequest_Constants_TRIGGER_SOFTWARE;
   start.r.motion_compensation = sl_msgs_msg_dds__CommandRequest_Constants_MOTION_OFF;
   start.r.start_at = {1'700'000'000, 5};
-  const auto reply = dispatcher.dispatch(start.sample(), sensor, kSecond);
+  const auto reply = dispatcher.dispatch(start.sample(), kSenderA, sensor, kSecond);
   REQUIRE(reply);
   CHECK(reply->result.accepted());
   CHECK(reply->client_id == "client-a");
@@ -372,15 +382,15 @@ TEST_CASE("dispatch: a start's options reach the sensor; every reply lists the p
   CHECK(dispatcher.repliesTimedOut() == 1);
 
   RequestSample config(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_GET_CONFIG, 6);
-  const auto config_reply = dispatcher.dispatch(config.sample(), sensor, kSecond);
+  const auto config_reply = dispatcher.dispatch(config.sample(), kSenderA, sensor, kSecond);
   REQUIRE(config_reply);
   CHECK(config_reply->detail == "sensor: sim\n");
   RequestSample select(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 7);
   select.pattern = "p1";
-  CHECK(dispatcher.dispatch(select.sample(), sensor, kSecond)->result.accepted());
+  CHECK(dispatcher.dispatch(select.sample(), kSenderA, sensor, kSecond)->result.accepted());
   CHECK(sensor.selected == std::vector<std::string>{"p1"});
   RequestSample stop(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP, 8);
-  CHECK(dispatcher.dispatch(stop.sample(), sensor, kSecond)->result.code == Code::kNotRunning);
+  CHECK(dispatcher.dispatch(stop.sample(), kSenderA, sensor, kSecond)->result.code == Code::kNotRunning);
   CHECK(sensor.stops == 1);
 }
 
@@ -392,19 +402,19 @@ TEST_CASE("dispatch: bad values are refused before the sensor sees them; retries
 
   RequestSample bad_enum(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 1);
   bad_enum.r.trigger = static_cast<std::uint8_t>(9);
-  auto reply = dispatcher.dispatch(bad_enum.sample(), sensor, kSecond);
+  auto reply = dispatcher.dispatch(bad_enum.sample(), kSenderA, sensor, kSecond);
   CHECK(reply->result.code == Code::kInvalidOption);
   CHECK_THAT(reply->result.reason, Catch::Contains("unknown trigger mode 9"));
 
   RequestSample long_pattern(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 2);
   long_pattern.pattern = std::string(100, 'x');
-  reply = dispatcher.dispatch(long_pattern.sample(), sensor, kSecond);
+  reply = dispatcher.dispatch(long_pattern.sample(), kSenderA, sensor, kSecond);
   CHECK(reply->result.code == Code::kInvalidOption);
   CHECK_THAT(reply->result.reason, Catch::Contains("pattern is 100 bytes"));
   CHECK(dispatcher.counters().invalid == 1);
 
   RequestSample unknown(static_cast<std::uint8_t>(17), 3);
-  reply = dispatcher.dispatch(unknown.sample(), sensor, kSecond);
+  reply = dispatcher.dispatch(unknown.sample(), kSenderA, sensor, kSecond);
   CHECK(reply->result.code == Code::kInvalidCommand);
   CHECK_THAT(reply->result.reason, Catch::Contains("unknown command 17"));
   CHECK(sensor.starts.empty());
@@ -412,11 +422,11 @@ TEST_CASE("dispatch: bad values are refused before the sensor sees them; retries
 
   // A retry (same client, same id) of a start: answered again, started once.
   RequestSample start(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 4);
-  CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
-  CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
+  CHECK(dispatcher.dispatch(start.sample(), kSenderA, sensor, kSecond)->result.accepted());
+  CHECK(dispatcher.dispatch(start.sample(), kSenderA, sensor, kSecond)->result.accepted());
   CHECK(sensor.starts.size() == 1);
   start.client = "client-b";  // another client's request 4 is a new request
-  CHECK(dispatcher.dispatch(start.sample(), sensor, kSecond)->result.accepted());
+  CHECK(dispatcher.dispatch(start.sample(), kSenderA, sensor, kSecond)->result.accepted());
   CHECK(sensor.starts.size() == 2);
 }
 
@@ -430,7 +440,7 @@ TEST_CASE("dispatch: over the rate limit a request is counted, not answered and 
   for (std::uint64_t id = 1; id <= 5; ++id) {
     RequestSample select(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, id);
     select.pattern = "p1";
-    answered += dispatcher.dispatch(select.sample(), sensor, kSecond).has_value();
+    answered += dispatcher.dispatch(select.sample(), kSenderA, sensor, kSecond).has_value();
   }
   CHECK(answered == 3);
   CHECK(sensor.selected.size() == 3);
@@ -438,5 +448,70 @@ TEST_CASE("dispatch: over the rate limit a request is counted, not answered and 
   CHECK(dispatcher.counters().rate_limited == 2);
   // A second later one token is back.
   RequestSample later(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 6);
-  CHECK(dispatcher.dispatch(later.sample(), sensor, 2 * kSecond + kSecond / 100).has_value());
+  CHECK(dispatcher.dispatch(later.sample(), kSenderA, sensor, 2 * kSecond + kSecond / 100).has_value());
+}
+
+// The identity probe of issue 36: 1,000 START/STOP/SET_PATTERN from 1,000
+// client ids of one participant in 0.1 s left 703 unanswered and an honest
+// client with a new id starved in the one allowance the ids shared. The
+// allowance is the sender's (participant's) now: the flood spends its own.
+TEST_CASE("dispatch: 1,000 made-up client ids of one sender share its allowance; another sender is served") {
+  FakeSensor sensor;
+  RequestLimits limits;  // 20/s, burst 40, 256 senders
+  RequestDispatcher dispatcher(limits);
+  int flood_answered = 0;
+  for (int i = 0; i < 1000; ++i) {
+    RequestSample select(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_SET_PATTERN, 1);
+    select.client = "fake-" + std::to_string(i);
+    select.pattern = "p1";
+    flood_answered += dispatcher.dispatch(select.sample(), kSenderA, sensor, kSecond).has_value();
+  }
+  CHECK(flood_answered == static_cast<int>(limits.burst));
+  CHECK(dispatcher.counters().rate_limited == 1000 - static_cast<std::uint64_t>(limits.burst));
+  // An honest client of another participant, in the same instant.
+  RequestSample stop(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_STOP, 1);
+  stop.client = "honest";
+  const auto reply = dispatcher.dispatch(stop.sample(), kSenderB, sensor, kSecond);
+  REQUIRE(reply);
+  CHECK(reply->client_id == "honest");
+  CHECK(sensor.stops == 1);
+  // Every request answered or counted.
+  for (int i = 0; i < flood_answered + 1; ++i) dispatcher.replied(true);
+  const RequestCounters& c = dispatcher.counters();
+  CHECK(c.received == 1001);
+  CHECK(c.answered + c.rate_limited == c.received);
+  // The flooding participant gets tokens back at its rate, like anyone.
+  RequestSample later(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_LIST_PATTERNS, 2);
+  CHECK(dispatcher.dispatch(later.sample(), kSenderA, sensor, kSecond + kSecond / 10).has_value());
+}
+
+TEST_CASE("dispatch: another sender reusing a client's id and request id is not taken for its retry") {
+  FakeSensor sensor;
+  RequestDispatcher dispatcher(RequestLimits{});
+  RequestSample start(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 9);
+  start.client = "operator";
+  CHECK(dispatcher.dispatch(start.sample(), kSenderA, sensor, kSecond)->result.accepted());
+  // The same (client, id) from another participant is a request of its own.
+  CHECK(dispatcher.dispatch(start.sample(), kSenderB, sensor, kSecond)->result.accepted());
+  CHECK(sensor.starts.size() == 2);
+  // The first participant's retry is answered from memory, not started again.
+  CHECK(dispatcher.dispatch(start.sample(), kSenderA, sensor, kSecond)->result.accepted());
+  CHECK(sensor.starts.size() == 2);
+}
+
+// A START with 100,000 camera ids is refused on its count alone: the entries
+// are never read (here they do not even exist), so the refusal costs the same
+// whatever the list holds.
+TEST_CASE("dispatch: an oversized camera list is refused without reading its entries") {
+  FakeSensor sensor;
+  RequestDispatcher dispatcher(RequestLimits{});
+  RequestSample start(sl_msgs_msg_dds__CommandRequest_Constants_COMMAND_START, 1);
+  msg::Request request = start.sample();
+  request.cameras._length = request.cameras._maximum = 100'000;
+  request.cameras._buffer = nullptr;  // reading an entry would crash
+  const auto reply = dispatcher.dispatch(request, kSenderA, sensor, kSecond);
+  REQUIRE(reply);
+  CHECK(reply->result.code == Code::kInvalidOption);
+  CHECK_THAT(reply->result.reason, Catch::Contains("cameras has 100000 entries, more than 16"));
+  CHECK(sensor.starts.empty());
 }

@@ -299,8 +299,31 @@ int scan(SensorClient& client, const Args& args) {
   const bool show_progress = args.count > 1 && ::isatty(STDERR_FILENO);
   if (show_progress) progressBar(0, args.count);
   const double scale = args.unit == sl::tools::LengthUnit::kMetre ? 1e-3 : 1.0;
+  // A request the daemon ended with an error (a decode that does not fit
+  // the pattern: docs/decode-health.md) delivers no more clouds: its status
+  // says so, and the wait ends there instead of at the timeout.
+  auto endedWithError = [&]() -> std::optional<std::string> {
+    const auto s = client.status(std::chrono::milliseconds(1));
+    if (!s || s->state == sl::daemon::ScanState::kScanning || s->state == sl::daemon::ScanState::kDegraded ||
+        s->state == sl::daemon::ScanState::kWaiting || s->last_error.empty() || s->last_error_ns < requested_at)
+      return std::nullopt;
+    return s->last_error;
+  };
   for (int i = 1; i <= args.count; ++i) {
-    const auto cloud = client.receiveCloud(requested_at, toMs(wait_s));
+    std::optional<sl::pipeline::PointCloud> cloud;
+    const auto until = std::chrono::steady_clock::now() + toMs(wait_s);
+    std::optional<std::string> ended;
+    while (!cloud && !ended && std::chrono::steady_clock::now() < until) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now());
+      cloud = client.receiveCloud(requested_at, std::min<std::chrono::milliseconds>(left, std::chrono::milliseconds(250)));
+      if (!cloud) ended = endedWithError();
+    }
+    if (ended) {
+      if (show_progress) std::fputs("\n", stderr);
+      std::cerr << "slctl: scan " << i << " of " << args.count << ": the daemon ended the request: " << *ended
+                << "\n";
+      return 1;
+    }
     if (!cloud) {
       std::cerr << "slctl: scan " << i << " of " << args.count << " did not arrive within "
                 << wait_s << " s";
@@ -371,6 +394,10 @@ int printStatus(SensorClient& client, const Args& args) {
               u(s->sets_dropped), u(s->sets_overflow), u(s->writes_timed_out),
               u(s->sets_not_recorded));
   std::printf("sets incomplete:  %llu\n", u(s->sets_incomplete));
+  std::printf("decode health:    %.1f %% modulated, %.1f %% of those consistent, residual median "
+              "%.3f; %llu implausible clouds\n",
+              100 * s->decode_modulated_fraction, 100 * s->decode_consistent_fraction,
+              s->decode_residual_median, u(s->clouds_implausible));
   std::printf("recording:        %s (%llu sets recorded, %llu over quota)\n",
               s->recording.empty() ? "-" : s->recording.c_str(), u(s->sets_recorded),
               u(s->sets_over_quota));

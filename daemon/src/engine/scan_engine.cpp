@@ -14,6 +14,7 @@
 #include <variant>
 
 #include "engine/control_loop.h"
+#include "engine/decode_watch.h"
 #include "engine/device_health.h"
 #include "engine/memory_prefault.h"
 #include "engine/request_control.h"
@@ -188,6 +189,7 @@ struct ScanEngine::Impl {
 
   // Device and scan health (camera, trigger threads report; output thread checks).
   DeviceHealth device_health;
+  DecodeWatch decode_watch;  // processing thread reports; output thread checks
   Clock::time_point next_health_check;  // output thread
 
   CameraGate gate{camera_ids.size()};  // parks the camera threads (software trigger)
@@ -299,10 +301,30 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     }
     ResultItem result{item->generation, {}, lastExposureNs(set), processing_ns, pipeline::systemClockNs(),
                       std::move(item->in_flight)};
-    for (CameraScan& scan : outcome.scans)
+    // Decode health: an implausible cloud is wrong everywhere (the pattern
+    // file does not describe the frames); it is counted and, unless
+    // runtime.publish_implausible, not published, and a finite request ends
+    // with the cause (DecodeWatch keeps a continuous one degraded).
+    std::string implausible;
+    for (std::size_t i = 0; i < outcome.scans.size(); ++i) {
+      CameraScan& scan = outcome.scans[i];
+      const DecodeWatch::Verdict verdict =
+          decode_watch.report(set.pattern_name, scan.camera_id, scan.health, i == 0);
+      if (verdict.implausible) {
+        if (implausible.empty()) implausible = verdict.cause;
+        if (!config.runtime.publish_implausible) continue;
+      }
       result.results.push_back({0, set.pattern_name, scan.camera_id, scan.bit_depth,
                                 std::move(scan.maps), std::move(scan.cloud),
                                 processing_config.cloud_unit_mm * 1e-3, item->set});
+    }
+    decode_watch.setDone(item->generation, implausible);
+    if (!implausible.empty() && !config.runtime.publish_implausible &&
+        control.health().scans_requested > 0) {
+      control.endRequest(item->generation, implausible + "; cloud not published (runtime.publish_implausible)");
+      continue;
+    }
+    if (result.results.empty()) continue;
     results.push(std::move(result));
   }
 }
@@ -348,8 +370,14 @@ void ScanEngine::Impl::checkHealth() {
   const auto now = Clock::now();
   if (now < next_health_check) return;
   next_health_check = now + 100ms;
-  control.setDegraded(degradedCause(control.health(), device_health, statistics, control.generation(),
-                                    config.runtime.stall_timeout_s));
+  const std::uint64_t generation = control.generation();
+  std::string cause = degradedCause(control.health(), device_health, statistics, generation,
+                                    config.runtime.stall_timeout_s);
+  // A decode that stays implausible comes first: the scans it withholds are
+  // what "no scan published" would report next.
+  if (const std::string decode = decode_watch.degradedCause(generation); !decode.empty())
+    cause = cause.empty() ? decode : decode + "; " + cause;
+  control.setDegraded(cause);
 }
 
 ScanEngine::ScanEngine(const DaemonConfig& config, EngineDevices devices, OutputCallback output,
@@ -464,6 +492,7 @@ EngineStatus ScanEngine::status() const {
   s.wait_ms = stages.median.wait_ms;
   s.processing_ms = stages.median.processing_ms;
   s.publish_ms = stages.median.publish_ms;
+  d.decode_watch.fill(s);
   return s;
 }
 

@@ -168,12 +168,16 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
       const auto triangulator = stages_.triangulators.find(camera_id);
       if (triangulator == stages_.triangulators.end())
         throw std::runtime_error("no calibration of camera '" + camera_id + "'");
+      const pipeline::Codec& codec = decoder->second.codec();
+      pipeline::DecodeTally tally;
       auto [maps, cloud] = processor_.process(
-          decoder->second.codec(), triangulator->second, *images, set.trigger_stamp_ns, camera_id,
+          codec, triangulator->second, *images, set.trigger_stamp_ns, camera_id,
           config_.keep_maps ? pipeline::ScanProcessor::Keep::kMapsAndCloud
-                            : pipeline::ScanProcessor::Keep::kCloud);
+                            : pipeline::ScanProcessor::Keep::kCloud,
+          &tally);
       if (auto coloured = colouredCopy(set, camera_id, *cloud)) cloud = std::move(coloured);
-      out.scans.push_back({camera_id, images->bit_depth, std::move(maps), std::move(cloud)});
+      out.scans.push_back({camera_id, images->bit_depth, std::move(maps), std::move(cloud),
+                           pipeline::judgeDecodeTally(codec.spec(), codec.options(), tally)});
     }
   } catch (const std::exception& e) {
     out.scans.clear();

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "sl/daemon/config.h"
+#include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/motion_compensation.h"
 #include "sl/pipeline/scan_processor.h"
@@ -54,6 +55,9 @@ struct CameraScan {
   int bit_depth = 8;      // of that camera's images
   std::shared_ptr<const pipeline::ProjectorMaps> maps;  // null unless keep_maps
   std::shared_ptr<const pipeline::PointCloud> cloud;    // cloud_unit_mm, that camera's optical frame
+  // From the decoder's counts (pipeline::judgeDecodeTally: no modulation
+  // per frequency).
+  pipeline::DecodeHealth health;
 };
 
 struct SetOutcome {

@@ -68,6 +68,9 @@ struct StatusInfo {
   std::uint64_t requests_rejected = 0;  // refusals of the full request reader
   std::uint64_t clouds_lost_to_readers = 0;
   std::vector<PointsReaderInfo> points_readers;
+  // Decode health of the latest scan and implausible clouds (EngineStatus).
+  double decode_modulated_fraction = 0, decode_consistent_fraction = 0, decode_residual_median = 0;
+  std::uint64_t clouds_implausible = 0;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

@@ -33,14 +33,15 @@ struct TopicQos {
 };
 
 // What the daemon accepts of a request (`dds.requests`): longer strings or
-// camera lists are refused with INVALID_OPTION; beyond its rate a client's
+// camera lists are refused with INVALID_OPTION; beyond its rate a sender's
 // requests are not answered but counted (requests_rate_limited).
 struct RequestLimits {
   std::size_t max_string = 256;   // client_id, pattern, recording, each camera id
   std::size_t max_cameras = 16;   // entries in cameras
-  double rate_hz = 20;            // sustained requests per second per client
-  double burst = 40;              // requests a client may send at once
-  std::size_t max_clients = 256;  // buckets kept; further ids share one
+  double rate_hz = 20;            // sustained requests per second per sender (DDS participant)
+  double burst = 40;              // requests a sender may send at once
+  // Rate buckets kept, one per sending DDS participant; further senders share one.
+  std::size_t max_clients = 256;
 };
 
 struct DdsConfig {
@@ -103,6 +104,11 @@ struct RuntimeConfig {
   std::uint64_t recording_max_mb = 0;
   std::uint64_t recording_max_sets = 0;
   std::uint64_t recording_min_free_mb = 1024;
+  // A cloud whose decode health is implausible (the pattern file does not
+  // describe the projected frames: docs/decode-health.md) is counted and
+  // not published, and a finite request ends with the cause; true publishes
+  // it anyway (counted, the scan still degraded).
+  bool publish_implausible = false;
 };
 
 // Which sensor the daemon runs (`sensor:`).

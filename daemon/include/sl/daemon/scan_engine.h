@@ -76,6 +76,16 @@ struct EngineStatus {
   double wait_ms = 0;
   double processing_ms = 0;
   double publish_ms = 0;
+  // Decode health (docs/decode-health.md) of the latest processed scan, of
+  // its first camera: modulated pixels / all, consistently unwrapped /
+  // modulated, median unwrapping residual (periods; 0 for a code without a
+  // consistency test). All 0 before the first scan.
+  double decode_modulated_fraction = 0;
+  double decode_consistent_fraction = 0;
+  double decode_residual_median = 0;
+  // Clouds whose decode was implausible, since start-up: not published
+  // unless runtime.publish_implausible.
+  std::uint64_t clouds_implausible = 0;
 };
 
 // One camera's result of one scan, shared with the output callback (a

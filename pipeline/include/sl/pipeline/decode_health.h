@@ -81,6 +81,40 @@ struct DecodeHealth {
   std::vector<std::string> warnings;
 };
 
+// Whether a code of `spec` has a consistency test (>= 2 frequencies, micro
+// phase shift, Gray + phase shift with the complementary bit): without one
+// a wrong description cannot be seen from one scan.
+bool hasConsistencyTest(const PatternSpec& spec);
+
+// The counts behind a DecodeHealth, gathered band by band while the maps are
+// still in cache (ScanProcessor::process with a tally: the daemon never
+// writes its maps out). The status of every pixel is counted; the residual
+// of the modulated pixels on a grid of every kResidualStep-th pixel of every
+// kResidualStep-th image row (1/16 of them: a histogram increment per pixel
+// would cost a third of a 3+3 scan), binned finely enough that quantiles
+// from the bins are within half a bin (0.0025 periods) of the grid's exact
+// ones.
+struct DecodeTally {
+  static constexpr int kBins = 100;                  // of kBinWidth, then one bin for >= 0.5
+  static constexpr double kBinWidth = 0.005;         // periods
+  static constexpr int kResidualStep = 4;            // grid of the residual histogram (px)
+  std::array<std::int64_t, 5> status{};              // per PixelStatus (>= 4 counted as 4)
+  std::array<std::int64_t, kBins + 1> residual{};    // modulated pixels of the grid only
+
+  // Adds rows [row_begin, row_end) of `maps`' status and residual (its
+  // residual only when `with_residual`); `image_row` is the image row of
+  // maps row `row_begin` (a band's rows are numbered from 0), which places
+  // the residual grid.
+  void addRows(const ProjectorMaps& maps, int row_begin, int row_end, bool with_residual, int image_row);
+  void add(const DecodeTally& other);
+};
+
+// The health of a scan from its tally alone (no modulation per frequency:
+// that needs the frames): counts, residual quantiles (interpolated in the
+// bins) and histogram, and the judgement of measureDecodeHealth().
+DecodeHealth judgeDecodeTally(const PatternSpec& spec, const DecoderOptions& options,
+                              const DecodeTally& tally, const DecodeHealthLimits& limits = {});
+
 // Measures the health of `maps` decoded by a codec of `spec` with `options`
 // (the options the codec used: Codec::options()) from `frames` (the frames
 // decoded, projection order) of `bit_depth` significant bits. Throws

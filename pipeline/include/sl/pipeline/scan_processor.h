@@ -10,6 +10,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "sl/pipeline/codec.h"
+#include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/row_workers.h"
 #include "sl/pipeline/triangulator.h"
 #include "sl/pipeline/types.h"
@@ -51,10 +52,13 @@ class ScanProcessor {
   // cloud.frame_id = frame_id, both stamped stamp_ns. Same results as
   // codec.decode() then triangulator.triangulate(), with either `keep`.
   // Throws as those do (std::invalid_argument on frames or a calibration
-  // that do not fit).
+  // that do not fit). With a `tally`, it is overwritten with the counts of
+  // the decoded maps (status of every pixel, residual of the modulated ones
+  // when the code has a consistency test), gathered block by block while
+  // the maps are in cache: judgeDecodeTally() makes the scan's decode health.
   ScanOutput process(const Codec& codec, const Triangulator& triangulator,
                      const CameraImages& images, TimestampNs stamp_ns, const std::string& frame_id,
-                     Keep keep = Keep::kMapsAndCloud);
+                     Keep keep = Keep::kMapsAndCloud, DecodeTally* tally = nullptr);
 
   // Decoding only (maps as in process()).
   std::shared_ptr<const ProjectorMaps> decode(const Codec& codec, const CameraImages& images,
@@ -72,6 +76,7 @@ class ScanProcessor {
   RowWorkers workers_;
   // Keep::kCloud: per worker thread, the maps of its current block of rows.
   std::vector<ProjectorMaps> bands_;
+  std::vector<DecodeTally> tallies_;  // per worker thread, for process(..., tally)
   // Recycled buffers; free when this pool holds the only reference.
   struct MapsSlot {
     std::shared_ptr<ProjectorMaps> maps;
