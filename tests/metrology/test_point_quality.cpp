@@ -7,10 +7,17 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <numbers>
 #include <vector>
 
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <string>
+
 #include "common.h"  // sl_eval's simulated rig and rendering helpers
+#include "sl_process/process.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/point_quality.h"
@@ -225,4 +232,49 @@ TEST_CASE("normals: organized normals agree with the simulated plane and sphere"
   CHECK(median(sphere_deg) < 3.0);
   CHECK(wild < 0.001);
   CHECK_THROWS_AS(sl::pipeline::organizedNormals(cloud, 0, 5.0f), std::invalid_argument);
+}
+
+TEST_CASE("sl_process: cloud.ply carries nx ny nz and confidence, depth_sigma.tiff written",
+          "[metrology][quality]") {
+  const Scene s = tiltedWall();
+  const auto sensor = sl::drivers::SimulatedSensor::create(s.config);
+  sl::tools::LoadedFrames frames;
+  frames.frames = sl::eval::renderScan(*sensor, s.spec.name, s.spec.frameCount(), 11);
+  frames.bit_depth = 8;
+  sl::pipeline::TriangulatorOptions triangulation =
+      sl::eval::evalTriangulation(sl::pipeline::TriangulatorOptions::Use::kColumns);
+  sl::tools::ProcessResult result =
+      sl::tools::processCapture(s.spec, s.calibration, frames, {}, triangulation);
+  sl::pipeline::CameraNoise noise;
+  sl::tools::addPointQuality(result, s.spec, s.calibration, noise, triangulation.use);
+  const std::string dir = std::string(SL_BINARY_DIR) + "/test_metrology_process";
+  std::filesystem::remove_all(dir);
+  const std::size_t points = sl::tools::writeOutputs(result, 8, dir);
+  REQUIRE(points > 1000000);
+  const cv::Mat sigma = cv::imread(dir + "/depth_sigma.tiff", cv::IMREAD_UNCHANGED);
+  REQUIRE(sigma.type() == CV_32FC1);
+  REQUIRE(sigma.size() == result.depth_sigma.size());
+  REQUIRE(sigma.isContinuous());
+  REQUIRE(result.depth_sigma.isContinuous());
+  // Bit for bit, NaN included.
+  CHECK(std::memcmp(sigma.data, result.depth_sigma.data, sigma.total() * sizeof(float)) == 0);
+  std::ifstream ply(dir + "/cloud.ply", std::ios::binary);
+  std::string line, header;
+  while (std::getline(ply, line) && line != "end_header") header += line + "\n";
+  INFO(header);
+  CHECK(header.find("property float x\nproperty float y\nproperty float z\nproperty float "
+                    "intensity\nproperty float nx\nproperty float ny\nproperty float nz\nproperty "
+                    "float confidence\n") != std::string::npos);
+  CHECK(header.find("element vertex " + std::to_string(points) + "\n") != std::string::npos);
+  // The first point's record against the maps.
+  std::size_t first = 0;
+  while (!std::isfinite(result.cloud.points[first].z)) ++first;
+  float record[8];
+  ply.read(reinterpret_cast<char*>(record), sizeof record);
+  const int r = int(first) / result.cloud.width, c = int(first) % result.cloud.width;
+  CHECK(record[2] == result.cloud.points[first].z);
+  const cv::Vec3f n = result.normals.at<cv::Vec3f>(r, c);
+  for (int k = 0; k < 3; ++k)
+    CHECK((record[4 + k] == n[k] || (std::isnan(record[4 + k]) && std::isnan(n[k]))));
+  CHECK(record[7] == result.depth_sigma.at<float>(r, c));
 }
