@@ -9,7 +9,17 @@
 #include <random>
 #include <vector>
 
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <opencv2/imgcodecs.hpp>
+#include <string>
+
 #include "board_sim.h"
+#include "sl/daemon/calibration_io.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/hand_eye.h"
 
@@ -244,4 +254,93 @@ TEST_CASE("hand-eye: a wrong robot pose is named, degenerate motions are refused
   CHECK_THROWS_AS(sl::pipeline::calibrateHandEye(one_axis, kBoard, setup), std::invalid_argument);
   one_axis.resize(2);
   CHECK_THROWS_AS(sl::pipeline::calibrateHandEye(one_axis, kBoard, setup), std::invalid_argument);
+}
+
+TEST_CASE("sl_handeye: robot poses file + rendered pose folders -> the mount", "[metrology][hand_eye]") {
+  namespace fs = std::filesystem;
+  const auto setup = sl::pipeline::HandEyeSetup::kEyeInHand;
+  const Truth truth = truthFor(setup);
+  const sl::pipeline::CameraProjectorCalibration rig = sl::drivers::simRig();
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_metrology_handeye";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  sl::daemon::CalibrationFile calibration;
+  calibration.calibration = rig;
+  calibration.source = "test_metrology: the simulator's rig";
+  sl::daemon::saveCalibration(calibration, (dir / "calibration.yaml").string());
+  // Four scans: the fewest that rotate about two axes with some margin.
+  sl::pipeline::PhaseShift33Pattern pattern;
+  pattern.name = "3+3_both";
+  pattern.direction = sl::pipeline::Direction::kBoth;
+  const sl::pipeline::PatternSpec spec = sl::pipeline::toSpec(pattern);
+  std::ofstream poses(dir / "poses.txt");
+  poses << "# folder x y z qx qy qz qw (base_from_gripper, mm)\n";
+  for (int i = 0; i < 4; ++i) {
+    const Eigen::Isometry3d T = metrology_test::cameraFromBoard(kBoard, kViews[i]);
+    sl::drivers::SimConfig config;
+    config.rig = rig;
+    config.patterns = {spec};
+    config.scene.planes = {metrology_test::boardPlane(kBoard, T)};
+    const auto sensor = sl::drivers::SimulatedSensor::create(config);
+    const fs::path folder = dir / ("pose" + std::to_string(i));
+    fs::create_directories(folder);
+    for (int f = 0; f < spec.frameCount(); ++f)
+      REQUIRE(cv::imwrite((folder / ("frame_" + std::to_string(f) + ".png")).string(),
+                          sensor->render(spec.name, f, 7000 + 100 * i + f)));
+    const Eigen::Isometry3d A = robotPose(setup, truth, T);
+    const Eigen::Quaterniond q(A.linear());
+    char line[256];
+    std::snprintf(line, sizeof line, "pose%d %.6f %.6f %.6f %.12f %.12f %.12f %.12f\n", i,
+                  A.translation().x(), A.translation().y(), A.translation().z(), q.x(), q.y(), q.z(),
+                  q.w());
+    poses << line;
+  }
+  poses.close();
+  const std::string command = std::string(SL_BINARY_DIR) + "/tools/sl_handeye --calibration " +
+                              (dir / "calibration.yaml").string() + " --robot-poses " +
+                              (dir / "poses.txt").string() +
+                              " --board 13x9 --square 15 --presmooth 1 --window-radius 25 --out " +
+                              (dir / "mount.yaml").string() + " > " + (dir / "log.txt").string() +
+                              " 2>&1";
+  const int status = std::system(command.c_str());
+  std::ifstream log(dir / "log.txt");
+  const std::string output((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  INFO(output);
+  REQUIRE(WIFEXITED(status));
+  REQUIRE(WEXITSTATUS(status) == 0);
+  // The mount as written.
+  std::ifstream yaml(dir / "mount.yaml");
+  std::string text((std::istreambuf_iterator<char>(yaml)), std::istreambuf_iterator<char>());
+  auto mount = text.find("\nmount:\n");
+  REQUIRE(mount != std::string::npos);
+  ++mount;
+  double t[3], q[4];
+  REQUIRE(std::sscanf(text.c_str() + mount,
+                      "mount:\n  translation_mm: [%lf, %lf, %lf]\n  quaternion_xyzw: [%lf, %lf, %lf, %lf]",
+                      &t[0], &t[1], &t[2], &q[0], &q[1], &q[2], &q[3]) == 7);
+  const Eigen::Quaterniond written(q[3], q[0], q[1], q[2]);
+  const double rotation_deg =
+      degrees(Eigen::AngleAxisd(truth.mount.linear().transpose() * written.toRotationMatrix()).angle());
+  const double translation_mm = (Eigen::Vector3d(t[0], t[1], t[2]) - truth.mount.translation()).norm();
+  std::printf("sl_handeye, 4 rendered poses: rotation error %.4f deg, translation %.4f mm\n",
+              rotation_deg, translation_mm);
+  CHECK(rotation_deg < 0.05);
+  CHECK(translation_mm < 0.2);
+  CHECK(text.find("setup: eye-in-hand") != std::string::npos);
+  CHECK(text.find("4 views: 10 or more") != std::string::npos);  // advice to add poses
+
+  // A malformed poses line is refused, naming the file and the line.
+  std::ofstream bad(dir / "bad.txt");
+  bad << "pose0 1 2 3 0 0 0\n";
+  bad.close();
+  const std::string bad_command = std::string(SL_BINARY_DIR) + "/tools/sl_handeye --calibration " +
+                                  (dir / "calibration.yaml").string() + " --robot-poses " +
+                                  (dir / "bad.txt").string() + " --board 13x9 --square 15 > " +
+                                  (dir / "bad.log").string() + " 2>&1";
+  const int bad_status = std::system(bad_command.c_str());
+  std::ifstream bad_log(dir / "bad.log");
+  const std::string bad_output((std::istreambuf_iterator<char>(bad_log)),
+                               std::istreambuf_iterator<char>());
+  CHECK(WEXITSTATUS(bad_status) == 1);
+  CHECK(bad_output.find("bad.txt:1: expected FOLDER x y z qx qy qz qw") != std::string::npos);
 }
