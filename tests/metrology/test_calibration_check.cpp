@@ -9,7 +9,18 @@
 #include <random>
 #include <vector>
 
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <opencv2/imgcodecs.hpp>
+#include <string>
+#include <utility>
+
 #include "board_sim.h"
+#include "sl/daemon/calibration_io.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/calibration_check.h"
 
@@ -127,4 +138,85 @@ TEST_CASE("verification: too few corners are refused", "[metrology][verify]") {
   v.projector_px.resize(5);
   CHECK_THROWS_AS(sl::pipeline::verifyCalibration(rig, {v}, kBoard), std::invalid_argument);
   CHECK_THROWS_AS(sl::pipeline::correctProjectorPose(rig, {}, kBoard), std::invalid_argument);
+}
+
+namespace {
+
+// Runs a tool of the build; exit code and its output (stdout and stderr).
+std::pair<int, std::string> runTool(const std::string& args, const std::filesystem::path& log) {
+  const std::string command =
+      std::string(SL_BINARY_DIR) + "/tools/" + args + " > " + log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  std::ifstream in(log);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text};
+}
+
+}  // namespace
+
+TEST_CASE("sl_verify: rendered scans with a moved projector fail; --correct writes a new "
+          "calibration that passes",
+          "[metrology][verify]") {
+  namespace fs = std::filesystem;
+  const CameraProjectorCalibration rig = sl::drivers::simRig();
+  // The projector knocked by 0.2 deg about its y axis and 0.5 mm sideways.
+  const CameraProjectorCalibration truth = moved(rig, 0.2, {0, 1, 0}, {0.5, 0, 0});
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_metrology_verify";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  sl::daemon::CalibrationFile file;
+  file.calibration = rig;
+  file.source = "test_metrology: the simulator's rig before the knock";
+  sl::daemon::saveCalibration(file, (dir / "calibration.yaml").string());
+  sl::pipeline::PhaseShift33Pattern pattern;
+  pattern.name = "3+3_both";
+  pattern.direction = sl::pipeline::Direction::kBoth;
+  const sl::pipeline::PatternSpec spec = sl::pipeline::toSpec(pattern);
+  std::string folders;
+  for (std::size_t i = 0; i < kViews.size(); ++i) {
+    sl::drivers::SimConfig config;
+    config.rig = truth;
+    config.patterns = {spec};
+    config.scene.planes = {metrology_test::boardPlane(kBoard, metrology_test::cameraFromBoard(kBoard, kViews[i]))};
+    const auto sensor = sl::drivers::SimulatedSensor::create(config);
+    const fs::path folder = dir / ("view" + std::to_string(i));
+    fs::create_directories(folder);
+    for (int f = 0; f < spec.frameCount(); ++f)
+      REQUIRE(cv::imwrite((folder / ("frame_" + std::to_string(f) + ".png")).string(),
+                          sensor->render(spec.name, f, 300 * i + f + 1)));
+    folders += " " + folder.string();
+  }
+  const std::string common = " --board 13x9 --square 15 --presmooth 1 --window-radius 25 --scans" + folders;
+  const auto [code, output] =
+      runTool("sl_verify --calibration " + (dir / "calibration.yaml").string() + " --correct " +
+                  (dir / "corrected.yaml").string() + common,
+              dir / "verify.log");
+  INFO(output);
+  CHECK(code == 4);  // the given calibration does not hold
+  CHECK(output.find("-> FAIL") != std::string::npos);
+  CHECK(output.find("camera-projector consistency") != std::string::npos);
+  REQUIRE(fs::exists(dir / "corrected.yaml"));
+  const CameraProjectorCalibration corrected =
+      sl::daemon::loadCalibration((dir / "corrected.yaml").string()).calibration;
+  const double rotation_deg = degrees(Eigen::AngleAxisd(truth.R * corrected.R.transpose()).angle());
+  const double translation_mm = (corrected.t - truth.t).norm();
+  std::printf("sl_verify --correct on 3 rendered views (projector moved 0.2 deg, 0.5 mm): corrected "
+              "to %.4f deg, %.4f mm of the truth\n",
+              rotation_deg, translation_mm);
+  CHECK(rotation_deg < 0.01);
+  CHECK(translation_mm < 0.1);
+  // The corrected calibration on the same scans passes.
+  const auto [code2, output2] =
+      runTool("sl_verify --calibration " + (dir / "corrected.yaml").string() + common,
+              dir / "verify2.log");
+  INFO(output2);
+  CHECK(code2 == 0);
+  CHECK(output2.find("-> PASS") != std::string::npos);
+  // Never over an existing file.
+  const auto [code3, output3] =
+      runTool("sl_verify --calibration " + (dir / "calibration.yaml").string() + " --correct " +
+                  (dir / "calibration.yaml").string() + common,
+              dir / "verify3.log");
+  CHECK(code3 == 1);
+  CHECK(output3.find("the file exists") != std::string::npos);
 }

@@ -21,15 +21,10 @@
 #include <string>
 #include <vector>
 
-#include <opencv2/imgcodecs.hpp>
-
-#include "common/frame_files.h"
+#include "board_scans.h"
 #include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
 #include "sl/pipeline/calibration.h"
-#include "sl/pipeline/decoder.h"
 #include "sl/pipeline/hand_eye.h"
-#include "sl/pipeline/pattern.h"
 
 namespace fs = std::filesystem;
 namespace pl = sl::pipeline;
@@ -128,8 +123,7 @@ int main(int argc, char** argv) {
   pl::Checkerboard board;
   bool eye_to_hand = false;
   int fringes = 16;
-  pl::CornerDetectionOptions corners;
-  pl::LocalHomographyOptions homographies;
+  sl::tools::BoardScanOptions scan;
   for (int i = 1; i < argc; ++i) {
     const std::string o = argv[i];
     auto value = [&]() -> std::string {
@@ -158,9 +152,9 @@ int main(int argc, char** argv) {
     } else if (o == "--fringes") {
       fringes = static_cast<int>(number(o, value()));
     } else if (o == "--presmooth") {
-      corners.presmooth_sigma_px = number(o, value());
+      scan.corners.presmooth_sigma_px = number(o, value());
     } else if (o == "--window-radius") {
-      homographies.window_radius_px = static_cast<int>(number(o, value()));
+      scan.homographies.window_radius_px = static_cast<int>(number(o, value()));
     } else if (o == "--out") {
       out_path = value();
     } else {
@@ -173,53 +167,17 @@ int main(int argc, char** argv) {
     board.validate();
     const pl::CameraProjectorCalibration calibration =
         sl::daemon::loadCalibration(calibration_path).calibration;
-    pl::PatternSpec spec;
-    if (fs::exists(pattern)) {
-      spec = sl::daemon::loadPattern(pattern);
-    } else if (pattern == "3+3_both") {
-      pl::PhaseShift33Pattern p;
-      p.name = pattern;
-      p.direction = pl::Direction::kBoth;
-      p.fringes = fringes;
-      p.projector_width = calibration.projector.width;
-      p.projector_height = calibration.projector.height;
-      spec = pl::toSpec(p);
-    } else {
-      throw std::runtime_error("--pattern: '" + pattern +
-                               "' is neither a pattern file nor the built-in 3+3_both");
-    }
-    if (spec.direction != pl::Direction::kBoth)
-      throw std::runtime_error("pattern '" + spec.name +
-                               "' must code both directions (local homographies need both)");
-    const pl::Decoder decoder(spec, {});
-    const bool mean_shading = spec.family == pl::PatternFamily::kPhaseShift;
+    const pl::PatternSpec spec = sl::tools::boardScanPattern(
+        pattern, fringes, calibration.projector.width, calibration.projector.height);
     std::vector<pl::HandEyeView> views;
     for (const RobotPose& pose : readRobotPoses(poses_path)) {
-      const std::vector<std::string> files = sl::tools::listFrameFiles(pose.folder);
-      if (static_cast<int>(files.size()) != spec.frameCount())
-        throw std::runtime_error(pose.folder + ": " + std::to_string(files.size()) +
-                                 " images, pattern '" + spec.name + "' has " +
-                                 std::to_string(spec.frameCount()) + " frames");
-      std::vector<cv::Mat> frames, code_frames;
-      for (std::size_t k = 0; k < files.size(); ++k) {
-        cv::Mat image = cv::imread(files[k], cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
-        if (image.empty()) throw std::runtime_error(files[k] + ": cannot read the image");
-        frames.push_back(image);
-        if (spec.frame_order.empty() || spec.frame_order[k] != pl::kSkippedFrame)
-          code_frames.push_back(image);
-      }
-      const int bit_depth = frames.front().depth() == CV_8U ? 8 : 16;
-      const pl::ProjectorMaps maps = decoder.decode(frames, bit_depth);
       const std::string label = fs::path(pose.folder).filename().string();
-      const pl::BoardViewResult seen =
-          pl::observeBoard(mean_shading ? pl::meanImage(code_frames) : maps.offset, maps, board,
-                           label, corners, homographies);
-      if (!seen.view) throw std::runtime_error(pose.folder + ": " + seen.error);
+      const pl::BoardView seen = sl::tools::observeBoardScan(pose.folder, spec, board, scan, label);
       pl::HandEyeView v;
       v.label = label;
       v.base_from_gripper = pose.base_from_gripper;
-      v.corner_ids = seen.view->corner_ids;
-      v.points_mm = pl::triangulateBoardCorners(calibration, *seen.view);
+      v.corner_ids = seen.corner_ids;
+      v.points_mm = pl::triangulateBoardCorners(calibration, seen);
       views.push_back(std::move(v));
       std::cout << "sl_handeye: " << label << ": " << views.back().corner_ids.size()
                 << " corners\n";
