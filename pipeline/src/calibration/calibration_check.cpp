@@ -141,7 +141,8 @@ VerificationResult verifyCalibration(const CameraProjectorCalibration& c,
   if (result.consistency_rms_mm > thresholds.max_consistency_rms_mm)
     result.failures.push_back(format(
         "camera-projector consistency %.3f mm RMS exceeds %.3f mm: the projector has moved "
-        "against the camera (run sl_calibrate correct) or the intrinsics no longer hold",
+        "against the camera (sl_verify --correct re-estimates its pose) or the intrinsics no "
+        "longer hold",
         result.consistency_rms_mm, thresholds.max_consistency_rms_mm));
   if (std::abs(result.square_error_mm) > thresholds.max_square_error_mm)
     result.failures.push_back(format(
