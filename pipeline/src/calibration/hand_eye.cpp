@@ -161,11 +161,14 @@ HandEyeResult calibrateHandEye(const std::vector<HandEyeView>& views, const Chec
       const cv::Point3f b = board.corner(id);
       B[i].emplace_back(b.x, b.y, b.z);
     }
+  // Residuals of every view but `skip` (none: -1).
+  std::size_t skip = views.size();
   const detail::ResidualFunction f = [&](const Eigen::VectorXd& x, Eigen::VectorXd& r) {
     const Eigen::Isometry3d X = perturbed(X0, x.head<6>());
     const Eigen::Isometry3d Y = perturbed(Y0, x.tail<6>());
     int row = 0;
     for (std::size_t i = 0; i < views.size(); ++i) {
+      if (i == skip) continue;
       const Eigen::Isometry3d AX = A[i] * X;
       for (std::size_t k = 0; k < B[i].size(); ++k, row += 3)
         r.segment<3>(row) = AX * views[i].points_mm[k] - Y * B[i][k];
@@ -202,14 +205,32 @@ HandEyeResult calibrateHandEye(const std::vector<HandEyeView>& views, const Chec
   }
   const double small_sample = double(views.size()) / double(views.size() - 1);
   const Eigen::MatrixXd clustered = small_sample * bread * meat * bread;
+  // Leave-one-view-out jackknife of the mount: the sandwich above is biased
+  // low with few views when each view carries its own error (a robot pose
+  // error moves all of a view's corners alike); the jackknife is not as much.
+  Eigen::Matrix<double, 6, 1> jackknife = Eigen::Matrix<double, 6, 1>::Zero();
+  if (views.size() >= 4) {
+    std::vector<Eigen::Matrix<double, 6, 1>> estimates;
+    for (std::size_t i = 0; i < views.size(); ++i) {
+      skip = i;
+      const int n = values - 3 * static_cast<int>(B[i].size());
+      estimates.push_back(detail::solveLeastSquares(f, s.x, n).x.head<6>());
+    }
+    skip = views.size();
+    Eigen::Matrix<double, 6, 1> mean = Eigen::Matrix<double, 6, 1>::Zero();
+    for (const auto& e : estimates) mean += e;
+    mean /= double(estimates.size());
+    for (const auto& e : estimates) jackknife += (e - mean).cwiseAbs2();
+    jackknife *= double(views.size() - 1) / double(views.size());
+  }
   for (int q = 0; q < 6; ++q) {
-    const double variance = std::max(independent(q, q), clustered(q, q));
+    const double variance = std::max({independent(q, q), clustered(q, q), jackknife(q)});
     (q < 3 ? result.sigma_rotation_deg(q) : result.sigma_translation_mm(q - 3)) =
         std::sqrt(std::max(variance, 0.0)) * (q < 3 ? kDeg : 1.0);
   }
   result.covariance = independent.topLeftCorner<6, 6>();
   for (int q = 0; q < 6; ++q) {
-    const double scale = std::sqrt(std::max(clustered(q, q), independent(q, q)) /
+    const double scale = std::sqrt(std::max({clustered(q, q), independent(q, q), jackknife(q)}) /
                                    std::max(independent(q, q), 1e-300));
     result.covariance.row(q) *= scale;
     result.covariance.col(q) *= scale;

@@ -54,10 +54,11 @@ struct HandEyeResult {
   Eigen::Isometry3d target = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d initial_mount = Eigen::Isometry3d::Identity();  // calibrateHandEye (Tsai)
   // 1-sigma of the mount: rotation about the mount frame's own axes (deg) and
-  // translation (mm, in the parent frame), the larger per parameter of the
-  // linearised covariance with independent corner errors and the
-  // view-clustered (sandwich) one that also holds when a view's errors are
-  // correlated (robot pose errors).
+  // translation (mm, in the parent frame), the largest per parameter of the
+  // linearised covariance with independent corner errors, the view-clustered
+  // (sandwich) one and, from 4 views on, the leave-one-view-out jackknife's:
+  // the last two also hold when a view's errors are correlated (robot pose
+  // errors). Costs one refit per view.
   Eigen::Vector3d sigma_rotation_deg = Eigen::Vector3d::Zero();
   Eigen::Vector3d sigma_translation_mm = Eigen::Vector3d::Zero();
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();  // rad, mm
