@@ -86,8 +86,7 @@ inline sl::pipeline::BoardView syntheticView(const sl::pipeline::CameraProjector
 }
 
 // The full chain on the simulator with `rig` as the true geometry. Returns
-// nullopt-like empty view (no corners) with `error` set when the board is not
-// found.
+// a view without corners, and sets *error, when the board is not found.
 inline sl::pipeline::BoardView renderedView(const sl::pipeline::CameraProjectorCalibration& rig,
                                             const sl::pipeline::Checkerboard& board,
                                             const Eigen::Isometry3d& camera_from_board,

@@ -66,6 +66,9 @@ const char* const kHelp =
     "  --camera-gain K           camera shot noise, variance K * signal (8-bit DN^2 per DN;\n"
     "                            default 0.0084, the simulator's)\n"
     "  --camera-read-noise DN    camera read noise std, 8-bit DN (default 0.05)\n"
+    "  --camera-bits N           significant bits of the images for --quality (default: 8 for\n"
+    "                            8-bit images, 16 for 16-bit ones; 10 or 12 for Mono10/12\n"
+    "                            stored in 16-bit files)\n"
     "  --normal-step PX          normals from neighbours PX pixels away (default 3)\n"
     "  --accept-implausible      exit 0 even when the decode health says the pattern file\n"
     "                            does not fit the frames (docs/decode-health.md)\n"
@@ -95,7 +98,7 @@ int main(int argc, char** argv) {
   double smooth_sigma = 0;
   bool quality = false;
   sl::pipeline::CameraNoise noise;
-  int normal_step = 3;
+  int normal_step = 3, camera_bits = 0;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string arg = argv[i];
@@ -117,6 +120,11 @@ int main(int argc, char** argv) {
       } else if (arg == "--camera-read-noise") {
         noise.read_noise_dn = number(arg, value());
         if (!(noise.read_noise_dn >= 0)) return usage("--camera-read-noise must be >= 0");
+      } else if (arg == "--camera-bits") {
+        const double bits = number(arg, value());
+        if (!(bits >= 8 && bits <= 16 && bits == std::floor(bits)))
+          return usage("--camera-bits must be an integer 8..16");
+        camera_bits = static_cast<int>(bits);
       } else if (arg == "--normal-step") {
         const double step = number(arg, value());
         if (!(step >= 1 && step <= 50 && step == std::floor(step)))
@@ -212,8 +220,12 @@ int main(int argc, char** argv) {
       sl::tools::smoothProjectorCoordinates(result.maps, smooth_sigma);
     }
     if (quality) {
-      // The maps' DN are those of the images' container depth (8 or 16).
-      noise.bit_depth = frames.bit_depth;
+      // The maps' DN are the images' values: their significant bits set the
+      // scale of the noise model's 8-bit DN.
+      if (camera_bits > frames.bit_depth)
+        throw std::invalid_argument("--camera-bits " + std::to_string(camera_bits) + ": the images are " +
+                                    std::to_string(frames.bit_depth) + "-bit");
+      noise.bit_depth = camera_bits > 0 ? camera_bits : frames.bit_depth;
       sl::tools::addPointQuality(result, pattern, *calibration, noise, triangulator.use,
                                  normal_step);
     }
