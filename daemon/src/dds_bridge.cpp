@@ -37,6 +37,11 @@ dds::Qos writerQos(const TopicQos& q) {
   return qos.keepLast(q.depth).xcdr1();
 }
 
+// zlib level of the compressed images: the fastest (the publish thread
+// encodes them; image_transport's default, 9, takes several times longer
+// for little gain on these images).
+constexpr int kPngLevel = 1;
+
 // Why the points writer must serialize clouds (empty: it may borrow them).
 // An iceoryx reader gets only what dds_write puts in shared memory, so with
 // shared memory configured (or a configuration that cannot be read) clouds
@@ -72,7 +77,10 @@ class EngineCommands : public CommandTarget {
 TopicNames TopicNames::forNamespace(const std::string& ns) {
   return {"rt/" + ns + "/points", "rt/" + ns + "/projector_maps", "rt/" + ns + "/image_sets",
           "rt/" + ns + "/status", "rq/" + ns + "/commandRequest", "rr/" + ns + "/commandReply",
-          "rt/" + ns + "/depth/image", "rt/" + ns + "/shading/image", "rt/" + ns + "/camera_info"};
+          "rt/" + ns + "/depth/image", "rt/" + ns + "/shading/image", "rt/" + ns + "/camera_info",
+          "rt/" + ns + "/depth/image_rect", "rt/" + ns + "/depth/camera_info",
+          "rt/" + ns + "/shading/camera_info", "rt/" + ns + "/shading/image/compressed",
+          "rt/" + ns + "/depth/image_rect/compressedDepth"};
 }
 
 bool FrameIds::isFirst(const std::string& camera_id) const { return camera_id == first_camera_id; }
@@ -96,6 +104,11 @@ struct DdsBridge::Impl {
         depth_topic(participant, names.depth_image, sensor_msgs_msg_dds__Image__desc),
         shading_topic(participant, names.shading_image, sensor_msgs_msg_dds__Image__desc),
         info_topic(participant, names.camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
+        depth_rect_topic(participant, names.depth_image_rect, sensor_msgs_msg_dds__Image__desc),
+        depth_info_topic(participant, names.depth_camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
+        shading_info_topic(participant, names.shading_camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
+        shading_png_topic(participant, names.shading_compressed, sensor_msgs_msg_dds__CompressedImage__desc),
+        depth_png_topic(participant, names.depth_rect_compressed_depth, sensor_msgs_msg_dds__CompressedImage__desc),
         sets_topic(participant, names.image_sets, sl_msgs_msg_dds__ImageSet__desc),
         // Clouds, maps, images: as configured (dds.qos; by default reliable
         // with a short keep-last history: a write waits at most
@@ -119,10 +132,17 @@ struct DdsBridge::Impl {
         depth_writer(participant, depth_topic, writerQos(config.images_qos)),
         shading_writer(participant, shading_topic, writerQos(config.images_qos)),
         info_writer(participant, info_topic, writerQos(config.images_qos)),
+        depth_rect_writer(participant, depth_rect_topic, writerQos(config.images_qos)),
+        depth_info_writer(participant, depth_info_topic, writerQos(config.images_qos)),
+        shading_info_writer(participant, shading_info_topic, writerQos(config.images_qos)),
+        shading_png_writer(participant, shading_png_topic, writerQos(config.images_qos)),
+        depth_png_writer(participant, depth_png_topic, writerQos(config.images_qos)),
         sets_writer(participant, sets_topic, writerQos(config.image_sets_qos)),
         request_condition(request_reader),
         wake(participant),
         waitset(participant) {
+    if (config.publish_images && camera.width >= 2 && camera.height >= 2 && camera.fx > 0 && camera.fy > 0)
+      rectifier.emplace(camera);
     waitset.attach(request_condition, 1);
     waitset.attach(wake, 2);
     services.attach(waitset, 3);
@@ -161,6 +181,11 @@ struct DdsBridge::Impl {
   dds::Topic<Image> depth_topic;
   dds::Topic<Image> shading_topic;
   dds::Topic<CameraInfo> info_topic;
+  dds::Topic<Image> depth_rect_topic;
+  dds::Topic<CameraInfo> depth_info_topic;
+  dds::Topic<CameraInfo> shading_info_topic;
+  dds::Topic<CompressedImage> shading_png_topic;
+  dds::Topic<CompressedImage> depth_png_topic;
   dds::Topic<ImageSetMsg> sets_topic;
   CloudWriter points_writer;
   dds::Writer<Maps> maps_writer;
@@ -170,6 +195,13 @@ struct DdsBridge::Impl {
   dds::Writer<Image> depth_writer;
   dds::Writer<Image> shading_writer;
   dds::Writer<CameraInfo> info_writer;
+  dds::Writer<Image> depth_rect_writer;
+  dds::Writer<CameraInfo> depth_info_writer;
+  dds::Writer<CameraInfo> shading_info_writer;
+  dds::Writer<CompressedImage> shading_png_writer;
+  dds::Writer<CompressedImage> depth_png_writer;
+  // The first camera's depth onto its rectified grid (when publish_images).
+  std::optional<DepthRectifier> rectifier;
   dds::Writer<ImageSetMsg> sets_writer;
   dds::ReadCondition request_condition;
   dds::GuardCondition wake;
@@ -296,10 +328,26 @@ void DdsBridge::publish(const ScanResult& result) {
     const ScanImages images(*result.cloud, result.cloud_unit_m, result.bit_depth, frame_id);
     count(d.depth_writer.write(images.depth()));
     count(d.shading_writer.write(images.shading()));
+    // Compressed siblings cost an encoding: only for matched readers.
+    if (d.shading_png_writer.matchedReaders() > 0)
+      count(d.shading_png_writer.write(CompressedPngMessage(images.shading(), kPngLevel).sample()));
     // camera_info describes the first camera (whose frame is dds.frame_id);
-    // images of other cameras carry their own frame_id and no camera_info.
-    if (d.frame_ids.isFirst(result.camera_id))
-      d.info_writer.write(CameraInfoMessage(d.camera, result.cloud->stamp_ns, frame_id).sample());
+    // images of other cameras carry their own frame_id and no camera_info
+    // (nor a rectified depth image: the bridge has the first camera's model).
+    const pipeline::TimestampNs stamp = result.cloud->stamp_ns;
+    if (d.frame_ids.isFirst(result.camera_id)) {
+      const CameraInfoMessage raw_info(d.camera, stamp, frame_id);
+      d.info_writer.write(raw_info.sample());
+      d.shading_info_writer.write(raw_info.sample());
+      if (d.rectifier && result.cloud->width == d.rectifier->width() &&
+          result.cloud->height == d.rectifier->height()) {
+        const RectifiedDepthMessage rectified(images.depthValues(), *d.rectifier, stamp, frame_id);
+        count(d.depth_rect_writer.write(rectified.sample()));
+        if (d.depth_png_writer.matchedReaders() > 0)
+          count(d.depth_png_writer.write(CompressedDepthMessage(rectified.sample(), kPngLevel).sample()));
+        d.depth_info_writer.write(CameraInfoMessage(d.camera, stamp, frame_id, true).sample());
+      }
+    }
   }
 }
 

@@ -1,14 +1,18 @@
 #include "sl/daemon/devices.h"
 
+#include <filesystem>
 #include <map>
+#include <set>
 #include <stdexcept>
 
 #if SL_HAVE_ARAVIS
 #include "aravis_devices.h"
 #endif
 #include "sl/daemon/log.h"
+#include "sl/daemon/pattern_config.h"
 #include "sl/drivers/camera_stamp_trigger.h"
 #include "sl/drivers/lightcrafter4500.h"
+#include "sl/drivers/recording.h"
 #include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/versavis.h"
@@ -42,8 +46,37 @@ EngineDevices openSimulated(const DaemonConfig& config, std::shared_ptr<void>& k
   return devices;
 }
 
+// A recording folder's sets that keep their pattern's description
+// (pattern.yml, drivers/recording.h) must describe the config's pattern of
+// that name: the first such set of each pattern is compared key by key
+// (`patterns` recorded patterns in all; an MCAP recording has no
+// descriptions). Throws std::runtime_error naming the set's file, the
+// pattern and every difference.
+void checkRecordedPatterns(const DaemonConfig& config, std::size_t patterns) {
+  namespace fs = std::filesystem;
+  if (!fs::is_directory(config.replay.dir)) return;
+  std::set<std::string> checked;
+  for (const std::string& set : drivers::listRecordedSets(config.replay.dir)) {
+    if (checked.size() >= patterns) return;
+    const fs::path described = fs::path(set) / drivers::kRecordedPatternFile;
+    if (!fs::exists(described)) continue;
+    const pipeline::PatternSpec recorded = loadPattern(described.string());
+    if (!checked.insert(recorded.name).second) continue;
+    const pipeline::PatternSpec* pattern = config.findPattern(recorded.name);
+    if (!pattern) continue;  // a set of a pattern the projector's sequences do not list
+    const std::vector<std::string> differences = patternDifferences(recorded, *pattern);
+    if (differences.empty()) continue;
+    std::string list;
+    for (const std::string& d : differences) list += "; " + d;
+    throw std::runtime_error(config.source_path + ": replay: " + described.string() +
+                             " describes the recorded pattern '" + recorded.name +
+                             "' otherwise than the config's pattern of that name (recorded vs "
+                             "config" + list + ")");
+  }
+}
+
 // A recording played back (sensor: replay). Every recorded pattern must be
-// one the config can decode.
+// one the config can decode, as it was recorded.
 EngineDevices openReplay(const DaemonConfig& config, std::shared_ptr<void>& keep_alive) {
   std::shared_ptr<drivers::ReplaySensor> replay;
   try {
@@ -68,6 +101,7 @@ EngineDevices openReplay(const DaemonConfig& config, std::shared_ptr<void>& keep
     if (!config.findPattern(sequence.name))
       throw std::runtime_error(config.source_path + ": replay: the recording holds pattern '" +
                                sequence.name + "', which the config's patterns do not define");
+  checkRecordedPatterns(config, devices.projector->sequences().size());
   return devices;
 }
 

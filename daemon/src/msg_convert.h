@@ -10,6 +10,7 @@
 
 #include "builtin_interfaces/msg/Time.h"
 #include "sensor_msgs/msg/CameraInfo.h"
+#include "sensor_msgs/msg/CompressedImage.h"
 #include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
 #include "sl/daemon/commands.h"
@@ -25,6 +26,7 @@ using PointCloud2 = sensor_msgs_msg_dds__PointCloud2_;
 using PointField = sensor_msgs_msg_dds__PointField_;
 using Image = sensor_msgs_msg_dds__Image_;
 using CameraInfo = sensor_msgs_msg_dds__CameraInfo_;
+using CompressedImage = sensor_msgs_msg_dds__CompressedImage_;
 using Request = sl_msgs_msg_dds__CommandRequest_;
 using Reply = sl_msgs_msg_dds__CommandReply_;
 using Status = sl_msgs_msg_dds__Status_;

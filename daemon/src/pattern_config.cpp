@@ -1,6 +1,7 @@
 #include "sl/daemon/pattern_config.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -257,6 +258,90 @@ PatternSpec parsePatternText(const std::string& yaml_text, const std::string& or
   const YamlMap m(root, origin, "");
   return parsePattern(m, default_name, nullptr,
                       std::filesystem::path(origin).parent_path().string());
+}
+
+namespace {
+
+std::string number(double v, int digits) {
+  char text[40];
+  std::snprintf(text, sizeof text, "%.*g", digits, v);
+  return text;
+}
+
+std::string numbers(const std::vector<double>& values, int digits) {
+  std::string out = "[";
+  for (std::size_t i = 0; i < values.size(); ++i)
+    out += (i ? ", " : "") + number(values[i], digits);
+  return out + "]";
+}
+
+const char* boolean(bool v) { return v ? "true" : "false"; }
+
+// The keys of `p` that describe its projected sequence (not its name), in
+// pattern-file order, values as YAML flow text.
+std::vector<std::pair<std::string, std::string>> patternKeys(const PatternSpec& p, int digits) {
+  std::vector<std::pair<std::string, std::string>> keys;
+  keys.emplace_back("family", pipeline::toString(p.family));
+  keys.emplace_back("direction", pipeline::toString(p.direction));
+  keys.emplace_back("projector", "{width: " + std::to_string(p.projector_width) +
+                                     ", height: " + std::to_string(p.projector_height) + "}");
+  const bool sinusoid = p.family != PatternFamily::kGrayCode;
+  const bool gray = p.family == PatternFamily::kGrayCode || p.family == PatternFamily::kGrayPhaseShift;
+  if (sinusoid && p.family != PatternFamily::kTwoPlusOne)
+    keys.emplace_back("steps", std::to_string(p.steps));
+  if (sinusoid && !gray) keys.emplace_back("frequencies", numbers(p.frequencies, digits));
+  if (p.family == PatternFamily::kPhaseShift)
+    keys.emplace_back("unwrapping", pipeline::toString(p.unwrapping));
+  if (p.family == PatternFamily::kModulatedPhaseShift)
+    keys.emplace_back("carrier_pitch_px", number(p.carrier_pitch_px, digits));
+  if (gray) {
+    if (p.gray_pitch_px > 0) keys.emplace_back("pitch_px", number(p.gray_pitch_px, digits));
+    else keys.emplace_back("bits", std::to_string(p.gray_bits));
+    keys.emplace_back("inverse", boolean(p.gray_inverse));
+    keys.emplace_back("reference_frames", boolean(p.reference_frames));
+  }
+  if (p.family == PatternFamily::kGrayPhaseShift)
+    keys.emplace_back("complementary", boolean(p.complementary));
+  if (sinusoid) {
+    keys.emplace_back("shift_sign", std::to_string(p.shift_sign));
+    keys.emplace_back("start_phase_deg", number(p.start_phase_rad * 180.0 / std::numbers::pi, digits));
+    keys.emplace_back("offset", number(p.offset, digits));
+    keys.emplace_back("amplitude", number(p.amplitude, digits));
+  }
+  if (!p.frame_order.empty()) {
+    std::vector<double> order(p.frame_order.begin(), p.frame_order.end());
+    keys.emplace_back("frame_order", numbers(order, digits));
+  }
+  return keys;
+}
+
+}  // namespace
+
+std::string patternYaml(const PatternSpec& spec) {
+  YAML::Emitter name;
+  name << spec.name;  // quoted when the name needs it
+  std::string text = "# " + std::to_string(spec.frameCount()) + " frames\nname: " +
+                     name.c_str() + "\n";
+  for (const auto& [key, value] : patternKeys(spec, 17)) text += key + ": " + value + "\n";
+  return text;
+}
+
+std::vector<std::string> patternDifferences(const PatternSpec& a, const PatternSpec& b) {
+  std::vector<std::string> out;
+  if (a.frameCount() != b.frameCount())
+    out.push_back("frames: " + std::to_string(a.frameCount()) + " vs " +
+                  std::to_string(b.frameCount()));
+  const auto ka = patternKeys(a, 9), kb = patternKeys(b, 9);
+  auto find = [](const auto& keys, const std::string& key) -> std::string {
+    for (const auto& [k, v] : keys)
+      if (k == key) return v;
+    return "(none)";
+  };
+  for (const auto& [key, value] : ka)
+    if (find(kb, key) != value) out.push_back(key + ": " + value + " vs " + find(kb, key));
+  for (const auto& [key, value] : kb)
+    if (find(ka, key) == "(none)") out.push_back(key + ": (none) vs " + value);
+  return out;
 }
 
 PatternSpec loadPattern(const std::string& path) {

@@ -6,6 +6,7 @@
 #include <system_error>
 
 #include "sl/daemon/log.h"
+#include "sl/daemon/pattern_config.h"
 #include "sl/drivers/recording.h"
 
 namespace sl::daemon {
@@ -54,7 +55,10 @@ Recorder::~Recorder() {
   thread_.join();
 }
 
-void Recorder::start(const std::string& dir, const std::string& note) {
+void Recorder::start(const std::string& dir, const std::string& note,
+                     const std::vector<pipeline::PatternSpec>& patterns) {
+  std::map<std::string, std::string> pattern_yaml;
+  for (const pipeline::PatternSpec& pattern : patterns) pattern_yaml[pattern.name] = patternYaml(pattern);
   drivers::createRecording(dir, note);
   if (quota_.min_free_bytes > 0) {
     std::error_code ec;
@@ -67,6 +71,7 @@ void Recorder::start(const std::string& dir, const std::string& note) {
   const std::size_t existing = drivers::listRecordedSets(dir).size();
   std::lock_guard lock(mutex_);
   dir_ = dir;
+  pattern_yaml_ = std::move(pattern_yaml);
   next_index_ = existing + 1;
   ++epoch_;
   quota_reached_ = false;
@@ -92,7 +97,9 @@ void Recorder::record(std::shared_ptr<const pipeline::ImageSet> set) {
   Item item;
   {
     std::lock_guard lock(mutex_);
-    item = {dir_, next_index_++, epoch_, std::move(set)};
+    const auto described = pattern_yaml_.find(set->pattern_name);
+    item = {dir_, next_index_++, epoch_, std::move(set),
+            described == pattern_yaml_.end() ? std::string() : described->second};
   }
   queue_.push(std::move(item));
 }
@@ -152,7 +159,7 @@ void Recorder::run() {
       }
     }
     try {
-      drivers::writeRecordedSet(item->dir, item->index, *item->set);
+      drivers::writeRecordedSet(item->dir, item->index, *item->set, item->pattern_yaml);
       ++written_;
       const std::uint64_t bytes = folderBytes(setFolder(item->dir, item->index));
       std::lock_guard lock(mutex_);

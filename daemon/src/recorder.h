@@ -4,12 +4,15 @@
 
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "sl/daemon/bounded_queue.h"
+#include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::daemon {
@@ -35,8 +38,10 @@ class Recorder {
   // Starts writing into `dir` (created if needed; sets continue the
   // numbering of a recording already there). Throws std::runtime_error
   // naming the folder if it cannot be created, or when its file system has
-  // less than the free-space floor left.
-  void start(const std::string& dir, const std::string& note);
+  // less than the free-space floor left. Each set of a pattern of
+  // `patterns` gets its description (pattern.yml, daemon::patternYaml()).
+  void start(const std::string& dir, const std::string& note,
+             const std::vector<pipeline::PatternSpec>& patterns = {});
   // Stops accepting sets; queued sets are still written.
   void stop();
   bool active() const { return active_; }
@@ -64,6 +69,7 @@ class Recorder {
     std::uint64_t index = 0;  // set number within dir, assigned when queued
     std::uint64_t epoch = 0;  // of the recording (each start and stop begins a new one)
     std::shared_ptr<const pipeline::ImageSet> set;
+    std::string pattern_yaml;  // "" = no description of the set's pattern
   };
   const RecordingQuota quota_;
   BoundedQueue<Item> queue_;
@@ -73,6 +79,7 @@ class Recorder {
   std::atomic<std::uint64_t> over_quota_{0};
   mutable std::mutex mutex_;
   std::string dir_;               // guarded by mutex_
+  std::map<std::string, std::string> pattern_yaml_;  // by pattern name; guarded by mutex_
   std::uint64_t next_index_ = 1;  // guarded by mutex_
   // The current recording hit its quota: its further sets are counted, not
   // queued (until stop() or start()).

@@ -7,6 +7,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include <opencv2/imgcodecs.hpp>
+
 namespace sl::daemon::msg {
 
 namespace {
@@ -110,8 +112,9 @@ ScanImages::ScanImages(const pipeline::PointCloud& cloud, double cloud_unit_m, i
 }
 
 CameraInfoMessage::CameraInfoMessage(const pipeline::PinholeModel& camera, pipeline::TimestampNs stamp_ns,
-                                     std::string frame_id)
+                                     std::string frame_id, bool rectified)
     : frame_id_(std::move(frame_id)), d_(camera.distortion.begin(), camera.distortion.end()) {
+  if (rectified) d_.assign(d_.size(), 0.0);
   msg_.header.stamp = toTime(stamp_ns);
   msg_.header.frame_id = frame_id_.data();
   msg_.height = static_cast<std::uint32_t>(camera.height);
@@ -126,6 +129,74 @@ CameraInfoMessage::CameraInfoMessage(const pipeline::PinholeModel& camera, pipel
   std::copy(std::begin(p), std::end(p), msg_.p);
   msg_.binning_x = msg_.binning_y = 0;
   msg_.roi = {0, 0, 0, 0, false};
+}
+
+RectifiedDepthMessage::RectifiedDepthMessage(const std::vector<float>& raw_depth,
+                                             const DepthRectifier& rectifier,
+                                             pipeline::TimestampNs stamp_ns, std::string frame_id)
+    : frame_id_(std::move(frame_id)) {
+  rectifier.rectify(raw_depth, depth_);
+  msg_.header.stamp = toTime(stamp_ns);
+  msg_.header.frame_id = frame_id_.data();
+  msg_.height = static_cast<std::uint32_t>(rectifier.height());
+  msg_.width = static_cast<std::uint32_t>(rectifier.width());
+  msg_.encoding = encoding_.data();
+  msg_.is_bigendian = 0;
+  msg_.step = msg_.width * 4;
+  borrow(msg_.data, reinterpret_cast<std::uint8_t*>(depth_.data()), depth_.size() * 4);
+}
+
+CompressedPngMessage::CompressedPngMessage(const Image& image, int png_level)
+    : frame_id_(image.header.frame_id ? image.header.frame_id : ""),
+      format_(std::string(image.encoding ? image.encoding : "") + "; png compressed ") {
+  const std::string encoding = image.encoding ? image.encoding : "";
+  const int type = encoding == "mono8" ? CV_8UC1 : encoding == "mono16" ? CV_16UC1 : -1;
+  if (type < 0) throw std::invalid_argument("CompressedPngMessage: encoding '" + encoding + "' is not mono8/mono16");
+  const cv::Mat pixels(static_cast<int>(image.height), static_cast<int>(image.width), type,
+                       image.data._buffer, image.step);
+  if (!cv::imencode(".png", pixels, png_, {cv::IMWRITE_PNG_COMPRESSION, png_level}))
+    throw std::runtime_error("CompressedPngMessage: PNG encoding failed");
+  msg_.header.stamp = image.header.stamp;
+  msg_.header.frame_id = frame_id_.data();
+  msg_.format = format_.data();
+  borrow(msg_.data, png_.data(), png_.size());
+}
+
+CompressedDepthMessage::CompressedDepthMessage(const Image& depth, int png_level)
+    : frame_id_(depth.header.frame_id ? depth.header.frame_id : ""), format_("32FC1; compressedDepth png") {
+  const std::string encoding = depth.encoding ? depth.encoding : "";
+  if (encoding != "32FC1") throw std::invalid_argument("CompressedDepthMessage: encoding '" + encoding + "' is not 32FC1");
+  const int rows = static_cast<int>(depth.height), cols = static_cast<int>(depth.width);
+  const cv::Mat z(rows, cols, CV_32FC1, depth.data._buffer, depth.step);
+  // As compressed_depth_image_transport computes them (float).
+  const float depth_max = static_cast<float>(kDepthMaxM);
+  const float quant_a = static_cast<float>(kQuantization) * (static_cast<float>(kQuantization) + 1.0f);
+  const float quant_b = 1.0f - quant_a / depth_max;
+  cv::Mat inverse(rows, cols, CV_16UC1);
+  for (int r = 0; r < rows; ++r) {
+    const float* in = z.ptr<float>(r);
+    std::uint16_t* out = inverse.ptr<std::uint16_t>(r);
+    for (int c = 0; c < cols; ++c) {
+      // Depths the 16 bits cannot hold (nearer than A / (65536 - B), 0.152 m
+      // with the defaults) are sent as invalid, like NaN and far ones.
+      const float q = in[c] < depth_max && in[c] > 0.0f ? quant_a / in[c] + quant_b : 0.0f;
+      out[c] = q < 65536.0f ? static_cast<std::uint16_t>(q) : 0;
+    }
+  }
+  std::vector<std::uint8_t> png;
+  if (!cv::imencode(".png", inverse, png, {cv::IMWRITE_PNG_COMPRESSION, png_level}))
+    throw std::runtime_error("CompressedDepthMessage: PNG encoding failed");
+  // ConfigHeader {compressionFormat format; float depthParam[2];}, little endian.
+  const std::int32_t inv_depth = 0;
+  data_.resize(12 + png.size());
+  std::memcpy(data_.data(), &inv_depth, 4);
+  std::memcpy(data_.data() + 4, &quant_a, 4);
+  std::memcpy(data_.data() + 8, &quant_b, 4);
+  std::memcpy(data_.data() + 12, png.data(), png.size());
+  msg_.header.stamp = depth.header.stamp;
+  msg_.header.frame_id = frame_id_.data();
+  msg_.format = format_.data();
+  borrow(msg_.data, data_.data(), data_.size());
 }
 
 ImageSetMessage::ImageSetMessage(const pipeline::ImageSet& set, std::vector<std::string> optical_frames)

@@ -20,6 +20,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "depth_rectify.h"
 #include "msg_convert.h"
 #include "reader_acks.h"  // MatchedReaderState
 #include "request_guard.h"  // RequestCounters
@@ -75,6 +76,7 @@ class ScanImages : NonMovable {
   ScanImages(const pipeline::PointCloud& cloud, double cloud_unit_m, int bit_depth, std::string frame_id);
   const Image& depth() const { return depth_msg_; }
   const Image& shading() const { return shading_msg_; }
+  const std::vector<float>& depthValues() const { return depth_; }  // row-major, metres
 
  private:
   std::string frame_id_, depth_encoding_ = "32FC1", shading_encoding_ = "mono8";
@@ -84,17 +86,74 @@ class ScanImages : NonMovable {
 };
 
 // sensor_msgs/CameraInfo of a pinhole camera: plumb_bob distortion, K and P
-// from its intrinsics (pixels), R the identity (no rectification).
+// from its intrinsics (pixels), R the identity. The rectified image of the
+// camera (DepthRectifier) has the same K and no distortion, so P = [K | 0]
+// describes it (ROS's convention: P is the projection of the rectified
+// image). `rectified`: the camera_info of that rectified image, D = 0.
 class CameraInfoMessage : NonMovable {
  public:
   CameraInfoMessage(const pipeline::PinholeModel& camera, pipeline::TimestampNs stamp_ns,
-                    std::string frame_id);
+                    std::string frame_id, bool rectified = false);
   const CameraInfo& sample() const { return msg_; }
 
  private:
   std::string frame_id_, model_ = "plumb_bob";
   std::vector<double> d_;
   CameraInfo msg_{};
+};
+
+// The depth image (32FC1, metres, NaN where invalid) on the camera's
+// rectified grid: `raw_depth` (ScanImages::depthValues()) resampled by
+// `rectifier`, whose camera must have the raw image's size.
+class RectifiedDepthMessage : NonMovable {
+ public:
+  RectifiedDepthMessage(const std::vector<float>& raw_depth, const DepthRectifier& rectifier,
+                        pipeline::TimestampNs stamp_ns, std::string frame_id);
+  const Image& sample() const { return msg_; }
+
+ private:
+  std::string frame_id_, encoding_ = "32FC1";
+  std::vector<float> depth_;
+  Image msg_{};
+};
+
+// sensor_msgs/CompressedImage of a mono8 or mono16 `image` as
+// image_transport's compressed plugin writes it in png mode
+// (compressed_image_transport: format "<encoding>; png compressed ", data a
+// PNG of the image). `png_level`: zlib level 0..9. Throws
+// std::invalid_argument for another encoding.
+class CompressedPngMessage : NonMovable {
+ public:
+  CompressedPngMessage(const Image& image, int png_level);
+  const CompressedImage& sample() const { return msg_; }
+
+ private:
+  std::string frame_id_, format_;
+  std::vector<std::uint8_t> png_;
+  CompressedImage msg_{};
+};
+
+// sensor_msgs/CompressedImage of a 32FC1 depth image (metres, NaN invalid)
+// in image_transport's compressedDepth format, png mode
+// (compressed_depth_image_transport, codec.cpp encodeCompressedDepthImage):
+// format "32FC1; compressedDepth png"; data = ConfigHeader {int32 format =
+// INV_DEPTH (0), float32 depthParam[2] = {A, B}} (12 bytes, little endian)
+// followed by a 16-bit grey PNG of the inverse depth q = A / z + B
+// (truncated), 0 where z is NaN, >= depth_max_m or too near for 16 bits; with
+// A = quantization * (quantization + 1), B = 1 - A / depth_max_m. A reader
+// gets z = A / (q - B). image_transport's defaults: depth_max 10 m,
+// quantization 100.
+class CompressedDepthMessage : NonMovable {
+ public:
+  static constexpr double kDepthMaxM = 10.0;
+  static constexpr double kQuantization = 100.0;
+  CompressedDepthMessage(const Image& depth, int png_level);
+  const CompressedImage& sample() const { return msg_; }
+
+ private:
+  std::string frame_id_, format_;
+  std::vector<std::uint8_t> data_;
+  CompressedImage msg_{};
 };
 
 // sl_msgs/ImageSet: every image of one sequence as acquired, camera-major,

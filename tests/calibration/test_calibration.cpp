@@ -16,6 +16,8 @@
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <regex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -671,7 +673,12 @@ CliRun runCli(const std::string& args, const fs::path& log) {
 
 // Five board poses on the simulator as pose folders of PNG frames (3+3_both,
 // sl_calibrate's built-in pattern), with the projector `brightness_dn` bright.
-std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightness_dn) {
+// With `moved_mm`, the board of each pose is that much nearer the camera
+// (farther for odd poses) in the column frames (0-5) than in the row frames
+// (6-11): a board knocked during the sequence. The shading image blends the
+// two, nearly alike; the projector columns disagree with the corners.
+std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightness_dn,
+                                             double moved_mm = 0) {
   const Checkerboard board{13, 9, 15.0};
   PhaseShift33Pattern pattern;
   pattern.name = "3+3_both";
@@ -689,13 +696,17 @@ std::vector<std::string> writeSimulatedPoses(const fs::path& dir, double brightn
     config.scene.planes = {boardPlane(board, poses[i])};
     config.projector_brightness_dn = brightness_dn;
     const auto sensor = sl::drivers::SimulatedSensor::create(config);
+    BoardPose moved = poses[i];
+    moved.centre_mm.z() += (i % 2 ? moved_mm : -moved_mm);
+    config.scene.planes = {boardPlane(board, moved)};
+    const auto moved_sensor = sl::drivers::SimulatedSensor::create(config);
     const fs::path folder = dir / ("pose" + std::to_string(i));
     fs::create_directories(folder);
     for (int f = 0; f < pattern.frameCount(); ++f) {
       char name[32];
       std::snprintf(name, sizeof name, "frame_%02d.png", f);
-      REQUIRE(cv::imwrite((folder / name).string(),
-                          sensor->render(pattern.name, f, 1000 * i + f)));
+      const auto& source = f < pattern.frameCount() / 2 ? moved_sensor : sensor;
+      REQUIRE(cv::imwrite((folder / name).string(), source->render(pattern.name, f, 1000 * i + f)));
     }
     folders.push_back(folder.string());
   }
@@ -734,6 +745,9 @@ TEST_CASE("sl_calibrate: saturated poses say so with numbers, --keep-saturated, 
     CHECK(skipped >= 3);
     CHECK(r.exit_code == 1);  // fewer than 3 usable poses
     CHECK(count(r.output, "% saturated") >= skipped);
+    // The corners, counted: found in the shading image, with a projector coordinate.
+    CHECK(count(r.output, "corners found in the shading image: 117 of 117; pixels: ") >= skipped);
+    CHECK(count(r.output, " of 117 corners have a projector coordinate") >= skipped);
     CHECK(r.output.find("% decoded") != std::string::npos);
     CHECK(r.output.find("--keep-saturated") != std::string::npos);
     const CliRun kept = runCli("sl_calibrate --poses" + poses(folders) + board +
@@ -770,22 +784,67 @@ TEST_CASE("sl_calibrate: saturated poses say so with numbers, --keep-saturated, 
     CHECK(accepted.exit_code == 0);
     CHECK(fs::exists(dir / "accepted.yaml"));
   }
+  SECTION("a board knocked during every sequence: beyond the default 2 px, exit 3") {
+    const auto folders = writeSimulatedPoses(dir / "moved", 220.0, 15.0);
+    const CliRun r = runCli("sl_calibrate --poses" + poses(folders) + board + " --out " +
+                                (dir / "moved.yaml").string(),
+                            log);
+    INFO(r.output);
+    CHECK(r.exit_code == 3);
+    CHECK(r.output.find("RMS reprojection error: camera") != std::string::npos);
+    CHECK(r.output.find("per pose (RMS px):") != std::string::npos);
+    CHECK(r.output.find("beyond --max-rms 2 px") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "moved.yaml"));
+  }
 }
 
-TEST_CASE("sl_calibrate and sl_patterns --help list their options and exit 0", "[cli]") {
+// Every option a tool's parser compares against (a "--name" literal of its
+// source; sl_calibrate's --camera-/--projector- flags are composed, so they
+// are listed here) has a line of its own in --help, and --help exits 0.
+TEST_CASE("sl_process, sl_calibrate and sl_patterns --help list every option, exit 0", "[cli]") {
   const fs::path log = fs::path(SL_BINARY_DIR) / "test_calibration_help.txt";
-  const CliRun calibrate = runCli("sl_calibrate --help", log);
-  CHECK(calibrate.exit_code == 0);
-  for (const char* option : {"--poses", "--board", "--square", "--pattern", "--keep-saturated",
-                             "--max-rms", "--accept", "--out", "--help"}) {
-    INFO(option);
-    CHECK(calibrate.output.find(std::string(" ") + option + " ") != std::string::npos);
-  }
-  const CliRun patterns = runCli("sl_patterns --help", log);
-  CHECK(patterns.exit_code == 0);
-  CHECK(patterns.output.find("sl_patterns: help") == std::string::npos);
-  for (const char* option : {"--out", "--lightcrafter", "--calibration", "--ramp", "--help"}) {
-    INFO(option);
-    CHECK(patterns.output.find(std::string(" ") + option + " ") != std::string::npos);
+  const std::regex literal("\"(--[a-z0-9]+(-[a-z0-9]+)*)\"");
+  for (const auto& [tool, source] :
+       std::vector<std::pair<std::string, std::string>>{
+           {"sl_process", "tools/sl_process/main.cpp"},
+           {"sl_calibrate", "tools/sl_calibrate/sl_calibrate.cpp"},
+           {"sl_patterns", "tools/sl_patterns/main.cpp"}}) {
+    std::ifstream in(fs::path(SL_SOURCE_DIR) / source);
+    REQUIRE(in);
+    std::stringstream text;
+    text << in.rdbuf();
+    const std::string code = text.str();
+    std::set<std::string> options;
+    for (auto it = std::sregex_iterator(code.begin(), code.end(), literal);
+         it != std::sregex_iterator(); ++it)
+      options.insert((*it)[1].str());
+    if (tool == "sl_calibrate")
+      for (const char* device : {"camera", "projector"})
+        for (const char* flag : {"fix-principal-point", "fix-aspect-ratio", "no-tangential",
+                                 "radial-terms"})
+          options.insert(std::string("--") + device + "-" + flag);
+    INFO(tool << ": " << options.size() << " options");
+    CHECK(options.size() >= 5);
+    CHECK(options.count("--help") == 1);
+    const CliRun help = runCli(tool + " --help", log);
+    CHECK(help.exit_code == 0);
+    CHECK(help.output.rfind("usage: " + tool, 0) == 0);
+    CHECK(help.output.find(tool + ": help") == std::string::npos);
+    // The lines that introduce an option: "  --name ..." or "  -h, --help ...".
+    std::vector<std::string> lines;
+    std::stringstream output(help.output);
+    for (std::string line; std::getline(output, line);) lines.push_back(line + " ");
+    for (const std::string& option : options) {
+      INFO(tool << " " << option << "\n" << help.output);
+      int introduced = 0;
+      for (const std::string& line : lines) {
+        const auto first = line.find_first_not_of(' ');
+        if (first == 0 || first == std::string::npos) continue;  // not indented: no option line
+        const std::string start = line.substr(first);
+        if (start.rfind(option + " ", 0) == 0 || start.rfind("-h, " + option + " ", 0) == 0)
+          ++introduced;
+      }
+      CHECK(introduced == 1);
+    }
   }
 }

@@ -85,18 +85,19 @@ sl_track "$listener_pid"
 for i in 1 2 3; do
   f="$work/scans/scan_000$i.ply"
   [ -s "$f" ] || fail "missing $f"
-  head -c 400 "$f" | grep -q "comment units mm" || fail "$f: no unit comment"
+  head -c 400 "$f" | grep -aq "^comment units m$" || fail "$f: not in metres by default (unit comment)"
 done
 wait "$listener_pid" || { cat "$work/listener.log"; fail "C listener did not receive 3 clouds"; }
 cat "$work/listener.log"
 [ "$(grep -c '1440 x 1080' "$work/listener.log")" -ge 3 ] || fail "C listener output unexpected"
 
-# One organized PCD scan: header fields and exact payload size.
-"$bin/tools/slctl" --ns "$ns" --timeout "$wait_s" scan --count 1 --format pcd --units m --out "$work/pcd"
+# One organized PCD scan (metres by default): header fields and exact payload size.
+"$bin/tools/slctl" --ns "$ns" --timeout "$wait_s" scan --count 1 --format pcd --out "$work/pcd"
 pcd="$work/pcd/scan_0001.pcd"
 head -c 400 "$pcd" | grep -q "^WIDTH 1440$" || fail "pcd: no WIDTH 1440"
 head -c 400 "$pcd" | grep -q "^HEIGHT 1080$" || fail "pcd: no HEIGHT 1080"
 head -c 400 "$pcd" | grep -q "^DATA binary$" || fail "pcd: not binary"
+head -c 400 "$pcd" | grep -q "sl-sensor, units m," || fail "pcd: not in metres by default"
 header_bytes=$(grep -a -b -m1 "^DATA binary$" "$pcd" | cut -d: -f1)
 expected=$((header_bytes + 12 + 1440 * 1080 * 16))
 [ "$(stat -c %s "$pcd")" -eq "$expected" ] || fail "pcd: size $(stat -c %s "$pcd"), expected $expected"

@@ -22,6 +22,8 @@
 #include <opencv2/core.hpp>
 
 #include "sl/daemon/config.h"
+#include "sl/daemon/devices.h"
+#include "sl/daemon/pattern_config.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/drivers/forwarding.h"
 #include "sl/drivers/recording.h"
@@ -744,6 +746,86 @@ TEST_CASE("a recording stops at its quota with the reason, counting the sets it 
     CHECK(r.code == CommandResult::Code::kDeviceError);
     CHECK(r.reason.find("below runtime.recording_min_free_mb") != std::string::npos);
     CHECK(engine.status().state == ScanState::kIdle);
+  }
+  std::filesystem::remove_all(root);
+}
+
+// Each recorded set keeps the description of its pattern (pattern.yml), so
+// that sl_process can refuse a pattern file of the same name with another
+// sequence (issue 32).
+TEST_CASE("a recorded set keeps its pattern's description", "[engine][record]") {
+  auto config = simConfig();
+  const std::string root = std::filesystem::temp_directory_path() /
+                           ("sl_described_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  config.runtime.recording_root = root;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [](const sl::daemon::ScanResult&) {});
+  REQUIRE(engine.start("", 1, "described").accepted());
+  const auto until = std::chrono::steady_clock::now() + sl::test::scaledBound(30s);
+  while (engine.status().sets_recorded < 1 && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(50ms);
+  REQUIRE(engine.status().sets_recorded == 1);
+  const auto sets = sl::drivers::listRecordedSets(root + "/described");
+  REQUIRE(sets.size() == 1);
+  const sl::pipeline::ImageSet set = sl::drivers::readRecordedSet(sets[0], false);
+  const sl::pipeline::PatternSpec* pattern = config.findPattern(set.pattern_name);
+  REQUIRE(pattern != nullptr);
+  const std::string described = sets[0] + "/pattern.yml";
+  REQUIRE(std::filesystem::exists(described));
+  const sl::pipeline::PatternSpec recorded = sl::daemon::loadPattern(described);
+  CHECK(recorded.name == pattern->name);
+  CHECK(recorded.frequencies == pattern->frequencies);
+  CHECK(sl::daemon::patternDifferences(recorded, *pattern).empty());
+  std::filesystem::remove_all(root);
+}
+
+// A replayed recording whose sets describe their pattern otherwise than the
+// config's pattern of that name (sim.yaml's 3+3_horizontal recorded at 40
+// periods, replayed with a config that says 16) is refused when the devices
+// open, naming the set's pattern.yml and the difference.
+TEST_CASE("a replay refuses a config pattern other than the recorded description",
+          "[engine][record]") {
+  auto config = simConfig();
+  const std::string root = std::filesystem::temp_directory_path() /
+                           ("sl_replay_described_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  const sl::pipeline::PatternSpec* recorded = config.findPattern("3+3_horizontal");
+  REQUIRE(recorded != nullptr);
+  REQUIRE(recorded->frequencies == std::vector<double>{40, 1});
+  sl::pipeline::ImageSet set;
+  set.sequence_id = 1;
+  set.pattern_name = recorded->name;
+  sl::pipeline::CameraImages camera;
+  camera.camera_id = "sim_top";
+  camera.bit_depth = 8;
+  for (int f = 0; f < recorded->frameCount(); ++f) {
+    camera.frames.push_back(cv::Mat(config.calibration.camera.height,
+                                    config.calibration.camera.width, CV_8UC1, cv::Scalar(100)));
+    camera.stamps_ns.push_back(1'000'000'000 + f * 100'000'000);
+  }
+  set.cameras = {camera};
+  sl::drivers::createRecording(root, "test");
+  sl::drivers::writeRecordedSet(root, 1, set, sl::daemon::patternYaml(*recorded));
+  config.sensor = sl::daemon::SensorKind::kReplay;
+  config.replay.dir = root;
+  std::shared_ptr<void> keep_alive;
+  // As recorded: opens.
+  CHECK_NOTHROW(sl::daemon::openDevices(config, keep_alive));
+  keep_alive.reset();
+  // The same name at 16 periods: refused, naming the file and the difference.
+  for (auto& pattern : config.patterns)
+    if (pattern.name == "3+3_horizontal") pattern.frequencies = {16, 1};
+  try {
+    sl::daemon::openDevices(config, keep_alive);
+    FAIL("opened a replay whose recorded pattern differs from the config's");
+  } catch (const std::runtime_error& e) {
+    const std::string message = e.what();
+    INFO(message);
+    CHECK(message.find(root + "/set_000001/pattern.yml") != std::string::npos);
+    CHECK(message.find("'3+3_horizontal'") != std::string::npos);
+    CHECK(message.find("frequencies: [40, 1] vs [16, 1]") != std::string::npos);
   }
   std::filesystem::remove_all(root);
 }

@@ -144,6 +144,110 @@ TEST_CASE("camera_info: plumb_bob, K and P from the intrinsics, R the identity")
   for (int i = 0; i < 12; ++i) CHECK(m.p[i] == p[i]);
 }
 
+TEST_CASE("camera_info of the rectified depth image: D = 0, the same K, P = [K | 0]") {
+  sl::pipeline::PinholeModel camera;
+  camera.width = 64;
+  camera.height = 48;
+  camera.fx = 80;
+  camera.fy = 81;
+  camera.cx = 31.5;
+  camera.cy = 23.5;
+  camera.distortion = {-0.08, 0.12, 0.0005, -0.0003, 0.01};
+  const msg::CameraInfoMessage message(camera, kStamp, "f", true);
+  const msg::CameraInfo& m = message.sample();
+  CHECK(str(m.distortion_model) == "plumb_bob");
+  REQUIRE(m.d._length == 5);
+  for (int i = 0; i < 5; ++i) CHECK(m.d._buffer[i] == 0.0);
+  const double p[12] = {80, 0, 31.5, 0, 0, 81, 23.5, 0, 0, 0, 1, 0};
+  for (int i = 0; i < 12; ++i) CHECK(m.p[i] == p[i]);
+  CHECK(m.k[0] == 80);
+  CHECK(m.k[4] == 81);
+}
+
+TEST_CASE("depth rectification: each rectified pixel's ray meets the raw image where its depth is read") {
+  sl::pipeline::PinholeModel camera;
+  camera.width = 64;
+  camera.height = 48;
+  camera.fx = 60;
+  camera.fy = 60;
+  camera.cx = 31.5;
+  camera.cy = 23.5;
+  camera.distortion = {0.2, 0.05, 0.001, -0.001, 0};  // pincushion
+  // A raw depth image that varies linearly with the raw pixel: bilinear
+  // resampling reproduces it exactly where its 4 pixels are valid.
+  std::vector<float> raw(64 * 48);
+  for (int v = 0; v < 48; ++v)
+    for (int u = 0; u < 64; ++u) raw[v * 64 + u] = 1.0f + 0.001f * u + 0.002f * v;
+  raw[20 * 64 + 30] = kNaN;
+  const DepthRectifier rectifier(camera);
+  const msg::RectifiedDepthMessage message(raw, rectifier, kStamp, "f");
+  const msg::Image& m = message.sample();
+  CHECK(str(m.encoding) == "32FC1");
+  CHECK(m.width == 64);
+  CHECK(m.height == 48);
+  CHECK(m.step == 256);
+  REQUIRE(m.data._length == 64 * 48 * 4);
+  std::vector<float> z(64 * 48);
+  std::memcpy(z.data(), m.data._buffer, m.data._length);
+  int checked = 0, invalid_near_nan = 0, outside = 0;
+  for (int v = 0; v < 48; ++v)
+    for (int u = 0; u < 64; ++u) {
+      const Eigen::Vector2d at = camera.normalizedToPixel({(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy});
+      const float got = z[v * 64 + u];
+      const bool inside = at.x() >= 0 && at.y() >= 0 && at.x() <= 63 && at.y() <= 47;
+      const bool near_nan = std::abs(at.x() - 30) < 1 && std::abs(at.y() - 20) < 1;
+      if (!inside) {
+        outside += std::isnan(got);
+        CHECK(std::isnan(got));
+      } else if (near_nan) {
+        invalid_near_nan += std::isnan(got);
+        CHECK(std::isnan(got));
+      } else {
+        REQUIRE(std::isfinite(got));
+        CHECK(got == Approx(1.0 + 0.001 * at.x() + 0.002 * at.y()).epsilon(1e-6));
+        ++checked;
+      }
+    }
+  CHECK(checked > 64 * 48 / 2);
+  CHECK(invalid_near_nan >= 1);
+  CHECK(outside > 0);  // the rectified corners see past the raw image (pincushion)
+  // A depth edge within one pixel is not blended into an invented surface.
+  std::vector<float> edge(64 * 48, 1.0f);
+  for (int v = 0; v < 48; ++v)
+    for (int u = 32; u < 64; ++u) edge[v * 64 + u] = 2.0f;
+  std::vector<float> out;
+  rectifier.rectify(edge, out);
+  for (float d : out) CHECK((std::isnan(d) || d == 1.0f || d == 2.0f));
+  CHECK_THROWS_WITH(rectifier.rectify(std::vector<float>(10), out),
+                    Catch::Contains("10 pixels for a 64x48 camera"));
+}
+
+TEST_CASE("compressed images: image_transport's png and compressedDepth formats") {
+  sl::pipeline::PointCloud cloud = smallCloud();
+  const msg::ScanImages images(cloud, 1e-3, 12, "cam_optical");
+  const msg::CompressedPngMessage png(images.shading(), 1);
+  CHECK(str(png.sample().format) == "mono8; png compressed ");
+  CHECK(str(png.sample().header.frame_id) == "cam_optical");
+  CHECK(png.sample().header.stamp.sec == 1'700'000'001);
+  REQUIRE(png.sample().data._length > 8);
+  CHECK(png.sample().data._buffer[1] == 'P');
+  const msg::CompressedDepthMessage depth(images.depth(), 1);
+  const msg::CompressedImage& d = depth.sample();
+  CHECK(str(d.format) == "32FC1; compressedDepth png");
+  REQUIRE(d.data._length > 12 + 8);
+  std::int32_t kind = -1;
+  float a = 0, b = 0;
+  std::memcpy(&kind, d.data._buffer, 4);
+  std::memcpy(&a, d.data._buffer + 4, 4);
+  std::memcpy(&b, d.data._buffer + 8, 4);
+  CHECK(kind == 0);
+  CHECK(a == 10100.0f);
+  CHECK(b == 1.0f - 10100.0f / 10.0f);
+  CHECK(d.data._buffer[12 + 1] == 'P');
+  CHECK_THROWS_WITH(msg::CompressedPngMessage(images.depth(), 1), Catch::Contains("'32FC1' is not mono8"));
+  CHECK_THROWS_WITH(msg::CompressedDepthMessage(images.shading(), 1), Catch::Contains("'mono8' is not 32FC1"));
+}
+
 TEST_CASE("projector maps: missing maps are NaN, non-continuous maps are copied row by row") {
   sl::pipeline::ProjectorMaps maps;
   maps.stamp_ns = kStamp;

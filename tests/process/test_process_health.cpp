@@ -1,8 +1,9 @@
 // sl_process on a recording of the simulated sensor (issue 32): a pattern file
 // that does not describe the recorded sequence gives no silent wrong cloud.
 // The recording is sim.yaml's 3+3_horizontal (40 periods) as the recorder
-// writes it; config/patterns/paper_3+3_horizontal.yaml has the same name and
-// 16 periods.
+// writes it (set 2, with its pattern.yml) and as it wrote it before sets kept
+// their pattern's description (set 1); config/patterns/
+// paper_3+3_horizontal.yaml has the same name and 16 periods.
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -18,6 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "sl/daemon/calibration_io.h"
+#include "sl/daemon/pattern_config.h"
 #include "sl/drivers/recording.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
@@ -93,14 +95,33 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
   const fs::path recording = dir / "recording";
   drivers::createRecording(recording.string(), "test");
   drivers::writeRecordedSet(recording.string(), 1, set);
+  drivers::writeRecordedSet(recording.string(), 2, set, daemon::patternYaml(recorded));
   const std::string images = (recording / "set_000001").string();
+  const std::string described = (recording / "set_000002").string();
   daemon::CalibrationFile calibration;
   calibration.calibration = sim.rig;
   const std::string calibration_path = (dir / "rig.yaml").string();
   daemon::saveCalibration(calibration, calibration_path);
   const std::string common = " --calibration " + calibration_path + " --images " + images;
+  const std::string common_described =
+      " --calibration " + calibration_path + " --images " + described;
 
-  SECTION("same preset name, other period: decoded, but implausible (exit 3)") {
+  SECTION("same preset name, other period, the set's pattern.yml: refused naming both (exit 2)") {
+    const std::string paper = std::string(SL_SOURCE_DIR) + "/config/patterns/paper_3+3_horizontal.yaml";
+    const Run r = slProcess("--pattern " + paper + " --out " + (dir / "out16d").string() +
+                            common_described);
+    INFO(r.output);
+    CHECK(r.exit_code == 2);
+    CHECK(r.output.find(paper) != std::string::npos);
+    CHECK(r.output.find((fs::path(described) / "pattern.yml").string()) != std::string::npos);
+    CHECK(r.output.find("frequencies: [40, 1] vs [16, 1]") != std::string::npos);
+    CHECK(!fs::exists(dir / "out16d" / "cloud.ply"));  // refused before decoding
+    // --accept-implausible does not cover a pattern file that is not the recording's.
+    const Run accepted = slProcess("--pattern " + paper + " --out " + (dir / "out16d").string() +
+                                   common_described + " --accept-implausible");
+    CHECK(accepted.exit_code == 2);
+  }
+  SECTION("same preset name, other period, a set without pattern.yml: implausible (exit 3)") {
     const Run r = slProcess("--pattern " + std::string(SL_SOURCE_DIR) +
                             "/config/patterns/paper_3+3_horizontal.yaml --out " +
                             (dir / "out16").string() + common);
@@ -119,8 +140,13 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
   SECTION("the right description: exit 0 and the simulator's depth") {
     writeFile(dir / "p40.yaml", kPattern40);
     const fs::path out = dir / "out40";
+    // The set's own pattern.yml as the pattern file checks alike.
+    const Run own = slProcess("--pattern " + (fs::path(described) / "pattern.yml").string() +
+                              " --out " + (dir / "out_own").string() + common_described);
+    INFO(own.output);
+    CHECK(own.exit_code == 0);
     const Run r = slProcess("--pattern " + (dir / "p40.yaml").string() + " --out " +
-                            out.string() + common);
+                            out.string() + common_described);
     INFO(r.output);
     REQUIRE(r.exit_code == 0);
     CHECK(r.output.find("IMPLAUSIBLE") == std::string::npos);
@@ -148,7 +174,7 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
     const Run named = slProcess("--pattern " + (dir / "other.yaml").string() + " --out " +
                                 (dir / "out_other").string() + common);
     INFO(named.output);
-    CHECK(named.exit_code == 1);
+    CHECK(named.exit_code == 2);
     CHECK(named.output.find("'3+3_horizontal'") != std::string::npos);
     CHECK(named.output.find("'3+3_vertical'") != std::string::npos);
     CHECK(named.output.find("meta.yml") != std::string::npos);
@@ -158,10 +184,61 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
     const Run counted = slProcess("--pattern " + (dir / "four.yaml").string() + " --out " +
                                   (dir / "out_four").string() + common);
     INFO(counted.output);
-    CHECK(counted.exit_code == 1);
+    CHECK(counted.exit_code == 2);
     CHECK(counted.output.find("6 frames") != std::string::npos);
     CHECK(counted.output.find("describes 8") != std::string::npos);
   }
+}
+
+TEST_CASE("sl_process: a calibration file of other keys points to --calibration-keys",
+          "[process][cli]") {
+  const fs::path dir = fs::path(SL_BINARY_DIR) / "test_process_keys";
+  fs::create_directories(dir);
+  // An OpenCV FileStorage calibration with keys of another tool (K1, D1, ...).
+  writeFile(dir / "stereo.yaml",
+            "%YAML:1.0\n---\nK1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+            "   data: [ 1000., 0., 320., 0., 1000., 240., 0., 0., 1. ]\n");
+  writeFile(dir / "own.yaml", "format: sl-sensor-calibration/1\ncam: {}\n");
+  for (const char* file : {"stereo.yaml", "own.yaml"}) {
+    const Run r = slProcess("--pattern " + std::string(SL_SOURCE_DIR) +
+                            "/config/patterns/paper_3+3_horizontal.yaml --images " + dir.string() +
+                            " --calibration " + (dir / file).string() + " --out " +
+                            (dir / "out").string());
+    INFO(r.output);
+    CHECK(r.exit_code == 1);
+    CHECK(r.output.find((dir / file).string()) != std::string::npos);
+    CHECK(r.output.find("--calibration-keys") != std::string::npos);
+  }
+}
+
+TEST_CASE("patternYaml() gives every preset back; patternDifferences() names what differs",
+          "[process][health]") {
+  int presets = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(SL_SOURCE_DIR) / "config/patterns")) {
+    const std::string path = entry.path().string();
+    pipeline::PatternSpec spec;
+    try {
+      spec = daemon::loadPattern(path);
+    } catch (const std::exception&) {
+      continue;  // not a pattern file (the calibration pattern of sl_calibrate, say)
+    }
+    ++presets;
+    INFO(path << "\n" << daemon::patternYaml(spec));
+    const pipeline::PatternSpec back = daemon::parsePatternText(daemon::patternYaml(spec), path);
+    CHECK(back.name == spec.name);
+    CHECK(back.frameCount() == spec.frameCount());
+    CHECK(daemon::patternDifferences(spec, back).empty());
+    CHECK(back.frequencies == spec.frequencies);
+  }
+  CHECK(presets >= 10);
+  pipeline::PatternSpec a, b;
+  b.frequencies = {40, 1};
+  b.steps = 4;
+  const auto d = daemon::patternDifferences(a, b);
+  REQUIRE(d.size() == 3);
+  CHECK(d[0] == "frames: 6 vs 8");
+  CHECK(d[1] == "steps: 3 vs 4");
+  CHECK(d[2] == "frequencies: [16, 1] vs [40, 1]");
 }
 
 TEST_CASE("sl_process --help lists every option and exits 0", "[process][cli]") {

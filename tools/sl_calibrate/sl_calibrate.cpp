@@ -47,6 +47,7 @@ constexpr const char* kUsage =
     "pgm), in projection order by the natural order of the numbers in their names (x_2\n"
     "before x_10; names that do not follow one numbering are refused), or as --list says.\n"
     "input:\n"
+    "  --poses DIR...         pose folders, one pattern sequence of the board each\n"
     "  --pattern P            built-in 3+3_both (default) or a pattern file (YAML, see README)\n"
     "  --fringes N            periods of the built-in 3+3 pattern (default 16)\n"
     "  --projector WxH        projector resolution of the built-in pattern (default 1824x1140)\n"
@@ -57,18 +58,27 @@ constexpr const char* kUsage =
     "  --exclude NAME         leave out the pose folder NAME (repeatable)\n"
     "  --secondary PRIMARY    calibrate a secondary camera against the projector of the\n"
     "                         calibration file PRIMARY (projector intrinsics fixed)\n"
+    "  --import-sl-sensor CAMERA.xml PROJECTOR.xml  convert sl_sensor's calibration files\n"
+    "  --projector-response RAMP_DIR  measure the projector's response from flat grey frames\n"
+    "  --levels L0,L1,...     projector levels of the RAMP_DIR frames (default k / (n - 1))\n"
     "corners:\n"
-    "  --board COLSxROWS      inner corners; --square MM square size\n"
+    "  --board COLSxROWS      inner corners of the checkerboard (required)\n"
+    "  --square MM            checkerboard square size (required)\n"
     "  --subpixel-radius PX   cornerSubPix half window (default 5)\n"
     "  --presmooth PX         Gaussian sigma before sub-pixel refinement (default 0)\n"
     "  --window-radius PX     local homography half window, camera px (default 15)\n"
     "  --min-valid N          minimum decoded pixels per window (default 100)\n"
     "  --min-modulation DN    decoder threshold on the 8-bit scale (default 8)\n"
     "  --keep-saturated       decode pixels with a saturated frame too (default: rejected)\n"
-    "model (prefix camera- or projector-):\n"
-    "  --camera-fix-principal-point  --camera-fix-aspect-ratio\n"
-    "  --camera-radial-terms N (0..3, default 3)  --camera-no-tangential\n"
-    "  (same with --projector-...)\n"
+    "model:\n"
+    "  --camera-fix-principal-point     camera cx, cy fixed at the image centre\n"
+    "  --camera-fix-aspect-ratio        camera fx = fy\n"
+    "  --camera-radial-terms N          camera radial distortion terms 0..3 (default 3)\n"
+    "  --camera-no-tangential           camera tangential distortion fixed at 0\n"
+    "  --projector-fix-principal-point  projector cx, cy fixed at the image centre\n"
+    "  --projector-fix-aspect-ratio     projector fx = fy\n"
+    "  --projector-radial-terms N       projector radial distortion terms 0..3 (default 3)\n"
+    "  --projector-no-tangential        projector tangential distortion fixed at 0\n"
     "output:\n"
     "  --out FILE             calibration YAML (default calibration.yaml)\n"
     "  --export-opencv FILE   also write OpenCV FileStorage (.xml/.yaml/.json, SLStudio keys)\n"
@@ -423,10 +433,12 @@ int run(const Args& a) {
         for (int x = 0; x < maps.status.cols; ++x)
           ++counts[std::min<int>(maps.status.at<std::uint8_t>(y, x), 4)];
       const double total = static_cast<double>(maps.status.total());
-      char numbers[256];
+      char numbers[320];
       std::snprintf(numbers, sizeof numbers,
-                    "; pixels: %.1f %% decoded, %.1f %% saturated, %.1f %% low modulation, "
-                    "%.1f %% unwrap inconsistent",
+                    "; corners found in the shading image: %d of %d; pixels: %.1f %% "
+                    "decoded, %.1f %% saturated, %.1f %% low modulation, %.1f %% unwrap "
+                    "inconsistent",
+                    result.corners_found, a.board.cornerCount(),
                     100.0 * counts[0] / total, 100.0 * counts[2] / total,
                     100.0 * counts[1] / total, 100.0 * counts[3] / total);
       std::string reason = result.error + numbers;

@@ -13,10 +13,11 @@
 // line in --list (relative to DIR). Without --calibration only the maps (and
 // with --phase the phase maps) are written. The decode health of the capture
 // (pipeline/decode_health.h) is printed; a recorded set folder's meta.yml is
-// checked against the pattern file. Exit codes: 0 ok, 1 error (including a
-// capture that decodes to no valid pixel, and a recording made with another
-// pattern), 2 usage, 3 decoded but implausible (outputs written; 0 with
-// --accept-implausible).
+// checked against the pattern file (name, frame count, and the set's
+// pattern.yml where it has one). Exit codes: 0 ok, 1 error (including a
+// capture that decodes to no valid pixel), 2 usage, or a pattern file that
+// is not the recorded set's, 3 decoded but implausible (outputs written; 0
+// with --accept-implausible).
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -42,7 +43,8 @@ const char* const kHelp =
     "Decodes (and with --calibration triangulates) one recorded capture.\n"
     "  --pattern FILE            pattern file describing the projected sequence (required)\n"
     "  --images DIR              folder of the frames, natural order of the numbers in their\n"
-    "                            names; a recorded set folder's meta.yml is checked (required)\n"
+    "                            names; a recorded set's meta.yml and pattern.yml are checked\n"
+    "                            against --pattern (required)\n"
     "  --list FILE               frame files one per line (relative to DIR) instead\n"
     "  --calibration FILE        camera-projector calibration: triangulate, write cloud.ply\n"
     "  --calibration-keys K      FILE.yaml or name=key,... for a calibration whose keys are\n"
@@ -73,7 +75,8 @@ const char* const kHelp =
     "  --accept-implausible      exit 0 even when the decode health says the pattern file\n"
     "                            does not fit the frames (docs/decode-health.md)\n"
     "  -h, --help                this text\n"
-    "Exit codes: 0 ok, 1 error, 2 usage, 3 decoded but implausible.\n";
+    "Exit codes: 0 ok, 1 error, 2 usage or a pattern file that is not the recorded set's\n"
+    "(meta.yml, pattern.yml), 3 decoded but implausible.\n";
 
 int usage(const std::string& message) {
   std::cerr << "sl_process: " << message << "\n" << kHelp;
@@ -179,13 +182,21 @@ int main(int argc, char** argv) {
   try {
     const sl::pipeline::PatternSpec pattern = sl::daemon::loadPattern(pattern_path);
     std::optional<sl::pipeline::CameraProjectorCalibration> calibration;
-    if (!calibration_path.empty())
-      calibration = calibration_keys.empty()
-                        ? sl::daemon::loadCalibration(calibration_path).calibration
-                        : sl::daemon::loadOpenCvCalibration(
-                              calibration_path,
-                              sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
-                              .calibration;
+    if (!calibration_path.empty() && calibration_keys.empty()) {
+      try {
+        calibration = sl::daemon::loadCalibration(calibration_path).calibration;
+      } catch (const std::exception& e) {
+        // A file of another tool's keys reads as one with missing keys.
+        const std::string message = e.what();
+        if (message.find("key '") == std::string::npos) throw;
+        throw std::runtime_error(message +
+                                 "; a calibration of another tool: name its keys with "
+                                 "--calibration-keys (sl_process --help, docs/calibration.md)");
+      }
+    } else if (!calibration_path.empty())
+      calibration = sl::daemon::loadOpenCvCalibration(
+                        calibration_path, sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
+                        .calibration;
     // Before reading any image: a pattern made for another projector, a
     // recording made with another pattern.
     if (calibration) sl::tools::checkPatternFitsCalibration(pattern, *calibration);
@@ -262,6 +273,9 @@ int main(int argc, char** argv) {
       if (!accept_implausible) return kExitImplausible;
     }
     return 0;
+  } catch (const sl::tools::RecordingMismatch& e) {
+    std::cerr << "sl_process: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "sl_process: " << e.what() << "\n";
     return 1;

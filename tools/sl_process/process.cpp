@@ -12,6 +12,7 @@
 
 #include "common/frame_files.h"
 #include "common/ply.h"
+#include "sl/daemon/pattern_config.h"
 #include "sl/drivers/recording.h"
 
 namespace sl::tools {
@@ -56,16 +57,31 @@ bool checkRecordedSet(const pipeline::PatternSpec& pattern, const std::string& p
   if (!fs::exists(meta)) return false;
   const pipeline::ImageSet set = drivers::readRecordedSet(images_dir, /*load_images=*/false);
   if (set.pattern_name != pattern.name)
-    throw std::runtime_error(meta.string() + " says the set was recorded with pattern '" +
-                             set.pattern_name + "', the pattern file " + pattern_path +
-                             " describes '" + pattern.name +
-                             "': give the pattern file of the recorded sequence");
+    throw RecordingMismatch(meta.string() + " says the set was recorded with pattern '" +
+                            set.pattern_name + "', the pattern file " + pattern_path +
+                            " describes '" + pattern.name +
+                            "': give the pattern file of the recorded sequence");
   for (const pipeline::CameraImages& camera : set.cameras) {
     if (static_cast<int>(camera.stamps_ns.size()) != pattern.frameCount())
-      throw std::runtime_error(meta.string() + " says camera '" + camera.camera_id + "' recorded " +
-                               std::to_string(camera.stamps_ns.size()) + " frames of pattern '" +
-                               set.pattern_name + "', the pattern file " + pattern_path +
-                               " describes " + std::to_string(pattern.frameCount()));
+      throw RecordingMismatch(meta.string() + " says camera '" + camera.camera_id + "' recorded " +
+                              std::to_string(camera.stamps_ns.size()) + " frames of pattern '" +
+                              set.pattern_name + "', the pattern file " + pattern_path +
+                              " describes " + std::to_string(pattern.frameCount()));
+  }
+  const fs::path described = fs::path(images_dir) / drivers::kRecordedPatternFile;
+  if (fs::exists(described)) {
+    const pipeline::PatternSpec recorded = daemon::loadPattern(described.string());
+    const std::vector<std::string> differences = daemon::patternDifferences(recorded, pattern);
+    if (!differences.empty()) {
+      std::string list;
+      for (const std::string& d : differences) list += "\n  " + d;
+      throw RecordingMismatch(
+          described.string() + " describes the recorded pattern '" + recorded.name +
+          "' otherwise than the pattern file " + pattern_path + " ('" + pattern.name +
+          "'), recorded vs given:" + list +
+          "\n  give the pattern file of the recorded sequence (" + described.string() +
+          " is one)");
+    }
   }
   return true;
 }

@@ -3,6 +3,7 @@
 // triangulate with a calibration, write maps, cloud and previews.
 #pragma once
 
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -45,13 +46,23 @@ struct ProcessResult {
 void checkPatternFitsCalibration(const pipeline::PatternSpec& pattern,
                                  const pipeline::CameraProjectorCalibration& calibration);
 
+// A recorded set that says it was made with another pattern than the
+// pattern file given for it.
+struct RecordingMismatch : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // When `images_dir` is a recorded set folder (sl-sensor-recording/1: it holds
 // a meta.yml), checks what the recording says against the pattern file
 // `pattern_path` describing `pattern`: the pattern name and the frame count
-// of every camera. Throws std::runtime_error naming the meta.yml and the
-// pattern file with both values on a mismatch; returns false (nothing
-// checked) for a plain folder of images. (A recording holds the pattern's
-// name only: another period under the same name shows in the decode health.)
+// of every camera (meta.yml), and, when the set keeps the description of its
+// pattern (pattern.yml, written by the daemon's recorder), every key of it:
+// family, direction, projector, steps, frequencies, unwrapping, Gray bits,
+// phase conventions, frame order. Throws RecordingMismatch naming the
+// recording's file and the pattern file with both values of every
+// difference; returns false (nothing checked) for a plain folder of images.
+// (A set recorded before pattern.yml holds the pattern's name only: another
+// period under the same name then shows in the decode health.)
 bool checkRecordedSet(const pipeline::PatternSpec& pattern, const std::string& pattern_path,
                       const std::string& images_dir);
 

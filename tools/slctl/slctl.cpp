@@ -1,6 +1,6 @@
 // slctl: command-line client of a running sl_sensord (over DDS).
 //
-//   slctl scan --count N --out DIR [--pattern NAME] [--units mm|m] [start options]
+//   slctl scan --count N --out DIR [--pattern NAME] [--units m|mm] [start options]
 //   slctl start [--pattern NAME] [start options] | stop | status | patterns | pattern set NAME
 // Start options: --trigger hardware|software, --delay S | --at UNIX_SECONDS,
 // --cameras ID[,ID...], --motion on|off.
@@ -33,9 +33,10 @@ using sl::daemon::SensorClient;
 constexpr const char* kUsage =
     "usage: slctl [options] COMMAND\n"
     "commands:\n"
-    "  scan --count N --out DIR [--pattern NAME] [--units mm|m] [--format ply|pcd]\n"
+    "  scan --count N --out DIR [--pattern NAME] [--units m|mm] [--format ply|pcd]\n"
     "                     take N scans, write DIR/scan_0001.ply ... (binary PLY: finite\n"
-    "                     points; binary PCD: organized, NaN for invalid pixels)\n"
+    "                     points; binary PCD: organized, NaN for invalid pixels), in\n"
+    "                     metres as the topics (--units mm: millimetres)\n"
     "  start [--pattern NAME]  scan continuously until stop\n"
     "  record NAME [--count N] [--pattern P] [--wait]  scan and record the image sets\n"
     "                     under NAME (in the daemon's runtime.recording_root, printed)\n"
@@ -69,7 +70,7 @@ struct Args {
   int count = 1;
   std::string out;
   std::string pattern;
-  sl::tools::LengthUnit unit = sl::tools::LengthUnit::kMillimetre;
+  sl::tools::LengthUnit unit = sl::tools::LengthUnit::kMetre;  // files as the topics: metres
   bool pcd = false;
   sl::daemon::StartRequest start;  // options of scan / start / record
   bool start_options_given = false;
@@ -347,9 +348,12 @@ int scan(SensorClient& client, const Args& args) {
     const double total = static_cast<double>(cloud->points.size());
     if (show_progress) std::fputs("\r\033[K", stderr);  // the bar gives way to the line
     if (written > 0) {
-      std::printf("scan %d/%d: %dx%d, %zu valid points (%.1f %%), z %.1f..%.1f mean %.1f %s -> %s\n",
+      // 0.1 mm either way.
+      const int digits = args.unit == sl::tools::LengthUnit::kMetre ? 4 : 1;
+      std::printf("scan %d/%d: %dx%d, %zu valid points (%.1f %%), z %.*f..%.*f mean %.*f %s -> %s\n",
                   i, args.count, cloud->width, cloud->height, written, 100.0 * written / total,
-                  zmin * scale, zmax * scale, zsum / written * scale, unit, path.c_str());
+                  digits, zmin * scale, digits, zmax * scale, digits, zsum / written * scale, unit,
+                  path.c_str());
     } else {
       std::printf("scan %d/%d: %dx%d, no valid points -> %s\n", i, args.count, cloud->width,
                   cloud->height, path.c_str());

@@ -42,7 +42,8 @@ CommandResult RequestControl::start(const StartRequest& request) {
     try {
       links_.recorder->start(accepted.recording_dir, "pattern " + accepted.pattern + ", " +
                                                          std::to_string(accepted.count) +
-                                                         " scans requested");
+                                                         " scans requested",
+                                 config_.patterns);
     } catch (const std::exception& e) {
       return {Code::kDeviceError, std::string("cannot record: ") + e.what()};
     }

@@ -95,7 +95,8 @@ void createRecording(const std::string& dir, const std::string& note) {
   out << "note" << note;
 }
 
-void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set) {
+void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set,
+                      const std::string& pattern_yaml) {
   const fs::path folder = fs::path(dir) / setName(index);
   std::error_code error;
   fs::create_directories(folder, error);
@@ -106,6 +107,12 @@ void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipelin
       if (!cv::imwrite(path, camera.frames[i], {cv::IMWRITE_PNG_COMPRESSION, 1}))
         throw std::runtime_error(path + ": cannot write frame");
     }
+  }
+  if (!pattern_yaml.empty()) {
+    const std::string path = (folder / kRecordedPatternFile).string();
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << pattern_yaml;
+    if (!out.flush()) throw std::runtime_error(path + ": cannot write");
   }
   // meta.yml last, through a temporary name: its presence marks the set complete.
   const std::string meta = (folder / "meta.yml").string();

@@ -189,6 +189,7 @@ BoardViewResult observeBoard(const cv::Mat& shading, const ProjectorMaps& maps,
                    std::to_string(board.rows) + " not found in the shading image";
     return result;
   }
+  result.corners_found = static_cast<int>(corners->size());
   BoardView view;
   view.label = label;
   for (int id = 0; id < board.cornerCount(); ++id) {
@@ -202,6 +203,7 @@ BoardViewResult observeBoard(const cv::Mat& shading, const ProjectorMaps& maps,
     view.camera_px.push_back(c);
     view.projector_px.push_back(*p);
   }
+  result.corners_with_projector = static_cast<int>(view.corner_ids.size());
   if (2 * static_cast<int>(view.corner_ids.size()) < board.cornerCount()) {
     result.error = label + ": only " + std::to_string(view.corner_ids.size()) + " of " +
                    std::to_string(board.cornerCount()) +

@@ -7,9 +7,15 @@
 // Topics (ns = DdsConfig::ns, default "sl"):
 //   rt/<ns>/points          sensor_msgs/PointCloud2 (ROS 2 wire format, XCDR1)
 //   rt/<ns>/projector_maps  sl_msgs ProjectorMaps (when enabled)
-//   rt/<ns>/depth/image     sensor_msgs/Image 32FC1, metres (when publish_images)
+//   rt/<ns>/depth/image     sensor_msgs/Image 32FC1, metres, raw pixel grid (when publish_images)
+//   rt/<ns>/depth/image_rect  the same on the rectified grid (first camera; when publish_images)
+//   rt/<ns>/depth/camera_info sensor_msgs/CameraInfo of depth/image_rect: D = 0, P = [K | 0]
 //   rt/<ns>/shading/image   sensor_msgs/Image mono8, the fringe offset A (when publish_images)
-//   rt/<ns>/camera_info     sensor_msgs/CameraInfo of the triangulating camera (when publish_images)
+//   rt/<ns>/shading/camera_info, rt/<ns>/camera_info  sensor_msgs/CameraInfo of the raw
+//                           images of the triangulating camera (when publish_images)
+//   rt/<ns>/shading/image/compressed, rt/<ns>/depth/image_rect/compressedDepth
+//                           sensor_msgs/CompressedImage in image_transport's formats,
+//                           encoded only while a reader is matched (when publish_images)
 //   rt/<ns>/status          sl_msgs Status (transient-local)
 //   rq/<ns>/commandRequest  sl_msgs CommandRequest (from clients)
 //   rr/<ns>/commandReply    sl_msgs CommandReply (one per request)
@@ -27,6 +33,8 @@ namespace sl::daemon {
 struct TopicNames {
   std::string points, projector_maps, image_sets, status, request, reply;
   std::string depth_image, shading_image, camera_info;
+  std::string depth_image_rect, depth_camera_info, shading_camera_info;
+  std::string shading_compressed, depth_rect_compressed_depth;
   static TopicNames forNamespace(const std::string& ns);
 };
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "sl/pipeline/pattern_spec.h"
 
@@ -17,5 +18,18 @@ pipeline::PatternSpec loadPattern(const std::string& path);
 // Same, from YAML text; `origin` names it in error messages.
 pipeline::PatternSpec parsePatternText(const std::string& yaml_text, const std::string& origin,
                                        const std::string& default_name = "pattern");
+
+// The pattern file text of `spec`: the keys loadPattern() reads, every one
+// of the family written out (numbers with 17 significant digits), so that
+// parsePatternText() of it gives `spec` back (the start phase to rounding).
+// Recordings keep it per set (drivers/recording.h, pattern.yml).
+std::string patternYaml(const pipeline::PatternSpec& spec);
+
+// How two descriptions of a sequence differ, the names aside: one line per
+// differing key, "key: <a> vs <b>" (values as in patternYaml(), to 9
+// significant digits), the frame count first. Empty when both describe the
+// same projected sequence.
+std::vector<std::string> patternDifferences(const pipeline::PatternSpec& a,
+                                            const pipeline::PatternSpec& b);
 
 }  // namespace sl::daemon

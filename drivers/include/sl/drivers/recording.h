@@ -5,6 +5,10 @@
 //   <dir>/recording.yml          format, creation time, free-text note
 //   <dir>/set_000001/meta.yml    sequence_id, pattern, trigger_stamp_ns and
 //                                per camera: id, bit_depth, stamps_ns[]
+//   <dir>/set_000001/pattern.yml the pattern file of the projected sequence
+//                                (daemon::patternYaml(); sets written with
+//                                a description only, recordings before it
+//                                have none): sl_process checks it
 //   <dir>/set_000001/<camera>_<i>.png   frame i of that camera, lossless PNG
 //                                (8-bit, or 16-bit for deeper sensors)
 // Sets are numbered in recording order from 1. The .yml files are OpenCV
@@ -26,9 +30,14 @@ namespace sl::drivers {
 // naming the path on failure.
 void createRecording(const std::string& dir, const std::string& note);
 
-// Writes `set` as set number `index` (1-based). Throws std::runtime_error
-// naming the file on failure.
-void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set);
+// Writes `set` as set number `index` (1-based), with `pattern_yaml` (the
+// pattern file text of the set's pattern, if not empty) as its pattern.yml.
+// Throws std::runtime_error naming the file on failure.
+void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set,
+                      const std::string& pattern_yaml = "");
+
+// The file name of a set's pattern description in its folder.
+inline constexpr const char* kRecordedPatternFile = "pattern.yml";
 
 // The complete sets of a recording, in order (folder names only; no images
 // are loaded). Throws std::runtime_error if `dir` is not a recording.

@@ -110,6 +110,8 @@ struct BoardView {
 struct BoardViewResult {
   std::optional<BoardView> view;
   std::string error;
+  int corners_found = 0;           // in the shading image: 0, or every corner of the board
+  int corners_with_projector = 0;  // of those, with a projector point
 };
 BoardViewResult observeBoard(const cv::Mat& shading, const ProjectorMaps& maps,
                              const Checkerboard& board, const std::string& label,
