@@ -23,6 +23,7 @@
 #include <exception>
 #include <filesystem>
 #include <iostream>
+#include <cmath>
 #include <optional>
 #include <string>
 
@@ -62,6 +63,15 @@ const char* const kHelp =
     "  --projector-gamma G       compensate a projector gamma in decoding\n"
     "  --projector-response FILE compensate a measured projector response\n"
     "  --estimate-gamma          estimate the projector gamma from the frames\n"
+    "  --quality                 per-point quality (docs/metrology.md): confidence (expected\n"
+    "                            depth sigma, mm) and nx ny nz in cloud.ply, depth_sigma.tiff\n"
+    "  --camera-gain K           camera shot noise, variance K * signal (8-bit DN^2 per DN;\n"
+    "                            default 0.0084, the simulator's)\n"
+    "  --camera-read-noise DN    camera read noise std, 8-bit DN (default 0.05)\n"
+    "  --camera-bits N           significant bits of the images for --quality (default: 8 for\n"
+    "                            8-bit images, 16 for 16-bit ones; 10 or 12 for Mono10/12\n"
+    "                            stored in 16-bit files)\n"
+    "  --normal-step PX          normals from neighbours PX pixels away (default 3)\n"
     "  --accept-implausible      exit 0 even when the decode health says the pattern file\n"
     "                            does not fit the frames (docs/decode-health.md)\n"
     "  -h, --help                this text\n"
@@ -89,6 +99,9 @@ int main(int argc, char** argv) {
        accept_implausible = false;
   std::string response_path;
   double smooth_sigma = 0;
+  bool quality = false;
+  sl::pipeline::CameraNoise noise;
+  int normal_step = 3, camera_bits = 0;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string arg = argv[i];
@@ -103,6 +116,24 @@ int main(int argc, char** argv) {
       else if (arg == "--out") out_dir = value();
       else if (arg == "--list") list_path = value();
       else if (arg == "--phase") phase = true;
+      else if (arg == "--quality") quality = true;
+      else if (arg == "--camera-gain") {
+        noise.gain_dn_per_electron = number(arg, value());
+        if (!(noise.gain_dn_per_electron >= 0)) return usage("--camera-gain must be >= 0");
+      } else if (arg == "--camera-read-noise") {
+        noise.read_noise_dn = number(arg, value());
+        if (!(noise.read_noise_dn >= 0)) return usage("--camera-read-noise must be >= 0");
+      } else if (arg == "--camera-bits") {
+        const double bits = number(arg, value());
+        if (!(bits >= 8 && bits <= 16 && bits == std::floor(bits)))
+          return usage("--camera-bits must be an integer 8..16");
+        camera_bits = static_cast<int>(bits);
+      } else if (arg == "--normal-step") {
+        const double step = number(arg, value());
+        if (!(step >= 1 && step <= 50 && step == std::floor(step)))
+          return usage("--normal-step must be an integer 1..50 (camera px)");
+        normal_step = static_cast<int>(step);
+      }
       else if (arg == "--projector-gamma") {
         const double gamma = number(arg, value());
         if (!(gamma > 0)) return usage("--projector-gamma must be > 0");
@@ -144,6 +175,7 @@ int main(int argc, char** argv) {
     return usage("--pattern and --images are required");
   if (!calibration_keys.empty() && calibration_path.empty())
     return usage("--calibration-keys needs --calibration");
+  if (calibration_path.empty() && quality) return usage("--quality needs --calibration");
   if (calibration_path.empty() && undistort_images)
     return usage("--undistort-images needs --calibration");
 
@@ -197,6 +229,16 @@ int main(int argc, char** argv) {
     } else {
       result.maps = sl::tools::decodeCapture(pattern, frames, decoder, &result.health);
       sl::tools::smoothProjectorCoordinates(result.maps, smooth_sigma);
+    }
+    if (quality) {
+      // The maps' DN are the images' values: their significant bits set the
+      // scale of the noise model's 8-bit DN.
+      if (camera_bits > frames.bit_depth)
+        throw std::invalid_argument("--camera-bits " + std::to_string(camera_bits) + ": the images are " +
+                                    std::to_string(frames.bit_depth) + "-bit");
+      noise.bit_depth = camera_bits > 0 ? camera_bits : frames.bit_depth;
+      sl::tools::addPointQuality(result, pattern, *calibration, noise, triangulator.use,
+                                 normal_step);
     }
     const std::size_t points =
         sl::tools::writeOutputs(result, frames.bit_depth, out_dir, phase ? &pattern : nullptr);

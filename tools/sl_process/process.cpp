@@ -197,6 +197,17 @@ void write(const std::string& path, const cv::Mat& image) {
 
 }  // namespace
 
+void addPointQuality(ProcessResult& result, const pipeline::PatternSpec& pattern,
+                     const pipeline::CameraProjectorCalibration& calibration,
+                     const pipeline::CameraNoise& noise, pipeline::TriangulatorOptions::Use use,
+                     int normal_step, float max_jump_mm) {
+  if (result.cloud.width == 0 || result.cloud.height == 0)
+    throw std::invalid_argument("point quality needs a triangulated cloud (--calibration)");
+  result.depth_sigma =
+      pipeline::depthSigma(result.maps, result.cloud, calibration, pattern, noise, use);
+  result.normals = pipeline::organizedNormals(result.cloud, normal_step, max_jump_mm);
+}
+
 std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::string& out_dir,
                          const pipeline::PatternSpec* pattern) {
   fs::create_directories(out_dir);
@@ -248,7 +259,11 @@ std::size_t writeOutputs(const ProcessResult& result, int bit_depth, const std::
     }
   }
   write((dir / "depth.png").string(), depth_preview);
-  return writePly(cloud, (dir / "cloud.ply").string(), LengthUnit::kMillimetre);
+  if (result.depth_sigma.empty() && result.normals.empty())
+    return writePly(cloud, (dir / "cloud.ply").string(), LengthUnit::kMillimetre);
+  if (!result.depth_sigma.empty()) write((dir / "depth_sigma.tiff").string(), result.depth_sigma);
+  return writePlyWithQuality(cloud, result.depth_sigma, result.normals,
+                             (dir / "cloud.ply").string(), LengthUnit::kMillimetre);
 }
 
 }  // namespace sl::tools

@@ -11,6 +11,7 @@
 
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/decode_health.h"
+#include "sl/pipeline/point_quality.h"
 #include "sl/pipeline/triangulator.h"
 
 namespace sl::tools {
@@ -33,6 +34,10 @@ struct ProcessResult {
   pipeline::ProjectorMaps maps;
   pipeline::PointCloud cloud;  // mm, camera optical frame; empty (0 x 0) for maps only
   pipeline::DecodeHealth health;  // of the decoded frames (measureDecodeHealth)
+  // Per-point quality (addPointQuality), empty unless computed: expected
+  // depth sigma (CV_32FC1, mm) and unit normals (CV_32FC3), the cloud's size.
+  cv::Mat depth_sigma;
+  cv::Mat normals;
 };
 
 // Throws std::invalid_argument when the pattern was made for another
@@ -104,6 +109,18 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
                              const pipeline::TriangulatorOptions& triangulator,
                              bool undistort_images = false, double smooth_sigma_px = 0);
 
+// Fills result.depth_sigma (pipeline::depthSigma with `noise` and the axis
+// `use` picks) and result.normals (pipeline::organizedNormals, `normal_step`
+// px, neighbours farther than max_jump_mm dropped) of a triangulated result.
+// `calibration`: the one processCapture triangulated with (its projector and
+// R, t are what matter). Throws std::invalid_argument for a result without a
+// cloud or a pattern family without a phase-noise model (Gray code, micro
+// phase shift).
+void addPointQuality(ProcessResult& result, const pipeline::PatternSpec& pattern,
+                     const pipeline::CameraProjectorCalibration& calibration,
+                     const pipeline::CameraNoise& noise, pipeline::TriangulatorOptions::Use use,
+                     int normal_step = 3, float max_jump_mm = 5.0f);
+
 // Writes into `out_dir` (created if missing):
 //   up.tiff, vp.tiff, modulation.tiff, offset.tiff, depth.tiff: 32-bit float
 //     TIFF (projector px / camera DN / mm), NaN where invalid (depth.tiff,
@@ -112,7 +129,9 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
 //     phase_u_wrapped.tiff (and phase_v_... for rows) from phaseMaps()
 //   status.png: 8-bit PixelStatus per pixel (0 valid, 1 low modulation,
 //     2 saturated, 3 unwrap inconsistent, 4 out of range)
-//   cloud.ply: binary PLY of the valid points (mm)
+//   cloud.ply: binary PLY of the valid points (mm); with point quality
+//     (addPointQuality) also nx ny nz and confidence (expected depth sigma,
+//     mm) per point, and depth_sigma.tiff (mm)
 //   depth.png, modulation.png: 8-bit previews (depth: near bright, invalid
 //     black, stretched over the 1st..99th percentile; modulation: 0..255 DN
 //     at 8 bits, clipped)
