@@ -260,13 +260,14 @@ TEST_CASE("sl_view's reader QoS matches the daemon's writers", "[view][dds]") {
   sl::daemon::DdsConfig dds;
   dds.ns = "view_qos_" + std::to_string(::getpid());
   dds.publish_images = true;
-  sl::pipeline::PinholeModel camera;
+  sl::pipeline::CameraProjectorCalibration calibration;
+  sl::pipeline::PinholeModel& camera = calibration.camera;
   camera.width = 8;
   camera.height = 6;
   camera.fx = camera.fy = 10;
   camera.cx = 4;
   camera.cy = 3;
-  sl::daemon::DdsBridge bridge(dds, "cam0", camera);
+  sl::daemon::DdsBridge bridge(dds, "cam0", calibration);
   for (const bool best_effort : {true, false}) {
     CAPTURE(best_effort);
     sl::view::RawTopicsOptions options;
