@@ -147,7 +147,7 @@ void parseTopicQos(const YamlMap& m, TopicQos& q) {
   m.done();
 }
 
-void parseDds(const YamlMap& m, DdsConfig& d) {
+void parseDds(const YamlMap& m, DdsConfig& d, const std::filesystem::path& base_dir) {
   d.domain_id = m.get<int>("domain_id", d.domain_id);
   if (d.domain_id < 0 || d.domain_id > 232) m.fail("domain_id", "must be in 0..232");
   d.ns = m.get<std::string>("namespace", d.ns);
@@ -190,7 +190,7 @@ void parseDds(const YamlMap& m, DdsConfig& d) {
   r.burst = requests.get<double>("burst", r.burst);
   if (!(r.burst >= 1 && r.burst <= 100000)) requests.fail("burst", "must be in [1, 100000] requests");
   requests.done();
-  parseTfConfig(m.optionalMap("tf"), d.tf);
+  parseTfConfig(m.optionalMap("tf"), d.tf, base_dir);
   m.done();
 }
 
@@ -455,7 +455,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
                                                 : config.sim.camera_fps,
                     config.synchroniser);
   parseMotion(root.optionalMap("motion_compensation"), config.motion);
-  parseDds(root.optionalMap("dds"), config.dds);
+  parseDds(root.optionalMap("dds"), config.dds, base_dir);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   parseSoftwareTrigger(root.optionalMap("software_trigger"), config.software_trigger);
   // Relative: under the service's state directory when systemd gives one

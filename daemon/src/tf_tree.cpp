@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "sl/daemon/config_error.h"
+#include "sl/daemon/input_file.h"
 #include "yaml_reader.h"
 
 namespace sl::daemon {
@@ -18,9 +19,46 @@ void checkFrame(const YamlMap& m, const char* key, const std::string& frame, boo
     m.fail(key, "must be 1..128 characters without spaces, quotes or a leading '/' (tf2 frame ids)");
 }
 
+// The mount from an sl_handeye result (format sl-sensor-hand-eye/1): its
+// `mount` is the first camera's optical frame in the flange (eye-in-hand) or
+// in the robot base (eye-to-hand), translation in mm. base_frame shares the
+// optical frame's origin with body axes: p_parent = R_mount opticalToBody()^T
+// p_base + t.
+void readHandEyeMount(const YamlMap& mount, const std::string& path, TfConfig& tf) {
+  YAML::Node root;
+  try {
+    root = loadInputYaml(path, InputKind::kCalibration);
+  } catch (const ConfigError& e) {
+    mount.fail("hand_eye", e.what());
+  }
+  const auto fail = [&](const std::string& what) {
+    mount.fail("hand_eye", "'" + path + "': " + what + " (write it with sl_handeye --out)");
+  };
+  if (!root.IsMap() || !root["format"] || root["format"].as<std::string>("") != "sl-sensor-hand-eye/1")
+    fail("not an sl_handeye result (format: sl-sensor-hand-eye/1)");
+  const YAML::Node m = root["mount"];
+  if (!m || !m.IsMap() || !m["translation_mm"] || !m["quaternion_xyzw"]) fail("no mount: {translation_mm, quaternion_xyzw}");
+  std::vector<double> t, q;
+  try {
+    t = m["translation_mm"].as<std::vector<double>>();
+    q = m["quaternion_xyzw"].as<std::vector<double>>();
+  } catch (const YAML::Exception&) {
+    fail("mount.translation_mm and mount.quaternion_xyzw must be lists of numbers");
+  }
+  if (t.size() != 3 || q.size() != 4) fail("mount.translation_mm needs 3 numbers, mount.quaternion_xyzw 4");
+  for (double v : t)
+    if (!std::isfinite(v) || std::abs(v) > 1e7) fail("mount.translation_mm is not finite millimetres below 10 km");
+  const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (!(std::abs(norm - 1.0) <= 1e-3)) fail("mount.quaternion_xyzw is not a unit quaternion");
+  const Eigen::Quaterniond optical(q[3] / norm, q[0] / norm, q[1] / norm, q[2] / norm);
+  const Eigen::Quaterniond base(optical.toRotationMatrix() * opticalToBody().transpose());
+  tf.mount_xyz_m = {t[0] * 1e-3, t[1] * 1e-3, t[2] * 1e-3};
+  tf.mount_xyzw = {base.x(), base.y(), base.z(), base.w()};
+}
+
 }  // namespace
 
-void parseTfConfig(const YamlMap& m, TfConfig& tf) {
+void parseTfConfig(const YamlMap& m, TfConfig& tf, const std::filesystem::path& base_dir) {
   tf.publish = m.get<bool>("publish", tf.publish);
   tf.parent_frame = m.get<std::string>("parent_frame", tf.parent_frame);
   tf.base_frame = m.get<std::string>("base_frame", tf.base_frame);
@@ -33,6 +71,15 @@ void parseTfConfig(const YamlMap& m, TfConfig& tf) {
   if (mount.has("xyz") || mount.has("rpy") || mount.has("quaternion")) {
     if (tf.parent_frame.empty())
       mount.fail("xyz", "a mount pose needs dds.tf.parent_frame (the frame it is given in)");
+  }
+  if (mount.has("hand_eye")) {
+    if (mount.has("xyz") || mount.has("rpy") || mount.has("quaternion"))
+      mount.fail("hand_eye", "give the mount as hand_eye (a file) or as xyz + rpy|quaternion, not both");
+    if (tf.parent_frame.empty())
+      mount.fail("hand_eye", "a mount pose needs dds.tf.parent_frame (the flange or base frame of the hand-eye calibration)");
+    std::filesystem::path path(mount.get<std::string>("hand_eye"));
+    if (path.is_relative()) path = base_dir / path;
+    readHandEyeMount(mount, path.lexically_normal().string(), tf);
   }
   if (mount.has("xyz")) {
     const std::vector<double> xyz = mount.get<std::vector<double>>("xyz");

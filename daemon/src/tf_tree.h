@@ -3,6 +3,7 @@
 // Pure: no DDS.
 #pragma once
 
+#include <filesystem>
 #include <map>
 #include <string>
 #include <vector>
@@ -22,7 +23,10 @@ class YamlMap;
 // about z (q = Rz(yaw) Ry(pitch) Rx(roll)). Throws ConfigError naming the
 // key: a quaternion whose norm is not 1 within 1e-3, both rpy and
 // quaternion, a mount without parent_frame, bad frame names.
-void parseTfConfig(const YamlMap& m, TfConfig& tf);
+// mount: {hand_eye: FILE} instead takes the mount from an sl_handeye result
+// (its mount: the first camera's optical frame in parent_frame); a relative
+// FILE is relative to `base_dir` (the config file's folder).
+void parseTfConfig(const YamlMap& m, TfConfig& tf, const std::filesystem::path& base_dir = {});
 
 // One static transform: the pose of `child` in `parent`
 // (p_parent = pose * p_child), translation in metres.

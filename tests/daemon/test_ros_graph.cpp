@@ -5,8 +5,11 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
 #include <string>
+#include <unistd.h>
 
 #include "ros_graph.h"
 #include "sl/daemon/config.h"
@@ -145,6 +148,51 @@ TEST_CASE("sensorTransforms: mount, optical frames of every camera, projector", 
       CHECK(contains(e.what(), "'right_optical'"));
     }
   }
+}
+
+TEST_CASE("dds.tf.mount.hand_eye: the mount from an sl_handeye result", "[ros_graph][tf]") {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("sl_hand_eye_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  // The first camera's optical frame in the flange: a rotation about a
+  // skew axis and 12.5 / -40 / 95 mm.
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, -2, 0.5).normalized()));
+  const fs::path file = dir / "hand_eye.yaml";
+  {
+    std::ofstream out(file);
+    out.precision(17);
+    out << "format: sl-sensor-hand-eye/1\nsetup: eye-in-hand\nmount:\n  translation_mm: [12.5, -40, 95]\n"
+        << "  quaternion_xyzw: [" << q.x() << ", " << q.y() << ", " << q.z() << ", " << q.w() << "]\n";
+  }
+  const TfConfig tf = tfOf("    parent_frame: tool0\n    mount: {hand_eye: " + file.string() + "}\n");
+  sl::pipeline::CameraProjectorCalibration calibration;
+  calibration.R = Eigen::Matrix3d::Identity();
+  calibration.t = {150, 0, 0};
+  const auto transforms = sl::daemon::sensorTransforms(tf, {{"cam", "cam_optical", calibration}});
+  Eigen::Isometry3d tool0_from_base = Eigen::Isometry3d::Identity(), base_from_optical = tool0_from_base;
+  for (const auto& t : transforms) {
+    if (t.parent == "tool0" && t.child == "sl_base_link") tool0_from_base = t.pose;
+    if (t.parent == "sl_base_link" && t.child == "cam_optical") base_from_optical = t.pose;
+  }
+  // Through the tree, the optical frame lands where the file put it.
+  const Eigen::Isometry3d tool0_from_optical = tool0_from_base * base_from_optical;
+  CHECK((tool0_from_optical.translation() - Eigen::Vector3d(0.0125, -0.040, 0.095)).norm() < 1e-12);
+  CHECK((tool0_from_optical.linear() - q.toRotationMatrix()).norm() < 1e-9);
+
+  // Mistakes name the key (and the file).
+  CHECK(contains(errorOf("    parent_frame: tool0\n    mount: {hand_eye: " + (dir / "missing.yaml").string() + "}\n"),
+                 "hand_eye"));
+  CHECK(contains(errorOf("    mount: {hand_eye: " + file.string() + "}\n"), "parent_frame"));
+  CHECK(contains(errorOf("    parent_frame: tool0\n    mount: {hand_eye: " + file.string() + ", xyz: [0, 0, 0]}\n"),
+                 "not both"));
+  {
+    std::ofstream out(dir / "other.yaml");
+    out << "camera: {fx: 1}\n";
+  }
+  const std::string other = errorOf("    parent_frame: tool0\n    mount: {hand_eye: " + (dir / "other.yaml").string() + "}\n");
+  CHECK(contains(other, "hand_eye"));
+  CHECK(contains(other, "sl-sensor-hand-eye/1"));
+  fs::remove_all(dir);
 }
 
 TEST_CASE("diagnosticsOf: levels from the daemon's state", "[ros_graph][diagnostics]") {
