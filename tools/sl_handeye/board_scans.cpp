@@ -1,5 +1,6 @@
 #include "board_scans.h"
 
+#include <cmath>
 #include <filesystem>
 #include <stdexcept>
 #include <vector>
@@ -12,6 +13,44 @@
 #include "sl/pipeline/pattern.h"
 
 namespace sl::tools {
+
+double optionNumber(const std::string& option, const std::string& value) {
+  std::size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != value.size() || !std::isfinite(v))
+    throw std::invalid_argument(option + ": expected a number, got '" + value + "'");
+  return v;
+}
+
+bool takeBoardScanOption(const std::string& o, const std::function<std::string()>& value,
+                         pipeline::Checkerboard& board, std::string& pattern, int& fringes,
+                         BoardScanOptions& scan) {
+  if (o == "--board") {
+    const std::string v = value();
+    const auto x = v.find('x');
+    if (x == std::string::npos) throw std::invalid_argument("--board: expected COLSxROWS, got '" + v + "'");
+    board.cols = static_cast<int>(optionNumber(o, v.substr(0, x)));
+    board.rows = static_cast<int>(optionNumber(o, v.substr(x + 1)));
+  } else if (o == "--square") {
+    board.square_mm = optionNumber(o, value());
+  } else if (o == "--pattern") {
+    pattern = value();
+  } else if (o == "--fringes") {
+    fringes = static_cast<int>(optionNumber(o, value()));
+  } else if (o == "--presmooth") {
+    scan.corners.presmooth_sigma_px = optionNumber(o, value());
+  } else if (o == "--window-radius") {
+    scan.homographies.window_radius_px = static_cast<int>(optionNumber(o, value()));
+  } else {
+    return false;
+  }
+  return true;
+}
 
 pipeline::PatternSpec boardScanPattern(const std::string& pattern, int fringes,
                                        int projector_width, int projector_height) {

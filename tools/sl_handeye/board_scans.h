@@ -3,6 +3,7 @@
 // sl_calibrate observes them (pipeline/calibration.h observeBoard).
 #pragma once
 
+#include <functional>
 #include <string>
 
 #include "sl/pipeline/calibration.h"
@@ -14,6 +15,18 @@ struct BoardScanOptions {
   pipeline::CornerDetectionOptions corners;
   pipeline::LocalHomographyOptions homographies;
 };
+
+// The command-line options both metrology tools take for their board scans:
+// --board COLSxROWS, --square MM, --pattern P, --fringes N, --presmooth PX,
+// --window-radius PX. Returns false when `option` is none of them; `value`
+// gives the option's argument. Throws std::invalid_argument with the message
+// for the user when a value is not a number of the right kind.
+bool takeBoardScanOption(const std::string& option, const std::function<std::string()>& value,
+                         pipeline::Checkerboard& board, std::string& pattern, int& fringes,
+                         BoardScanOptions& scan);
+
+// `value` as a finite number; throws std::invalid_argument naming `option`.
+double optionNumber(const std::string& option, const std::string& value);
 
 // `pattern`: an existing pattern file, or "3+3_both" (the built-in 3+3 with
 // `fringes` periods, for the given projector size). Must code both

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -53,19 +54,6 @@ constexpr const char* kHelp =
 [[noreturn]] void usageError(const std::string& message) {
   std::cerr << "sl_handeye: " << message << "\n" << kHelp;
   std::exit(2);
-}
-
-double number(const std::string& option, const std::string& value) {
-  std::size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(value, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != value.size() || !std::isfinite(v))
-    usageError(option + ": expected a number, got '" + value + "'");
-  return v;
 }
 
 struct RobotPose {
@@ -124,6 +112,14 @@ int main(int argc, char** argv) {
   bool eye_to_hand = false;
   int fringes = 16;
   sl::tools::BoardScanOptions scan;
+  // The board-scan options both metrology tools share (board_scans.h).
+  const auto takeShared = [&](const std::string& o, const std::function<std::string()>& value) {
+    try {
+      return sl::tools::takeBoardScanOption(o, value, board, pattern, fringes, scan);
+    } catch (const std::invalid_argument& e) {
+      usageError(e.what());
+    }
+  };
   for (int i = 1; i < argc; ++i) {
     const std::string o = argv[i];
     auto value = [&]() -> std::string {
@@ -135,26 +131,11 @@ int main(int argc, char** argv) {
       return 0;
     } else if (o == "--calibration") {
       calibration_path = value();
+    } else if (takeShared(o, value)) {
     } else if (o == "--robot-poses") {
       poses_path = value();
-    } else if (o == "--board") {
-      const std::string v = value();
-      const auto x = v.find('x');
-      if (x == std::string::npos) usageError("--board: expected COLSxROWS, got '" + v + "'");
-      board.cols = static_cast<int>(number(o, v.substr(0, x)));
-      board.rows = static_cast<int>(number(o, v.substr(x + 1)));
-    } else if (o == "--square") {
-      board.square_mm = number(o, value());
     } else if (o == "--eye-to-hand") {
       eye_to_hand = true;
-    } else if (o == "--pattern") {
-      pattern = value();
-    } else if (o == "--fringes") {
-      fringes = static_cast<int>(number(o, value()));
-    } else if (o == "--presmooth") {
-      scan.corners.presmooth_sigma_px = number(o, value());
-    } else if (o == "--window-radius") {
-      scan.homographies.window_radius_px = static_cast<int>(number(o, value()));
     } else if (o == "--out") {
       out_path = value();
     } else {

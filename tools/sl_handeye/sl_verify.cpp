@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -52,16 +53,11 @@ constexpr const char* kHelp =
 }
 
 double number(const std::string& option, const std::string& value) {
-  std::size_t used = 0;
-  double v = 0;
   try {
-    v = std::stod(value, &used);
-  } catch (const std::exception&) {
-    used = 0;
+    return sl::tools::optionNumber(option, value);
+  } catch (const std::invalid_argument& e) {
+    usageError(e.what());
   }
-  if (used != value.size() || !std::isfinite(v))
-    usageError(option + ": expected a number, got '" + value + "'");
-  return v;
 }
 
 void print(const char* title, const pl::VerificationResult& r) {
@@ -95,6 +91,14 @@ int main(int argc, char** argv) {
   pl::VerificationThresholds thresholds;
   int fringes = 16;
   sl::tools::BoardScanOptions scan;
+  // The board-scan options both metrology tools share (board_scans.h).
+  const auto takeShared = [&](const std::string& o, const std::function<std::string()>& value) {
+    try {
+      return sl::tools::takeBoardScanOption(o, value, board, pattern, fringes, scan);
+    } catch (const std::invalid_argument& e) {
+      usageError(e.what());
+    }
+  };
   for (int i = 1; i < argc; ++i) {
     const std::string o = argv[i];
     auto value = [&]() -> std::string {
@@ -106,17 +110,10 @@ int main(int argc, char** argv) {
       return 0;
     } else if (o == "--calibration") {
       calibration_path = value();
+    } else if (takeShared(o, value)) {
     } else if (o == "--scans") {
       while (i + 1 < argc && std::string(argv[i + 1]).rfind("--", 0) != 0) scans.push_back(argv[++i]);
       if (scans.empty()) usageError("--scans: no folders given");
-    } else if (o == "--board") {
-      const std::string v = value();
-      const auto x = v.find('x');
-      if (x == std::string::npos) usageError("--board: expected COLSxROWS, got '" + v + "'");
-      board.cols = static_cast<int>(number(o, v.substr(0, x)));
-      board.rows = static_cast<int>(number(o, v.substr(x + 1)));
-    } else if (o == "--square") {
-      board.square_mm = number(o, value());
     } else if (o == "--max-consistency") {
       thresholds.max_consistency_rms_mm = number(o, value());
     } else if (o == "--max-square-error") {
@@ -125,14 +122,6 @@ int main(int argc, char** argv) {
       thresholds.max_flatness_rms_mm = number(o, value());
     } else if (o == "--correct") {
       correct_path = value();
-    } else if (o == "--pattern") {
-      pattern = value();
-    } else if (o == "--fringes") {
-      fringes = static_cast<int>(number(o, value()));
-    } else if (o == "--presmooth") {
-      scan.corners.presmooth_sigma_px = number(o, value());
-    } else if (o == "--window-radius") {
-      scan.homographies.window_radius_px = static_cast<int>(number(o, value()));
     } else {
       usageError("unknown option '" + o + "'");
     }
