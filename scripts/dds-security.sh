@@ -146,8 +146,12 @@ XML
 }
 
 for role in sensor operator viewer; do identity $role; done
-permissions sensor "rt/$ns/* rr/$ns/*" "rq/$ns/*"
-permissions operator "rq/$ns/*" "rt/$ns/* rr/$ns/*"
-permissions viewer "" "rt/$ns/*"
+# The ROS 2 graph topics are global, not under the namespace: the sensor
+# writes /tf_static, /diagnostics and ros_discovery_info (docs/ros2.md), the
+# others may read them.
+graph="rt/tf_static rt/diagnostics ros_discovery_info"
+permissions sensor "rt/$ns/* rr/$ns/* $graph" "rq/$ns/*"
+permissions operator "rq/$ns/*" "rt/$ns/* rr/$ns/* $graph"
+permissions viewer "" "rt/$ns/* $graph"
 rm -f identity_ca.srl
 echo "dds-security.sh: wrote CAs, identities (sensor operator viewer), permissions and governance to $(pwd)"

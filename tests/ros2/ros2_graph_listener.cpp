@@ -100,11 +100,15 @@ const char* durabilityName(dds_durability_kind_t k) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2) die("usage: ros2_graph_listener SECONDS");
+  if (argc != 3) die("usage: ros2_graph_listener SECONDS DOMAIN");
   const double seconds = std::atof(argv[1]);
   if (!(seconds > 0 && seconds < 600)) die("SECONDS must be in (0, 600)");
+  // /tf_static, /diagnostics and ros_discovery_info are not namespaced: the
+  // test's daemon gets a domain of its own, so no other daemon is heard.
+  const int domain = std::atoi(argv[2]);
+  if (domain < 0 || domain > 232) die("DOMAIN must be in 0..232");
   const dds_entity_t participant =
-      check(dds_create_participant(DDS_DOMAIN_DEFAULT, nullptr, nullptr), "participant");
+      check(dds_create_participant(static_cast<dds_domainid_t>(domain), nullptr, nullptr), "participant");
   std::vector<Subscription> subs = {
       subscribe(participant, &tf2_msgs_msg_dds__TFMessage__desc, "rt/tf_static", true),
       subscribe(participant, &diagnostic_msgs_msg_dds__DiagnosticArray__desc, "rt/diagnostics", false),

@@ -67,7 +67,12 @@ const readers = {
 const ns = `graph_${process.pid}_${Math.floor(Math.random() * 1e6)}`;
 const mount = { parent: 'test_robot_flange', base: 'test_sensor_base', xyz: [0.12, -0.05, 0.3], rpy: [0.1, -0.2, 0.3] };
 const sim = fs.readFileSync(path.join(src, 'config/sim.yaml'), 'utf8');
-const withNs = sim.replace(/^ {2}namespace: sl$/m, `  namespace: ${ns}`);
+// The graph topics are global (not under the namespace): a DDS domain of the
+// test's own keeps other daemons on this machine out of what it hears.
+const domain = 100 + (process.pid % 120);
+const withNs = sim.replace(/^ {2}namespace: sl$/m, `  namespace: ${ns}`)
+  .replace(/^ {2}domain_id: 0$/m, `  domain_id: ${domain}`);
+check(withNs.includes(`  domain_id: ${domain}`), 'set dds.domain_id in a copy of config/sim.yaml');
 check(withNs !== sim, 'set dds.namespace in a copy of config/sim.yaml');
 const frameId = /^ {2}frame_id: (\S+)$/m.exec(sim)?.[1];
 check(frameId, 'dds.frame_id in config/sim.yaml');
@@ -132,11 +137,11 @@ try {
     'daemon "ready:"');
   if (daemon.proc.exitCode !== null) throw new Error(`sl_sensord exited (${daemon.proc.exitCode})`);
   await sleep(1500);  // /tf_static and ros_discovery_info are written before the listener exists
-  listener = spawnLines(listenerExe, ['11'], 'listener');
+  listener = spawnLines(listenerExe, ['11', String(domain)], 'listener');
   const diagnosticsCount = () => listener.lines.filter((l) => l.startsWith('sample rt/diagnostics ')).length;
   await until(() => diagnosticsCount() >= 3, 8000, 'three /diagnostics samples while idle');
   const idleCount = diagnosticsCount();
-  const start = spawnSync(slctlExe, ['--ns', ns, 'start'], { encoding: 'utf8', timeout: 15000 });
+  const start = spawnSync(slctlExe, ['--domain', String(domain), '--ns', ns, 'start'], { encoding: 'utf8', timeout: 15000 });
   check(start.status === 0, `slctl start: exit ${start.status} ${start.stderr}`);
   const code = await listener.exited;
   check(code === 0, `ros2_graph_listener exit code ${code}`);
