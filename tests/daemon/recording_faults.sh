@@ -8,6 +8,8 @@
 #     whole (the replay's reader, every frame decoded) or is skipped by the
 #     reader with a message naming the folder; a new recording into the same
 #     folder continues the numbering and overwrites nothing.
+#  c. a complete set damaged afterwards (a truncated PNG, a truncated
+#     meta.yml) is refused by the reader with a message naming the file.
 # The on-disk checks use tests/recording_check (drivers::RecordingReader).
 # Runs in a private mount namespace (unshare -m, else -rm): exit 77 (skipped)
 # where none can be made.
@@ -141,5 +143,29 @@ while read -r line; do
 done <<< "$sums_before"
 if [ -n "$b_fail" ]; then echo "b: FAIL:$b_fail"; else echo "ok: b. kill -9 during a recording"; fi
 
-[ -z "$a_fail$b_fail" ] || fail "recording faults:${a_fail:+ a:$a_fail}${b_fail:+ b:$b_fail}"
+# --- c. a damaged complete set is refused naming its file -----------------------
+c_fail=""
+cp -r "$rec/killed" "$work/png"
+png=$(find "$work/png/set_000001" -name '*_00.png' | head -1)
+truncate -s $(( $(stat -c %s "$png") / 2 )) "$png"
+set +e
+"$check" "$work/png" > "$work/check_png.txt" 2>&1
+crc=$?
+set -e
+echo "c: truncated PNG: exit $crc: $(grep '^refused:' "$work/check_png.txt")"
+[ "$crc" -eq 1 ] && grep -q "^refused: $png: " "$work/check_png.txt" \
+  || c_fail+=" a truncated PNG is not refused naming it;"
+cp -r "$rec/killed" "$work/meta"
+meta="$work/meta/set_000001/meta.yml"
+truncate -s 40 "$meta"
+set +e
+"$check" "$work/meta" > "$work/check_meta.txt" 2>&1
+crc=$?
+set -e
+echo "c: truncated meta.yml: exit $crc: $(grep '^refused:' "$work/check_meta.txt")"
+[ "$crc" -eq 1 ] && grep -q "^refused: $meta: " "$work/check_meta.txt" \
+  || c_fail+=" a truncated meta.yml is not refused naming it;"
+if [ -n "$c_fail" ]; then echo "c: FAIL:$c_fail"; else echo "ok: c. damaged sets refused naming the file"; fi
+
+[ -z "$a_fail$b_fail$c_fail" ] || fail "recording faults:${a_fail:+ a:$a_fail}${b_fail:+ b:$b_fail}${c_fail:+ c:$c_fail}"
 echo "ok: recording faults"
