@@ -33,7 +33,7 @@ ns="recfault_$$"
 wait_s=$(( 30 * time_scale ))
 root="$work/root"
 mkdir -p "$root"
-disk_mb=${SL_RECFAULT_DISK_MB:-24}
+disk_mb=${SL_RECFAULT_DISK_MB:-12}  # ~3.4 MB per set of config/sim.yaml
 mount -t tmpfs -o "size=${disk_mb}m" tmpfs "$root" || { echo "skipped: cannot mount a tmpfs"; exit 77; }
 trap 'umount "$root" 2>/dev/null || true; sl_cleanup' EXIT
 
@@ -49,26 +49,40 @@ grep -q "recording_root: $root" "$work/full.yaml" || fail "could not set runtime
 sl_start_daemon "$work/full.yaml" "$work/daemon_full.log"
 sl_wait_ready "$work/daemon_full.log"
 count=12
-set +e
-out=$(slctl record full --count "$count" --wait 2>&1)
-rc=$?
-set -e
-echo "a: slctl record full --count $count --wait: exit $rc: $out"
-status=$(slctl status)
+slctl record full --count "$count" > "$work/record_full.log" 2>&1 \
+  || fail "slctl record full: $(cat "$work/record_full.log")"
+# The status while and after the disk fills: the write error must show in
+# last_error (later errors, e.g. a set lost on a loaded machine, replace it,
+# so it is looked for from the start); the counts are read once the request
+# ended and the recorder's count held for 1 s.
+error_seen="" prev="" status=""
+for _ in $(seq $(( 150 * time_scale ))); do
+  status=$(slctl status)
+  if [ -z "$error_seen" ] && echo "$status" | grep -q "^last error: .*No space left on device"; then
+    error_seen=$(echo "$status" | grep "^last error:")
+  fi
+  now=$(echo "$status" | grep -E "^(state|recording):" | tr '\n' ' ')
+  if echo "$status" | grep -q "^state: *idle" && [ "$now" = "$prev" ]; then break; fi
+  prev=$now
+  sleep 0.5
+done
 echo "$status" | grep -E "^(state|sets dropped|recording|last error|scans)" || true
+echo "a: last error when the disk filled: ${error_seen:-(never named the full disk)}"
 recorded=$(field "$status" 's/^recording: .*(\([0-9]*\) sets recorded.*/\1/p')
 over=$(field "$status" 's/^recording: .* \([0-9]*\) over quota.*/\1/p')
 not_recorded=$(field "$status" 's/^sets dropped: .*not recorded \([0-9]*\)).*/\1/p')
+scans=$(field "$status" 's/^scans: *\([0-9]*\) of.*/\1/p')
 used_kb=$(df -k "$root" | awk 'NR == 2 { print $3 }')
-echo "a: recorded $recorded, not recorded $not_recorded, over quota $over; tmpfs ${used_kb} kB of ${disk_mb} MB used"
+echo "a: scans $scans of $count; recorded $recorded, not recorded $not_recorded, over quota $over; tmpfs ${used_kb} kB of ${disk_mb} MB used"
 a_fail=""
-[ "$rc" -eq 0 ] || a_fail+=" slctl record --wait exit $rc;"
-echo "$status" | grep -q "^last error: .*full.*No space left on device" \
-  || a_fail+=" last error does not name the write error;"
-[ "$recorded" -ge 1 ] && [ "$recorded" -lt "$count" ] \
-  || a_fail+=" $recorded sets recorded (the disk should hold 1..$((count - 1)));"
-[ $(( recorded + not_recorded + over )) -eq "$count" ] \
-  || a_fail+=" recorded + not recorded + over quota = $(( recorded + not_recorded + over )), not $count;"
+echo "$status" | grep -q "^state: *idle" || a_fail+=" the request did not end;"
+[ -n "$error_seen" ] && echo "$error_seen" | grep -q "recording 'full' stopped after" \
+  || a_fail+=" the status never named the write error;"
+[ "$recorded" -ge 1 ] && [ "$recorded" -lt "$scans" ] \
+  || a_fail+=" $recorded sets recorded of $scans (the disk should hold 1..$((scans - 1)));"
+# Every set the request scanned was offered to the recorder: recorded or counted.
+[ $(( recorded + not_recorded + over )) -eq "$scans" ] \
+  || a_fail+=" recorded + not recorded + over quota = $(( recorded + not_recorded + over )), not the $scans sets scanned;"
 # Scanning goes on: a scan after the failure is published.
 slctl scan --count 2 --out "$work/after" > "$work/scan_after.log" 2>&1 \
   || a_fail+=" a scan after the full disk failed ($(tail -1 "$work/scan_after.log"));"
@@ -114,7 +128,7 @@ set +e
 "$check" "$rec/killed" > "$work/check_killed.txt" 2>&1
 crc=$?
 set -e
-grep "^incomplete:\|^refused:" "$work/check_killed.txt" || true
+cat "$work/check_killed.txt"
 echo "b: recording_check: exit $crc: $(tail -1 "$work/check_killed.txt")"
 b_fail=""
 [ "$crc" -eq 0 ] || b_fail+=" a set on disk is refused: $(tail -1 "$work/check_killed.txt");"
