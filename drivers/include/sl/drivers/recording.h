@@ -36,7 +36,8 @@ void createRecording(const std::string& dir, const std::string& note);
 
 // Writes `set` as set number `index` (1-based), with `pattern_yaml` (the
 // pattern file text of the set's pattern, if not empty) as its pattern.yml.
-// Throws std::runtime_error naming the file on failure.
+// Throws std::runtime_error naming the file on failure, or naming the set
+// folder when it exists already (a recorded set is never replaced).
 void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set,
                       const std::string& pattern_yaml = "");
 
