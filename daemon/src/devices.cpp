@@ -85,6 +85,9 @@ EngineDevices openReplay(const DaemonConfig& config, std::shared_ptr<void>& keep
     throw std::runtime_error(config.source_path + ": replay: " + e.what());
   }
   keep_alive = replay;
+  if (std::filesystem::is_directory(config.replay.dir))
+    for (const std::string& skipped : drivers::incompleteRecordedSets(config.replay.dir))
+      logWarning("replay: " + skipped);
   EngineDevices devices;
   devices.cameras = replay->cameras();
   devices.projector = replay->projector();

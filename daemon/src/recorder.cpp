@@ -68,13 +68,14 @@ void Recorder::start(const std::string& dir, const std::string& note,
                                " free, below runtime.recording_min_free_mb (" +
                                megabytes(quota_.min_free_bytes) + ")");
   }
-  const std::size_t existing = drivers::listRecordedSets(dir).size();
+  const std::uint64_t next = drivers::nextRecordedSetIndex(dir);
   std::lock_guard lock(mutex_);
   dir_ = dir;
   pattern_yaml_ = std::move(pattern_yaml);
-  next_index_ = existing + 1;
+  next_index_ = next;
   ++epoch_;
   quota_reached_ = false;
+  write_failed_ = false;
   recording_bytes_ = 0;
   recording_sets_ = 0;
   error_.message.clear();
@@ -85,6 +86,7 @@ void Recorder::stop() {
   std::lock_guard lock(mutex_);
   active_ = false;
   quota_reached_ = false;
+  write_failed_ = false;
   ++epoch_;
 }
 
@@ -93,10 +95,18 @@ void Recorder::record(std::shared_ptr<const pipeline::ImageSet> set) {
     ++over_quota_;
     return;
   }
+  if (write_failed_) {
+    ++not_written_;
+    return;
+  }
   if (!active_) return;
   Item item;
   {
     std::lock_guard lock(mutex_);
+    if (write_failed_) {  // the writer failed since the check above
+      ++not_written_;
+      return;
+    }
     const auto described = pattern_yaml_.find(set->pattern_name);
     item = {dir_, next_index_++, epoch_, std::move(set),
             described == pattern_yaml_.end() ? std::string() : described->second};
@@ -138,6 +148,10 @@ void Recorder::run() {
     std::string problem;
     {
       std::lock_guard lock(mutex_);
+      if (item->epoch == failed_epoch_) {  // its recording failed: not tried again
+        ++not_written_;
+        continue;
+      }
       if (item->epoch == quota_epoch_) problem = "quota";
       else if (item->dir == dir_) problem = quotaProblem(item->dir, *item->set);
       if (!problem.empty()) {
@@ -169,10 +183,16 @@ void Recorder::run() {
       }
     } catch (const std::exception& e) {
       std::lock_guard lock(mutex_);
-      error_.message = std::string("recording: ") + e.what();
+      ++not_written_;
+      failed_epoch_ = item->epoch;
+      if (item->epoch == epoch_) {  // still recording: stop it, count its further sets
+        write_failed_ = true;
+        active_ = false;
+      }
+      error_.message = "recording '" + fs::path(item->dir).filename().string() + "' stopped after " +
+                       std::to_string(recording_sets_) + " sets: " + e.what();
       error_.stamp_ns = pipeline::systemClockNs();
       ++error_.count;
-      active_ = false;
       logWarning(error_.message);
     }
   }

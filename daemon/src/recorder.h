@@ -25,7 +25,10 @@ struct RecordingQuota {
 };
 
 // Thread-safe. Overflow policy: a full queue drops the oldest set (counted in
-// dropped()); a write error stops the recording and is kept in lastError().
+// dropped()); a write error (e.g. a full disk) stops the recording and is
+// kept in lastError(): the set that failed, the sets of that recording still
+// queued and every later set of it offered to record() are counted in
+// notWritten() (dropped() + notWritten() = notRecorded()).
 // Before each set is written its raw image size is checked against the
 // quota; a set that would exceed it stops the recording (lastError() says
 // which limit), and it and every later set of that recording are counted in
@@ -52,6 +55,9 @@ class Recorder {
   std::uint64_t written() const { return written_; }
   std::uint64_t dropped() const { return queue_.dropped(); }
   std::uint64_t overQuota() const { return over_quota_; }
+  std::uint64_t notWritten() const { return not_written_; }
+  // Sets not recorded but for the quota: queue overflow and write errors.
+  std::uint64_t notRecorded() const { return dropped() + notWritten(); }
   struct Error {
     std::string message;              // "" = none
     std::int64_t stamp_ns = 0;        // system clock
@@ -84,6 +90,11 @@ class Recorder {
   // The current recording hit its quota: its further sets are counted, not
   // queued (until stop() or start()).
   std::atomic<bool> quota_reached_{false};
+  // The current recording failed to write a set: its further sets are
+  // counted in not_written_, not queued (until stop() or start()).
+  std::atomic<bool> write_failed_{false};
+  std::atomic<std::uint64_t> not_written_{0};
+  std::uint64_t failed_epoch_ = 0;     // guarded by mutex_: the recording that failed
   std::uint64_t epoch_ = 0;            // guarded by mutex_
   std::uint64_t quota_epoch_ = 0;      // guarded by mutex_: the recording that hit its quota
   std::uint64_t recording_bytes_ = 0;  // guarded by mutex_: written to dir_ since start()

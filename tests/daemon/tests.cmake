@@ -61,6 +61,13 @@ add_test(NAME e2e_cli COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/e2e_cli.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
 set_tests_properties(e2e_cli PROPERTIES TIMEOUT 300)
 
+# Recording faults (issue 36): a full disk (a small tmpfs in a private mount
+# namespace; skipped, exit 77, where none can be made) and kill -9 during a
+# recording.
+add_test(NAME recording_faults COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/recording_faults.sh
+  ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
+set_tests_properties(recording_faults PROPERTIES TIMEOUT 120 SKIP_RETURN_CODE 77)
+
 # The README's first-scan block, as pasted, against the simulated daemon.
 add_test(NAME readme_first_scan COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/readme_first_scan.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})

@@ -219,7 +219,9 @@ TEST_CASE("a meta.yml that hangs OpenCV's YAML parser is refused at once, naming
     CHECK_THROWS_WITH(sl::drivers::readRecordedSet(set.string()), Catch::Contains(meta + ": "));
     CHECK(std::chrono::steady_clock::now() - start < sl::test::scaledBound(10s));
   }
-  // Other malformed values are named too.
+  // Other malformed values are named too (a written set is never replaced:
+  // removed first).
+  std::filesystem::remove_all(set);
   sl::drivers::writeRecordedSet(dir, 1, makeSet(1, "p", 3, 8));
   std::ifstream in(meta);
   std::string text((std::istreambuf_iterator<char>(in)), {});

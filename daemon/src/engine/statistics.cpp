@@ -65,7 +65,7 @@ double EngineStatistics::frameRateHz() {
 
 void addRecorderStatus(EngineStatus& s, const Recorder& recorder, double last_error_hold_s,
                        pipeline::TimestampNs now_ns) {
-  s.sets_not_recorded = recorder.dropped();
+  s.sets_not_recorded = recorder.notRecorded();
   s.sets_dropped += s.sets_not_recorded;
   s.sets_recorded = recorder.written();
   s.sets_over_quota = recorder.overQuota();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -95,31 +96,65 @@ void createRecording(const std::string& dir, const std::string& note) {
   out << "note" << note;
 }
 
+namespace {
+
+// Writes `bytes` to `path` and checks every step, close included (a full
+// disk shows at write or at close). Throws naming the file.
+void writeFileChecked(const std::string& path, const void* bytes, std::size_t size) {
+  std::FILE* out = std::fopen(path.c_str(), "wb");
+  if (!out) throw std::runtime_error(path + ": cannot create: " + std::strerror(errno));
+  const std::size_t written = size == 0 ? 0 : std::fwrite(bytes, 1, size, out);
+  const int write_errno = errno;
+  const bool flushed = std::fflush(out) == 0;
+  const int flush_errno = errno;
+  const bool closed = std::fclose(out) == 0;
+  if (written != size)
+    throw std::runtime_error(path + ": cannot write: " + std::strerror(write_errno));
+  if (!flushed || !closed)
+    throw std::runtime_error(path + ": cannot write: " + std::strerror(flushed ? errno : flush_errno));
+}
+
+// A set folder being written: "set_000001.partial" (renamed to the set's
+// name once complete).
+constexpr const char* kPartialSuffix = ".partial";
+
+// The number of a set folder's name "set_NNNNNN" (exactly: digits only),
+// or 0.
+std::uint64_t setNumber(const std::string& name) {
+  if (name.size() <= 4 || name.rfind("set_", 0) != 0) return 0;
+  const std::string digits = name.substr(4);
+  if (digits.size() > 18 || digits.find_first_not_of("0123456789") != std::string::npos) return 0;
+  return std::stoull(digits);
+}
+
+}  // namespace
+
 void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set,
                       const std::string& pattern_yaml) {
-  const fs::path folder = fs::path(dir) / setName(index);
+  const fs::path final_folder = fs::path(dir) / setName(index);
+  const fs::path folder = fs::path(dir) / (setName(index) + kPartialSuffix);
   std::error_code error;
+  if (fs::exists(final_folder, error))
+    throw std::runtime_error(final_folder.string() + ": exists already, not overwritten");
+  fs::remove_all(folder, error);  // left by an interrupted write of this number
   fs::create_directories(folder, error);
   if (error) throw std::runtime_error(folder.string() + ": cannot create: " + error.message());
-  for (const auto& camera : set.cameras) {
-    for (std::size_t i = 0; i < camera.frames.size(); ++i) {
-      const std::string path = (folder / frameName(camera.camera_id, i)).string();
-      if (!cv::imwrite(path, camera.frames[i], {cv::IMWRITE_PNG_COMPRESSION, 1}))
-        throw std::runtime_error(path + ": cannot write frame");
+  try {
+    for (const auto& camera : set.cameras) {
+      for (std::size_t i = 0; i < camera.frames.size(); ++i) {
+        const std::string path = (folder / frameName(camera.camera_id, i)).string();
+        std::vector<unsigned char> png;
+        if (!cv::imencode(".png", camera.frames[i], png, {cv::IMWRITE_PNG_COMPRESSION, 1}))
+          throw std::runtime_error(path + ": cannot encode frame");
+        writeFileChecked(path, png.data(), png.size());
+      }
     }
-  }
-  if (!pattern_yaml.empty()) {
-    const std::string path = (folder / kRecordedPatternFile).string();
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out << pattern_yaml;
-    if (!out.flush()) throw std::runtime_error(path + ": cannot write");
-  }
-  // meta.yml last, through a temporary name: its presence marks the set complete.
-  const std::string meta = (folder / "meta.yml").string();
-  const std::string temporary = (folder / "meta.tmp.yml").string();
-  {
-    cv::FileStorage out(temporary, cv::FileStorage::WRITE);
-    if (!out.isOpened()) throw std::runtime_error(temporary + ": cannot write");
+    if (!pattern_yaml.empty()) {
+      const std::string path = (folder / kRecordedPatternFile).string();
+      writeFileChecked(path, pattern_yaml.data(), pattern_yaml.size());
+    }
+    const std::string meta = (folder / "meta.yml").string();
+    cv::FileStorage out(meta, cv::FileStorage::WRITE | cv::FileStorage::MEMORY);
     out << "sequence_id" << std::to_string(set.sequence_id);
     out << "pattern" << set.pattern_name;
     out << "trigger_stamp_ns" << std::to_string(set.trigger_stamp_ns);
@@ -130,9 +165,49 @@ void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipelin
           << toStrings(camera.stamps_ns) << "}";
     }
     out << "]";
+    const std::string text = out.releaseAndGetString();
+    writeFileChecked(meta, text.data(), text.size());
+    // Complete: the folder takes the set's name in one step.
+    fs::rename(folder, final_folder, error);
+    if (error)
+      throw std::runtime_error(final_folder.string() + ": cannot rename " + folder.string() +
+                               " to it: " + error.message());
+  } catch (...) {
+    fs::remove_all(folder, error);  // frees what the failed set took
+    throw;
   }
-  fs::rename(temporary, meta, error);
-  if (error) throw std::runtime_error(meta + ": cannot rename: " + error.message());
+}
+
+std::uint64_t nextRecordedSetIndex(const std::string& dir) {
+  std::uint64_t last = 0;
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(dir, error)) {
+    std::string name = entry.path().filename().string();
+    const std::size_t suffix = name.size() - std::min(name.size(), std::strlen(kPartialSuffix));
+    if (name.compare(suffix, std::string::npos, kPartialSuffix) == 0) name.erase(suffix);
+    last = std::max(last, setNumber(name));
+  }
+  return last + 1;
+}
+
+std::vector<std::string> incompleteRecordedSets(const std::string& dir) {
+  std::vector<std::string> out;
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(dir, error)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("set_", 0) != 0 || !entry.is_directory(error)) continue;
+    if (setNumber(name) == 0)
+      out.push_back(entry.path().string() + ": not a complete set (" +
+                    (name.size() > 8 && name.compare(name.size() - 8, 8, kPartialSuffix) == 0
+                         ? "interrupted while it was written"
+                         : "not a set folder name") +
+                    "), skipped");
+    else if (!fs::exists(entry.path() / "meta.yml"))
+      out.push_back((entry.path() / "meta.yml").string() +
+                    ": missing: an incomplete set (interrupted recording), skipped");
+  }
+  std::sort(out.begin(), out.end());
+  return out;
 }
 
 std::vector<std::string> listRecordedSets(const std::string& dir) {
@@ -151,8 +226,7 @@ std::vector<std::string> listRecordedSets(const std::string& dir) {
   std::vector<std::string> sets;
   for (const auto& entry : fs::directory_iterator(dir)) {
     const std::string name = entry.path().filename().string();
-    if (entry.is_directory() && name.rfind("set_", 0) == 0 &&
-        fs::exists(entry.path() / "meta.yml"))
+    if (entry.is_directory() && setNumber(name) > 0 && fs::exists(entry.path() / "meta.yml"))
       sets.push_back(entry.path().string());
   }
   std::sort(sets.begin(), sets.end());
@@ -272,7 +346,11 @@ class FolderRecording : public RecordingReader {
       folders_.push_back(folder);
       infos_.push_back(readRecordedSet(folder, /*load_images=*/false));
     }
-    if (infos_.empty()) throw std::runtime_error(dir + ": the recording holds no image sets");
+    if (infos_.empty()) {
+      const std::vector<std::string> incomplete = incompleteRecordedSets(dir);
+      throw std::runtime_error(dir + ": the recording holds no complete image sets" +
+                               (incomplete.empty() ? std::string() : " (" + incomplete.front() + ")"));
+    }
   }
   std::size_t size() const override { return infos_.size(); }
   const pipeline::ImageSet& info(std::size_t i) const override { return infos_.at(i); }

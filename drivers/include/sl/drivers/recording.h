@@ -12,9 +12,13 @@
 //   <dir>/set_000001/<camera>_<i>.png   frame i of that camera, lossless PNG
 //                                (8-bit, or 16-bit for deeper sensors)
 // Sets are numbered in recording order from 1. The .yml files are OpenCV
-// FileStorage YAML. A set folder is complete once its meta.yml exists (it is
-// written last, atomically), so an interrupted recording loses at most the
-// set being written.
+// FileStorage YAML. A set is written as <dir>/set_000001.partial/ and
+// renamed to set_000001 once every file of it is written and checked (close
+// included); a failed write removes the partial folder. So a set folder is
+// complete, and an interrupted recording (kill -9, full disk) loses at most
+// the set being written, left as a .partial folder (or, from recordings
+// before this scheme, a set folder without meta.yml) that readers skip and
+// incompleteRecordedSets() names.
 #pragma once
 
 #include <cstdint>
@@ -32,9 +36,18 @@ void createRecording(const std::string& dir, const std::string& note);
 
 // Writes `set` as set number `index` (1-based), with `pattern_yaml` (the
 // pattern file text of the set's pattern, if not empty) as its pattern.yml.
-// Throws std::runtime_error naming the file on failure.
+// Throws std::runtime_error naming the file on failure, or naming the set
+// folder when it exists already (a recorded set is never replaced).
 void writeRecordedSet(const std::string& dir, std::uint64_t index, const pipeline::ImageSet& set,
                       const std::string& pattern_yaml = "");
+
+// The number the next set written into `dir` gets: one past the highest
+// set number there, complete or not (so nothing is overwritten).
+std::uint64_t nextRecordedSetIndex(const std::string& dir);
+
+// One message per set folder of `dir` that readers skip as incomplete,
+// naming the folder or its missing meta.yml; empty when none.
+std::vector<std::string> incompleteRecordedSets(const std::string& dir);
 
 // The file name of a set's pattern description in its folder.
 inline constexpr const char* kRecordedPatternFile = "pattern.yml";
