@@ -30,6 +30,7 @@ ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vecto
   p.motion_enabled = config.motion.enabled;
   p.motion = config.motion.options;
   p.keep_maps = keep_maps;
+  p.camera_noise = config.camera_noise;
   return p;
 }
 
@@ -43,9 +44,19 @@ std::map<std::string, pipeline::PinholeModel> cameraModels(const ProcessingConfi
 }
 
 // `config` with the calibrations and the depth limits in the clouds' unit.
+// The maps are kept for the caller or for the depth sigma.
+pipeline::ScanProcessor::Keep keepOf(const ProcessingConfig& config) {
+  return config.keep_maps || config.depth_sigma ? pipeline::ScanProcessor::Keep::kMapsAndCloud
+                                                : pipeline::ScanProcessor::Keep::kCloud;
+}
+
 ProcessingConfig inCloudUnit(ProcessingConfig config) {
   if (!(config.cloud_unit_mm > 0 && std::isfinite(config.cloud_unit_mm)))
     throw std::invalid_argument("cloud unit must be a positive number of mm");
+  if (config.depth_sigma && !config.camera_noise)
+    throw std::invalid_argument("the depth sigma (dds.points_confidence) needs camera_noise");
+  if (config.normals && config.normal_step < 1)
+    throw std::invalid_argument("normal step must be at least 1 px");
   if (config.cloud_unit_mm == 1.0) return config;
   const double per_mm = 1.0 / config.cloud_unit_mm;
   for (auto& [id, calibration] : config.calibrations) calibration = pipeline::inUnits(calibration, per_mm);
@@ -79,9 +90,7 @@ void SetProcessor::warmUp() {
     black.frames.assign(static_cast<std::size_t>(codec.frameCount()), zeros);
     black.stamps_ns.assign(black.frames.size(), 0);
     try {
-      processor_.process(codec, triangulator, black, 0, camera_id,
-                         config_.keep_maps ? pipeline::ScanProcessor::Keep::kMapsAndCloud
-                                           : pipeline::ScanProcessor::Keep::kCloud);
+      processor_.process(codec, triangulator, black, 0, camera_id, keepOf(config_));
     } catch (const std::exception&) {
       // A pattern that cannot decode at this size fails the same way on its
       // first scan, where the error is reported.
@@ -170,20 +179,46 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
         throw std::runtime_error("no calibration of camera '" + camera_id + "'");
       const pipeline::Codec& codec = decoder->second.codec();
       pipeline::DecodeTally tally;
-      auto [maps, cloud] = processor_.process(
-          codec, triangulator->second, *images, set.trigger_stamp_ns, camera_id,
-          config_.keep_maps ? pipeline::ScanProcessor::Keep::kMapsAndCloud
-                            : pipeline::ScanProcessor::Keep::kCloud,
-          &tally);
+      auto [maps, cloud] = processor_.process(codec, triangulator->second, *images,
+                                              set.trigger_stamp_ns, camera_id, keepOf(config_), &tally);
+      std::shared_ptr<const PointQuality> quality = pointQuality(codec.spec(), camera_id,
+                                                                 images->bit_depth, maps.get(), *cloud);
+      if (!config_.keep_maps) maps = nullptr;  // kept for the depth sigma only
       if (auto coloured = colouredCopy(set, camera_id, *cloud)) cloud = std::move(coloured);
       out.scans.push_back({camera_id, images->bit_depth, std::move(maps), std::move(cloud),
-                           pipeline::judgeDecodeTally(codec.spec(), codec.options(), tally)});
+                           pipeline::judgeDecodeTally(codec.spec(), codec.options(), tally),
+                           std::move(quality)});
     }
   } catch (const std::exception& e) {
     out.scans.clear();
     out.error = "processing sequence " + std::to_string(set.sequence_id) + ": " + e.what();
   }
   return out;
+}
+
+// The per-point quality of `cloud` (triangulated by `camera_id` from `maps`
+// of `spec`, images of `bit_depth`); nullptr when none is asked for.
+std::shared_ptr<const PointQuality> SetProcessor::pointQuality(const pipeline::PatternSpec& spec,
+                                                               const std::string& camera_id, int bit_depth,
+                                                               const pipeline::ProjectorMaps* maps,
+                                                               const pipeline::PointCloud& cloud) const {
+  if (!config_.depth_sigma && !config_.normals) return nullptr;
+  auto quality = std::make_shared<PointQuality>();
+  if (config_.depth_sigma) {
+    if (!maps) throw std::logic_error("depth sigma: the maps were not kept");
+    pipeline::CameraNoise noise = *config_.camera_noise;
+    noise.bit_depth = bit_depth;
+    try {
+      quality->depth_sigma = pipeline::depthSigma(*maps, cloud, config_.calibrations.at(camera_id), spec,
+                                                  noise, config_.triangulator.use);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(std::string("depth sigma (dds.points_confidence): ") + e.what());
+    }
+  }
+  if (config_.normals)
+    quality->normals = pipeline::organizedNormals(
+        cloud, config_.normal_step, static_cast<float>(config_.normal_max_jump_mm / config_.cloud_unit_mm));
+  return quality;
 }
 
 // A copy of `cloud` (triangulated by `camera_id`) with the intensity seen by
