@@ -216,6 +216,13 @@ void parseCameraNoise(const YamlMap& root, DaemonConfig& config) {
     noise.read_noise_dn = config.sim.analog_gain * config.sim.read_noise_dn;
     config.camera_noise = noise;
   }
+  // The phase-noise model covers the phase-shift families only
+  // (pipeline/point_quality.h).
+  if (config.dds.points_layout.confidence)
+    for (const pipeline::PatternSpec& p : config.patterns)
+      if (p.family == pipeline::PatternFamily::kGrayCode || p.family == pipeline::PatternFamily::kMicroPhaseShift)
+        root.fail("dds", "points_confidence: pattern '" + p.name +
+                             "' has no phase-noise model (Gray code or micro phase shift)");
   if (config.dds.points_layout.confidence && !config.camera_noise)
     root.fail("camera_noise",
               "needed by dds.points_confidence: the camera's gain_dn_per_electron and read_noise_dn "

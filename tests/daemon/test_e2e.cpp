@@ -1554,3 +1554,47 @@ TEST_CASE("points with normals and confidence: fields, unit normals, calibrated 
   REQUIRE(client_owner->request(Command::kStop, "", 0, scaledBound(5s)));
   REQUIRE(daemon.terminate(5s) == 0);
 }
+
+// The keys of the per-point quality (docs/formats.md): the simulator's noise
+// by default, camera_noise overriding it, patterns without a noise model
+// refused at load.
+TEST_CASE("points_confidence: camera noise from the simulator or camera_noise, phase patterns only",
+          "[quality]") {
+  YAML::Node root = sl::test::simConfig("quality_keys");
+  root["dds"]["points_confidence"] = true;
+  root["sim"]["radiometry"]["analog_gain"] = 2.0;
+  auto parse = [](const YAML::Node& n) {
+    YAML::Emitter out;
+    out << n;
+    return sl::daemon::parseConfig(out.c_str(), "quality.yaml");
+  };
+  {
+    const sl::daemon::DaemonConfig c = parse(root);
+    REQUIRE(c.camera_noise);
+    CHECK(c.camera_noise->gain_dn_per_electron == Approx(2 * c.sim.gain_dn_per_electron));
+    CHECK(c.camera_noise->read_noise_dn == Approx(2 * c.sim.read_noise_dn));
+    CHECK(c.dds.points_layout.confidence);
+    CHECK_FALSE(c.dds.points_layout.normals);
+  }
+  root["camera_noise"]["gain_dn_per_electron"] = 0.02;
+  root["camera_noise"]["read_noise_dn"] = 0.7;
+  {
+    const sl::daemon::DaemonConfig c = parse(root);
+    REQUIRE(c.camera_noise);
+    CHECK(c.camera_noise->gain_dn_per_electron == 0.02);
+    CHECK(c.camera_noise->read_noise_dn == 0.7);
+  }
+  root["camera_noise"]["read_noise_dn"] = -1;
+  CHECK_THROWS_WITH(parse(root), Catch::Contains("camera_noise.read_noise_dn"));
+  root.remove("camera_noise");
+  YAML::Node gray;
+  gray["name"] = "gray";
+  gray["family"] = "gray_code";
+  gray["direction"] = "horizontal";
+  root["patterns"].push_back(gray);
+  CHECK_THROWS_WITH(parse(root), Catch::Contains("pattern 'gray' has no phase-noise model"));
+  root["dds"]["points_confidence"] = false;
+  CHECK_NOTHROW(parse(root));  // normals and plain clouds need no noise model
+  root["dds"]["points_normal_step"] = 0;
+  CHECK_THROWS_WITH(parse(root), Catch::Contains("points_normal_step"));
+}
