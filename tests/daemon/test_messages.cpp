@@ -11,9 +11,13 @@
 
 #include <opencv2/core.hpp>
 
+#include "engine/set_processor.h"
 #include "request_dispatch.h"
 #include "ros_messages.h"
+#include "sl/daemon/config.h"
 #include "sl/daemon/dds_bridge.h"
+#include "sl/drivers/sim.h"
+#include "sl/pipeline/point_quality.h"
 
 using namespace sl::daemon;
 using Code = CommandResult::Code;
@@ -168,6 +172,59 @@ TEST_CASE("cloud message with normals and confidence: PCL's field names, 32 byte
     layout = CloudLayout{};
     layout.normals = true;
     CHECK_THROWS_WITH(packCloud(cloud, 1e-3, layout, buffer, &wrong), Catch::Contains("normals"));
+  }
+}
+
+TEST_CASE("set processing: the per-point quality is depthSigma and organizedNormals of the whole scan",
+          "[quality]") {
+  // The set processor computes it in blocks of rows on its workers: every
+  // value must be the whole-image functions' (bit for bit, NaN included).
+  const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(SL_SOURCE_DIR "/config/sim.yaml");
+  REQUIRE(config.camera_noise);
+  const std::string pattern = "3+3_horizontal", id = config.sim.camera_id;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  sl::pipeline::ImageSet set;
+  set.pattern_name = pattern;
+  set.sequence_id = 1;
+  set.trigger_stamp_ns = kStamp;
+  sl::pipeline::CameraImages images;
+  images.camera_id = id;
+  images.bit_depth = 8;
+  const int frames = config.findPattern(pattern)->frameCount();
+  for (int i = 0; i < frames; ++i) {
+    images.frames.push_back(sim->render(pattern, i, 7 + i));
+    images.stamps_ns.push_back(kStamp + i);
+  }
+  set.cameras.push_back(images);
+  for (const double unit_mm : {1.0, 1000.0}) {
+    INFO("cloud unit " << unit_mm << " mm");
+    sl::daemon::ProcessingConfig processing = sl::daemon::processingConfigOf(config, {id}, unit_mm, true);
+    processing.depth_sigma = true;
+    processing.normals = true;
+    processing.normal_step = 4;
+    sl::daemon::SetProcessor processor(processing);
+    const sl::daemon::SetOutcome out = processor.process(set, {id}, false);
+    INFO("error: " << out.error);
+    REQUIRE(out.ok());
+    const sl::daemon::CameraScan& scan = out.scans.at(0);
+    REQUIRE(scan.quality);
+    REQUIRE(scan.maps);
+    sl::pipeline::CameraNoise noise = *config.camera_noise;
+    noise.bit_depth = 8;
+    const cv::Mat sigma = sl::pipeline::depthSigma(
+        *scan.maps, *scan.cloud, sl::pipeline::inUnits(config.calibration, 1.0 / unit_mm),
+        *config.findPattern(pattern), noise, config.triangulator.use);
+    const cv::Mat normals =
+        sl::pipeline::organizedNormals(*scan.cloud, 4, static_cast<float>(5.0 / unit_mm));
+    REQUIRE(scan.quality->depth_sigma.size() == sigma.size());
+    REQUIRE(scan.quality->normals.size() == normals.size());
+    CHECK(sigma.total() * sizeof(float) == sigma.step[0] * sigma.rows);
+    CHECK(std::memcmp(scan.quality->depth_sigma.data, sigma.data, sigma.total() * sizeof(float)) == 0);
+    CHECK(std::memcmp(scan.quality->normals.data, normals.data, normals.total() * 3 * sizeof(float)) == 0);
+    std::size_t finite = 0;
+    for (int r = 0; r < sigma.rows; ++r)
+      for (int c = 0; c < sigma.cols; ++c) finite += std::isfinite(sigma.at<float>(r, c));
+    CHECK(finite > sigma.total() / 2);  // not a comparison of two NaN images
   }
 }
 

@@ -197,27 +197,56 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
 }
 
 // The per-point quality of `cloud` (triangulated by `camera_id` from `maps`
-// of `spec`, images of `bit_depth`); nullptr when none is asked for.
+// of `spec`, images of `bit_depth`); nullptr when none is asked for. The
+// processor's row workers take blocks of rows, each with a copy of its rows
+// and `normal_step` more on either side, so that every value is the one the
+// whole-image functions give (their results depend on a pixel's row and
+// column neighbourhood only).
 std::shared_ptr<const PointQuality> SetProcessor::pointQuality(const pipeline::PatternSpec& spec,
                                                                const std::string& camera_id, int bit_depth,
                                                                const pipeline::ProjectorMaps* maps,
-                                                               const pipeline::PointCloud& cloud) const {
+                                                               const pipeline::PointCloud& cloud) {
   if (!config_.depth_sigma && !config_.normals) return nullptr;
+  if (config_.depth_sigma && !maps) throw std::logic_error("depth sigma: the maps were not kept");
+  const int rows = cloud.height, cols = cloud.width;
   auto quality = std::make_shared<PointQuality>();
-  if (config_.depth_sigma) {
-    if (!maps) throw std::logic_error("depth sigma: the maps were not kept");
-    pipeline::CameraNoise noise = *config_.camera_noise;
-    noise.bit_depth = bit_depth;
-    try {
-      quality->depth_sigma = pipeline::depthSigma(*maps, cloud, config_.calibrations.at(camera_id), spec,
-                                                  noise, config_.triangulator.use);
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(std::string("depth sigma (dds.points_confidence): ") + e.what());
-    }
+  if (config_.depth_sigma) quality->depth_sigma.create(rows, cols, CV_32FC1);
+  if (config_.normals) quality->normals.create(rows, cols, CV_32FC3);
+  pipeline::CameraNoise noise = config_.camera_noise.value_or(pipeline::CameraNoise{});
+  noise.bit_depth = bit_depth;
+  const pipeline::CameraProjectorCalibration& calibration = config_.calibrations.at(camera_id);
+  const int halo = config_.normals ? config_.normal_step : 0;
+  const float max_jump = static_cast<float>(config_.normal_max_jump_mm / config_.cloud_unit_mm);
+  constexpr int kBlockRows = 128;
+  try {
+    processor_.workers().run(rows, kBlockRows, [&](int begin, int end, int) {
+      const int lo = std::max(0, begin - halo), hi = std::min(rows, end + halo);
+      pipeline::PointCloud band;
+      band.width = cols;
+      band.height = hi - lo;
+      band.points.assign(cloud.points.begin() + static_cast<std::ptrdiff_t>(lo) * cols,
+                         cloud.points.begin() + static_cast<std::ptrdiff_t>(hi) * cols);
+      if (config_.depth_sigma) {
+        auto rowsOf = [&](const cv::Mat& m) { return m.empty() ? cv::Mat() : m.rowRange(lo, hi); };
+        pipeline::ProjectorMaps band_maps;
+        band_maps.up = rowsOf(maps->up);
+        band_maps.vp = rowsOf(maps->vp);
+        band_maps.modulation = rowsOf(maps->modulation);
+        band_maps.offset = rowsOf(maps->offset);
+        band_maps.status = rowsOf(maps->status);
+        pipeline::depthSigma(band_maps, band, calibration, spec, noise, config_.triangulator.use)
+            .rowRange(begin - lo, end - lo)
+            .copyTo(quality->depth_sigma.rowRange(begin, end));
+      }
+      if (config_.normals)
+        pipeline::organizedNormals(band, config_.normal_step, max_jump)
+            .rowRange(begin - lo, end - lo)
+            .copyTo(quality->normals.rowRange(begin, end));
+    });
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("per-point quality (dds.points_confidence / points_normals): ") +
+                                e.what());
   }
-  if (config_.normals)
-    quality->normals = pipeline::organizedNormals(
-        cloud, config_.normal_step, static_cast<float>(config_.normal_max_jump_mm / config_.cloud_unit_mm));
   return quality;
 }
 

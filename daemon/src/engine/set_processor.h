@@ -114,7 +114,7 @@ class SetProcessor {
   std::shared_ptr<const PointQuality> pointQuality(const pipeline::PatternSpec& spec,
                                                    const std::string& camera_id, int bit_depth,
                                                    const pipeline::ProjectorMaps* maps,
-                                                   const pipeline::PointCloud& cloud) const;
+                                                   const pipeline::PointCloud& cloud);
   std::shared_ptr<const pipeline::PointCloud> colouredCopy(const pipeline::ImageSet& set,
                                                            const std::string& camera_id,
                                                            const pipeline::PointCloud& cloud) const;
