@@ -1553,6 +1553,7 @@ TEST_CASE("points with normals and confidence: fields, unit normals, calibrated 
   }
   REQUIRE(client_owner->request(Command::kStop, "", 0, scaledBound(5s)));
   REQUIRE(daemon.terminate(5s) == 0);
+  std::filesystem::remove(path);
 }
 
 // The keys of the per-point quality (docs/formats.md): the simulator's noise
