@@ -166,6 +166,11 @@ void parseDds(const YamlMap& m, DdsConfig& d, const std::filesystem::path& base_
   if (d.points_layout.decimation < 1 || d.points_layout.decimation > 16)
     m.fail("points_decimation", "must be 1..16 (1 = every pixel)");
   d.points_layout.valid_only = m.get<bool>("points_valid_only", d.points_layout.valid_only);
+  d.points_layout.normals = m.get<bool>("points_normals", d.points_layout.normals);
+  d.points_layout.confidence = m.get<bool>("points_confidence", d.points_layout.confidence);
+  d.points_normal_step = m.get<int>("points_normal_step", d.points_normal_step);
+  if (d.points_normal_step < 1 || d.points_normal_step > 32)
+    m.fail("points_normal_step", "must be 1..32 pixels");
   d.points_zero_copy = m.get<bool>("points_zero_copy", d.points_zero_copy);
   d.status_period_s = positive(m, "status_period_s", d.status_period_s);
   const YamlMap qos = m.optionalMap("qos");
@@ -192,6 +197,36 @@ void parseDds(const YamlMap& m, DdsConfig& d, const std::filesystem::path& base_
   requests.done();
   parseTfConfig(m.optionalMap("tf"), d.tf, base_dir);
   m.done();
+}
+
+// `camera_noise:` (8-bit DN), by default the simulator's radiometry for
+// sensor: sim (its analog gain scales both noises, drivers/sim.h); required
+// by dds.points_confidence.
+void parseCameraNoise(const YamlMap& root, DaemonConfig& config) {
+  if (root.has("camera_noise")) {
+    const YamlMap m = root.optionalMap("camera_noise");
+    pipeline::CameraNoise noise;
+    noise.gain_dn_per_electron = nonNegative(m, "gain_dn_per_electron", noise.gain_dn_per_electron);
+    noise.read_noise_dn = nonNegative(m, "read_noise_dn", noise.read_noise_dn);
+    m.done();
+    config.camera_noise = noise;
+  } else if (config.sensor == SensorKind::kSim) {
+    pipeline::CameraNoise noise;
+    noise.gain_dn_per_electron = config.sim.analog_gain * config.sim.gain_dn_per_electron;
+    noise.read_noise_dn = config.sim.analog_gain * config.sim.read_noise_dn;
+    config.camera_noise = noise;
+  }
+  // The phase-noise model covers the phase-shift families only
+  // (pipeline/point_quality.h).
+  if (config.dds.points_layout.confidence)
+    for (const pipeline::PatternSpec& p : config.patterns)
+      if (p.family == pipeline::PatternFamily::kGrayCode || p.family == pipeline::PatternFamily::kMicroPhaseShift)
+        root.fail("dds", "points_confidence: pattern '" + p.name +
+                             "' has no phase-noise model (Gray code or micro phase shift)");
+  if (config.dds.points_layout.confidence && !config.camera_noise)
+    root.fail("camera_noise",
+              "needed by dds.points_confidence: the camera's gain_dn_per_electron and read_noise_dn "
+              "(8-bit DN; docs/metrology.md \"Per-point quality\")");
 }
 
 void parseMotion(const YamlMap& m, MotionConfig& motion) {
@@ -458,6 +493,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parseDds(root.optionalMap("dds"), config.dds, base_dir);
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   parseSoftwareTrigger(root.optionalMap("software_trigger"), config.software_trigger);
+  parseCameraNoise(root, config);
   // Relative: under the service's state directory when systemd gives one
   // (StateDirectory=, $STATE_DIRECTORY), else under the user's data folder
   // ($XDG_DATA_HOME/sl-sensor, ~/.local/share/sl-sensor): never in the source

@@ -329,7 +329,8 @@ ResultContents DdsBridge::resultContents() const {
   // A cloud published from its own points and sent in place by a reliable
   // writer is kept until its readers acknowledged it.
   return {CloudUnit::kMetres, c.publish_projector_maps,
-          impl_->points_writer.borrowing() && c.points_qos.reliable && packsInPlace(c.points_layout, 1.0)};
+          impl_->points_writer.borrowing() && c.points_qos.reliable && packsInPlace(c.points_layout, 1.0),
+          c.points_layout.confidence, c.points_layout.normals, c.points_normal_step};
 }
 
 void DdsBridge::publish(const ScanResult& result) {
@@ -345,7 +346,7 @@ void DdsBridge::publish(const ScanResult& result) {
     std::shared_ptr<std::vector<float>> buffer = in_place ? nullptr : d.packBuffer();
     std::vector<float> unused;
     const PackedCloud packed = packCloud(*result.cloud, result.cloud_unit_m, d.config.points_layout,
-                                         buffer ? *buffer : unused);
+                                         buffer ? *buffer : unused, result.quality.get());
     std::shared_ptr<const void> owner = result.cloud;
     if (buffer) owner = std::move(buffer);
     const bool written = d.points_writer.write(

@@ -45,17 +45,28 @@ std::vector<float> floatsOf(const cv::Mat& m, std::size_t n) {
 CloudMessage::CloudMessage(const PackedCloud& packed, pipeline::TimestampNs stamp_ns,
                            std::string frame_id)
     : frame_id_(std::move(frame_id)) {
-  static const char* kNames[4] = {"x", "y", "z", "intensity"};
-  for (int i = 0; i < 4; ++i)
-    fields_[i] = {const_cast<char*>(kNames[i]), static_cast<std::uint32_t>(4 * i), kFloat32, 1};
+  static const char* kNames[8] = {"x",        "y",        "z",        "intensity",
+                                  "normal_x", "normal_y", "normal_z", "confidence"};
+  std::uint32_t n = 0;
+  auto add = [&](int name) {
+    fields_[n] = {const_cast<char*>(kNames[name]), 4 * n, kFloat32, 1};
+    ++n;
+  };
+  for (int i = 0; i < 4; ++i) add(i);
+  if (packed.normals)
+    for (int i = 4; i < 7; ++i) add(i);
+  if (packed.confidence) add(7);
+  if (packed.point_step != 4 * n)
+    throw std::invalid_argument("packed cloud: point_step " + std::to_string(packed.point_step) +
+                                " for " + std::to_string(n) + " float32 fields");
   msg_.header.stamp = toTime(stamp_ns);
   msg_.header.frame_id = frame_id_.data();
   msg_.height = packed.height;
   msg_.width = packed.width;
-  borrow(msg_.fields, fields_, 4);
+  borrow(msg_.fields, fields_, n);
   msg_.is_bigendian = false;  // x86-64 / aarch64 little endian, as written
-  msg_.point_step = 16;
-  msg_.row_step = 16 * msg_.width;
+  msg_.point_step = packed.point_step;
+  msg_.row_step = packed.point_step * msg_.width;
   borrow(msg_.data, const_cast<std::uint8_t*>(packed.data), packed.bytes);
   // Organized, invalid pixels are NaN points, so the cloud may hold some:
   // is_dense = false (as ROS depth drivers publish organized clouds); finding

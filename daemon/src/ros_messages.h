@@ -40,7 +40,9 @@ class NonMovable {
 };
 
 // sensor_msgs/PointCloud2: fields x, y, z, intensity (float32, offsets 0, 4,
-// 8, 12; 16 bytes a point), little endian. `packed` is borrowed.
+// 8, 12; 16 bytes a point), then, when `packed` has them, normal_x,
+// normal_y, normal_z and confidence (float32 each, following on in this
+// order: PCL's and Open3D's names), little endian. `packed` is borrowed.
 class CloudMessage : NonMovable {
  public:
   CloudMessage(const PackedCloud& packed, pipeline::TimestampNs stamp_ns, std::string frame_id);
@@ -48,7 +50,7 @@ class CloudMessage : NonMovable {
 
  private:
   std::string frame_id_;
-  PointField fields_[4];
+  PointField fields_[8];
   PointCloud2 msg_{};
 };
 

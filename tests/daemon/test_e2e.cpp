@@ -24,6 +24,7 @@
 #include "support/time_scale.h"
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -1394,4 +1395,207 @@ TEST_CASE("image sets published by the daemon decode offline to its clouds, bit 
   }
   CHECK(compared >= kScans);
   REQUIRE(daemon.terminate(5s) == 0);
+}
+
+// Per-point quality on rt/<ns>/points (dds.points_normals,
+// dds.points_confidence): the fields as PCL names them, unit normals towards
+// the camera matching the simulated plane's, and a confidence (expected
+// depth sigma) that predicts the measured depth error per band of sigma
+// within 20 % (docs/metrology.md "Per-point quality").
+TEST_CASE("points with normals and confidence: fields, unit normals, calibrated sigma", "[quality]") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("quality");
+  YAML::Node root = sl::test::simConfig(ns);
+  root["dds"]["points_normals"] = true;
+  root["dds"]["points_confidence"] = true;
+  const std::string path = sl::test::writeConfigFile(root, ns);
+  const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(path);
+  REQUIRE(config.camera_noise);  // the simulator's radiometry
+  sl::test::DaemonProcess daemon(path);
+  REQUIRE(daemon.started());
+
+  using CloudMsg = sensor_msgs_msg_dds__PointCloud2_;
+  sl::dds::Participant participant(0);
+  sl::dds::Topic<CloudMsg> points_topic(participant, "rt/" + ns + "/points",
+                                        sensor_msgs_msg_dds__PointCloud2__desc);
+  sl::dds::Reader<CloudMsg> points_reader(participant, points_topic,
+                                          sl::dds::Qos().reliable().keepLast(4));
+  const auto client_owner = connect(ns, false);
+  REQUIRE(points_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
+  constexpr int kScans = 2;
+  const std::int64_t t0 = startScans(*client_owner, "3+3_horizontal", kScans);
+
+  const std::vector<std::string> names = {"x",        "y",        "z",        "intensity",
+                                          "normal_x", "normal_y", "normal_z", "confidence"};
+  std::vector<std::vector<float>> clouds;  // 8 floats a point, as received
+  const auto deadline = std::chrono::steady_clock::now() + scaledBound(20s);
+  while (clouds.size() < kScans && std::chrono::steady_clock::now() < deadline) {
+    for (auto loan = points_reader.take(1); !loan.empty(); loan = points_reader.take(1)) {
+      if (!loan.isValid(0)) continue;
+      const CloudMsg& c = loan[0];
+      if (stampNs(c.header.stamp) < t0) continue;
+      REQUIRE(c.width == 1440);
+      REQUIRE(c.height == 1080);
+      REQUIRE(c.fields._length == names.size());
+      for (std::uint32_t i = 0; i < c.fields._length; ++i) {
+        CHECK(std::string(c.fields._buffer[i].name) == names[i]);
+        CHECK(c.fields._buffer[i].offset == 4 * i);
+        CHECK(c.fields._buffer[i].datatype == 7);  // FLOAT32
+        CHECK(c.fields._buffer[i].count == 1);
+      }
+      REQUIRE(c.point_step == 32);
+      REQUIRE(c.row_step == 32 * c.width);
+      REQUIRE(c.data._length == std::size_t(32) * c.width * c.height);
+      CHECK_FALSE(c.is_bigendian);
+      std::vector<float> values(c.data._length / 4);
+      std::memcpy(values.data(), c.data._buffer, c.data._length);
+      clouds.push_back(std::move(values));
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  REQUIRE(clouds.size() == kScans);
+
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  const sl::drivers::SimGroundTruth& gt = sim->groundTruth();
+  const sl::drivers::SimPlane& plane = config.sim.scene.planes.at(0);
+  const Eigen::Vector3d plane_normal = plane.normal.normalized();
+  struct Sample {
+    double sigma_mm, error_mm;
+  };
+  std::vector<Sample> samples;
+  std::vector<double> angles_deg, tilt_sigma_deg;
+  Eigen::Vector3d mean_normal = Eigen::Vector3d::Zero(), truth_normal = Eigen::Vector3d::Zero();
+  const double fx = config.calibration.camera.fx;
+  std::size_t valid = 0, with_confidence = 0, with_normal = 0, not_unit = 0, away = 0;
+  for (const auto& cloud : clouds) {
+    for (int r = 0; r < 1080; ++r) {
+      for (int c = 0; c < 1440; ++c) {
+        const float* p = cloud.data() + 8 * (std::size_t(r) * 1440 + c);
+        const cv::Vec3f g = gt.xyz_mm.at<cv::Vec3f>(r, c);
+        if (!std::isfinite(p[2])) {
+          CHECK(std::isnan(p[7]));  // no point, no confidence
+          continue;
+        }
+        if (!std::isfinite(g[2])) continue;
+        const Eigen::Vector3d x_gt(g[0], g[1], g[2]);
+        if (std::abs(plane_normal.dot(x_gt - plane.point)) > 1e-3) continue;  // not on the plane
+        ++valid;
+        const Eigen::Vector3d x(p[0], p[1], p[2]);  // metres
+        const Eigen::Vector3d n(p[4], p[5], p[6]);
+        if (n.allFinite()) {
+          ++with_normal;
+          if (std::abs(n.norm() - 1) > 1e-4) ++not_unit;
+          if (n.dot(x) >= 0) ++away;
+          // The plane's normal oriented towards the camera.
+          const Eigen::Vector3d truth = plane_normal.dot(x_gt) < 0 ? plane_normal : -plane_normal;
+          angles_deg.push_back(std::acos(std::clamp(n.normalized().dot(truth), -1.0, 1.0)) * 180 / M_PI);
+          mean_normal += n;
+          truth_normal = truth;
+          // docs/metrology.md: the normal's tilt noise per axis is about
+          // sqrt(2) sigma_z / (2 step footprint), footprint = z / f.
+          if (std::isfinite(p[7]))
+            tilt_sigma_deg.push_back(std::sqrt(2.0) * p[7] /
+                                     (2 * config.dds.points_normal_step * p[2] / fx) * 180 / M_PI);
+        }
+        if (std::isfinite(p[7])) {
+          ++with_confidence;
+          CHECK(p[7] > 0);
+          const double error_mm = p[2] * 1e3 - g[2];
+          const double sigma_mm = p[7] * 1e3;
+          if (std::abs(error_mm) > 10 * sigma_mm) continue;  // wrong fringe order: no noise
+          samples.push_back({sigma_mm, error_mm});
+        }
+      }
+    }
+  }
+  INFO("plane points " << valid << ", with confidence " << with_confidence << ", with normal "
+                       << with_normal);
+  REQUIRE(valid > 500000);
+  CHECK(with_confidence > 0.99 * valid);
+  CHECK(with_normal > 0.95 * valid);
+  CHECK(not_unit == 0);
+  CHECK(away == 0);
+  std::nth_element(angles_deg.begin(), angles_deg.begin() + angles_deg.size() / 2, angles_deg.end());
+  const double median_angle = angles_deg[angles_deg.size() / 2];
+  std::nth_element(tilt_sigma_deg.begin(), tilt_sigma_deg.begin() + tilt_sigma_deg.size() / 2,
+                   tilt_sigma_deg.end());
+  // The angle of a tilt with two Gaussian components of this sigma has the
+  // median sqrt(2 ln 2) sigma.
+  const double predicted_median = std::sqrt(2 * std::log(2.0)) * tilt_sigma_deg[tilt_sigma_deg.size() / 2];
+  const double mean_off_deg =
+      std::acos(std::clamp(mean_normal.normalized().dot(truth_normal), -1.0, 1.0)) * 180 / M_PI;
+  WARN("normals on the simulated plane (step " << config.dds.points_normal_step
+       << " px): median angle to the truth " << median_angle << " deg (noise model: "
+       << predicted_median << "), mean normal off by " << mean_off_deg << " deg");
+  CHECK(mean_off_deg < 0.5);  // no bias beyond a fraction of a degree
+  CHECK(median_angle < 2 * predicted_median);
+  CHECK(median_angle > 0.5 * predicted_median);
+
+  // Bands of predicted sigma (quantiles), each: RMS measured error against
+  // RMS predicted sigma.
+  REQUIRE(samples.size() > 0.99 * with_confidence);
+  std::sort(samples.begin(), samples.end(),
+            [](const Sample& a, const Sample& b) { return a.sigma_mm < b.sigma_mm; });
+  constexpr int kBands = 4;
+  for (int b = 0; b < kBands; ++b) {
+    const std::size_t lo = samples.size() * b / kBands, hi = samples.size() * (b + 1) / kBands;
+    double sum_sigma2 = 0, sum_error2 = 0;
+    for (std::size_t i = lo; i < hi; ++i) {
+      sum_sigma2 += samples[i].sigma_mm * samples[i].sigma_mm;
+      sum_error2 += samples[i].error_mm * samples[i].error_mm;
+    }
+    const double predicted = std::sqrt(sum_sigma2 / (hi - lo)), measured = std::sqrt(sum_error2 / (hi - lo));
+    WARN("band " << b << ": sigma " << samples[lo].sigma_mm << "-" << samples[hi - 1].sigma_mm
+                 << " mm, predicted RMS " << predicted << " mm, measured RMS " << measured
+                 << " mm, ratio " << measured / predicted);
+    CHECK(measured / predicted > 0.8);
+    CHECK(measured / predicted < 1.2);
+  }
+  REQUIRE(client_owner->request(Command::kStop, "", 0, scaledBound(5s)));
+  REQUIRE(daemon.terminate(5s) == 0);
+  std::filesystem::remove(path);
+}
+
+// The keys of the per-point quality (docs/formats.md): the simulator's noise
+// by default, camera_noise overriding it, patterns without a noise model
+// refused at load.
+TEST_CASE("points_confidence: camera noise from the simulator or camera_noise, phase patterns only",
+          "[quality]") {
+  YAML::Node root = sl::test::simConfig("quality_keys");
+  root["dds"]["points_confidence"] = true;
+  root["sim"]["radiometry"]["analog_gain"] = 2.0;
+  auto parse = [](const YAML::Node& n) {
+    YAML::Emitter out;
+    out << n;
+    return sl::daemon::parseConfig(out.c_str(), "quality.yaml");
+  };
+  {
+    const sl::daemon::DaemonConfig c = parse(root);
+    REQUIRE(c.camera_noise);
+    CHECK(c.camera_noise->gain_dn_per_electron == Approx(2 * c.sim.gain_dn_per_electron));
+    CHECK(c.camera_noise->read_noise_dn == Approx(2 * c.sim.read_noise_dn));
+    CHECK(c.dds.points_layout.confidence);
+    CHECK_FALSE(c.dds.points_layout.normals);
+  }
+  root["camera_noise"]["gain_dn_per_electron"] = 0.02;
+  root["camera_noise"]["read_noise_dn"] = 0.7;
+  {
+    const sl::daemon::DaemonConfig c = parse(root);
+    REQUIRE(c.camera_noise);
+    CHECK(c.camera_noise->gain_dn_per_electron == 0.02);
+    CHECK(c.camera_noise->read_noise_dn == 0.7);
+  }
+  root["camera_noise"]["read_noise_dn"] = -1;
+  CHECK_THROWS_WITH(parse(root), Catch::Contains("camera_noise.read_noise_dn"));
+  root.remove("camera_noise");
+  YAML::Node gray;
+  gray["name"] = "gray";
+  gray["family"] = "gray_code";
+  gray["direction"] = "horizontal";
+  root["patterns"].push_back(gray);
+  CHECK_THROWS_WITH(parse(root), Catch::Contains("pattern 'gray' has no phase-noise model"));
+  root["dds"]["points_confidence"] = false;
+  CHECK_NOTHROW(parse(root));  // normals and plain clouds need no noise model
+  root["dds"]["points_normal_step"] = 0;
+  CHECK_THROWS_WITH(parse(root), Catch::Contains("points_normal_step"));
 }

@@ -11,9 +11,13 @@
 
 #include <opencv2/core.hpp>
 
+#include "engine/set_processor.h"
 #include "request_dispatch.h"
 #include "ros_messages.h"
+#include "sl/daemon/config.h"
 #include "sl/daemon/dds_bridge.h"
+#include "sl/drivers/sim.h"
+#include "sl/pipeline/point_quality.h"
 
 using namespace sl::daemon;
 using Code = CommandResult::Code;
@@ -78,6 +82,150 @@ TEST_CASE("cloud message: x, y, z, intensity float32, 16 bytes a point, metres, 
   CHECK(p[3] == 500.f);  // intensity in camera DN, not scaled
   std::memcpy(p, m.data._buffer + 1 * 16, sizeof p);
   CHECK(std::isnan(p[2]));
+}
+
+TEST_CASE("cloud message with normals and confidence: PCL's field names, 32 bytes a point",
+          "[quality]") {
+  const sl::pipeline::PointCloud cloud = smallCloud();
+  PointQuality quality;
+  quality.normals = cv::Mat(2, 3, CV_32FC3);
+  quality.depth_sigma = cv::Mat(2, 3, CV_32FC1);
+  for (int v = 0; v < 2; ++v)
+    for (int u = 0; u < 3; ++u) {
+      const float k = static_cast<float>(3 * v + u);
+      quality.normals.at<cv::Vec3f>(v, u) = {0.1f * k, -0.2f * k, -1.0f - k};
+      quality.depth_sigma.at<float>(v, u) = 0.05f + 0.01f * k;  // mm, as the cloud
+    }
+  quality.depth_sigma.at<float>(0, 1) = kNaN;
+  std::vector<float> buffer;
+  struct Case {
+    bool normals, confidence;
+    std::vector<std::string> names;
+  };
+  const Case cases[] = {
+      {true, true, {"x", "y", "z", "intensity", "normal_x", "normal_y", "normal_z", "confidence"}},
+      {true, false, {"x", "y", "z", "intensity", "normal_x", "normal_y", "normal_z"}},
+      {false, true, {"x", "y", "z", "intensity", "confidence"}},
+  };
+  for (const Case& c : cases) {
+    CloudLayout layout;
+    layout.normals = c.normals;
+    layout.confidence = c.confidence;
+    INFO("normals " << c.normals << ", confidence " << c.confidence);
+    CHECK_FALSE(packsInPlace(layout, 1.0));  // the optional fields never go in place
+    const std::uint32_t step = 4 * static_cast<std::uint32_t>(c.names.size());
+    CHECK(floatsPerPoint(layout) * 4 == static_cast<int>(step));
+    CHECK(maxPackedBytes(3, 2, layout) == 6 * step);
+    const PackedCloud packed = packCloud(cloud, 1e-3, layout, buffer, &quality);
+    const msg::CloudMessage message(packed, cloud.stamp_ns, "cam_optical");
+    const msg::PointCloud2& m = message.sample();
+    REQUIRE(m.fields._length == c.names.size());
+    for (std::uint32_t i = 0; i < m.fields._length; ++i) {
+      CHECK(str(m.fields._buffer[i].name) == c.names[i]);
+      CHECK(m.fields._buffer[i].offset == 4 * i);
+      CHECK(m.fields._buffer[i].datatype == msg::kFloat32);
+      CHECK(m.fields._buffer[i].count == 1);
+    }
+    CHECK(m.point_step == step);
+    CHECK(m.row_step == 3 * step);
+    REQUIRE(m.data._length == 6 * step);
+    std::vector<float> p(c.names.size());
+    std::memcpy(p.data(), m.data._buffer + 5 * step, step);  // pixel (2, 1)
+    CHECK(p[2] == Approx(0.505f));
+    CHECK(p[3] == 500.f);
+    std::size_t next = 4;
+    if (c.normals) {
+      CHECK(p[4] == Approx(0.5f));  // unit vectors: not scaled
+      CHECK(p[5] == Approx(-1.0f));
+      CHECK(p[6] == -6.0f);
+      next = 7;
+    }
+    if (c.confidence) {
+      CHECK(p[next] == Approx(0.10e-3f));  // metres
+      std::memcpy(p.data(), m.data._buffer + 1 * step, step);  // pixel (1, 0): NaN point
+      CHECK(std::isnan(p[next]));
+    }
+  }
+  SECTION("decimated and valid only keep each point's own quality") {
+    CloudLayout layout{1, true, true, true};
+    const PackedCloud packed = packCloud(cloud, 1e-3, layout, buffer, &quality);
+    REQUIRE(packed.width == 5);  // pixel (1, 0) dropped
+    REQUIRE(packed.point_step == 32);
+    float p[8];
+    std::memcpy(p, packed.data + 1 * 32, sizeof p);  // pixel (2, 0), k = 2
+    CHECK(p[4] == Approx(0.2f));
+    CHECK(p[7] == Approx(0.07e-3f));
+    layout = CloudLayout{2, false, false, true};
+    const PackedCloud decimated = packCloud(cloud, 1e-3, layout, buffer, &quality);
+    REQUIRE((decimated.width == 2 && decimated.height == 1 && decimated.point_step == 20));
+    std::memcpy(p, decimated.data + 20, 20);  // pixel (2, 0)
+    CHECK(p[4] == Approx(0.07e-3f));
+  }
+  SECTION("a field asked for but not computed is an error naming it") {
+    CloudLayout layout;
+    layout.confidence = true;
+    CHECK_THROWS_WITH(packCloud(cloud, 1e-3, layout, buffer, nullptr),
+                      Catch::Contains("confidence"));
+    PointQuality wrong;
+    wrong.depth_sigma = cv::Mat(3, 3, CV_32FC1, 0.0f);
+    CHECK_THROWS_WITH(packCloud(cloud, 1e-3, layout, buffer, &wrong), Catch::Contains("3 x 3"));
+    layout = CloudLayout{};
+    layout.normals = true;
+    CHECK_THROWS_WITH(packCloud(cloud, 1e-3, layout, buffer, &wrong), Catch::Contains("normals"));
+  }
+}
+
+TEST_CASE("set processing: the per-point quality is depthSigma and organizedNormals of the whole scan",
+          "[quality]") {
+  // The set processor computes it in blocks of rows on its workers: every
+  // value must be the whole-image functions' (bit for bit, NaN included).
+  const sl::daemon::DaemonConfig config = sl::daemon::loadConfig(SL_SOURCE_DIR "/config/sim.yaml");
+  REQUIRE(config.camera_noise);
+  const std::string pattern = "3+3_horizontal", id = config.sim.camera_id;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  sl::pipeline::ImageSet set;
+  set.pattern_name = pattern;
+  set.sequence_id = 1;
+  set.trigger_stamp_ns = kStamp;
+  sl::pipeline::CameraImages images;
+  images.camera_id = id;
+  images.bit_depth = 8;
+  const int frames = config.findPattern(pattern)->frameCount();
+  for (int i = 0; i < frames; ++i) {
+    images.frames.push_back(sim->render(pattern, i, 7 + i));
+    images.stamps_ns.push_back(kStamp + i);
+  }
+  set.cameras.push_back(images);
+  for (const double unit_mm : {1.0, 1000.0}) {
+    INFO("cloud unit " << unit_mm << " mm");
+    sl::daemon::ProcessingConfig processing = sl::daemon::processingConfigOf(config, {id}, unit_mm, true);
+    processing.depth_sigma = true;
+    processing.normals = true;
+    processing.normal_step = 4;
+    sl::daemon::SetProcessor processor(processing);
+    const sl::daemon::SetOutcome out = processor.process(set, {id}, false);
+    INFO("error: " << out.error);
+    REQUIRE(out.ok());
+    const sl::daemon::CameraScan& scan = out.scans.at(0);
+    REQUIRE(scan.quality);
+    REQUIRE(scan.maps);
+    sl::pipeline::CameraNoise noise = *config.camera_noise;
+    noise.bit_depth = 8;
+    const cv::Mat sigma = sl::pipeline::depthSigma(
+        *scan.maps, *scan.cloud, sl::pipeline::inUnits(config.calibration, 1.0 / unit_mm),
+        *config.findPattern(pattern), noise, config.triangulator.use);
+    const cv::Mat normals =
+        sl::pipeline::organizedNormals(*scan.cloud, 4, static_cast<float>(5.0 / unit_mm));
+    REQUIRE(scan.quality->depth_sigma.size() == sigma.size());
+    REQUIRE(scan.quality->normals.size() == normals.size());
+    CHECK(sigma.total() * sizeof(float) == sigma.step[0] * sigma.rows);
+    CHECK(std::memcmp(scan.quality->depth_sigma.data, sigma.data, sigma.total() * sizeof(float)) == 0);
+    CHECK(std::memcmp(scan.quality->normals.data, normals.data, normals.total() * 3 * sizeof(float)) == 0);
+    std::size_t finite = 0;
+    for (int r = 0; r < sigma.rows; ++r)
+      for (int c = 0; c < sigma.cols; ++c) finite += std::isfinite(sigma.at<float>(r, c));
+    CHECK(finite > sigma.total() / 2);  // not a comparison of two NaN images
+  }
 }
 
 TEST_CASE("depth and shading images: 32FC1 metres with NaN, mono8 scaled from the bit depth") {

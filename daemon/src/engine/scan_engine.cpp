@@ -110,6 +110,14 @@ std::vector<std::string> idsOf(const EngineDevices& devices) {
   return ids;
 }
 
+// `p` with the per-point quality the results' consumer asks for.
+ProcessingConfig withQuality(ProcessingConfig p, const ResultContents& contents) {
+  p.depth_sigma = contents.depth_sigma;
+  p.normals = contents.normals;
+  p.normal_step = contents.normal_step;
+  return p;
+}
+
 }  // namespace
 
 struct ScanEngine::Impl {
@@ -122,9 +130,10 @@ struct ScanEngine::Impl {
         schedule(kScheduleQueueCapacity, Overflow::kWaitForRoom),
         sets(config.runtime.queue_depth),
         results(config.runtime.queue_depth),
-        processing_config(processingConfigOf(config, camera_ids,
-                                             contents.cloud_unit == CloudUnit::kMetres ? 1000.0 : 1.0,
-                                             contents.projector_maps)),
+        processing_config(withQuality(processingConfigOf(config, camera_ids,
+                                                         contents.cloud_unit == CloudUnit::kMetres ? 1000.0 : 1.0,
+                                                         contents.projector_maps),
+                                      contents)),
         processor(processing_config),
         motion_enabled(processing_config.motion_enabled),
         software(this->devices.cameras, this->devices.projector, config.software_trigger),
@@ -316,7 +325,8 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
       }
       result.results.push_back({0, set.pattern_name, scan.camera_id, scan.bit_depth,
                                 std::move(scan.maps), std::move(scan.cloud),
-                                processing_config.cloud_unit_mm * 1e-3, item->set});
+                                processing_config.cloud_unit_mm * 1e-3, item->set,
+                                std::move(scan.quality)});
     }
     decode_watch.setDone(item->generation, implausible);
     if (!implausible.empty() && !config.runtime.publish_implausible &&

@@ -30,6 +30,7 @@ ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vecto
   p.motion_enabled = config.motion.enabled;
   p.motion = config.motion.options;
   p.keep_maps = keep_maps;
+  p.camera_noise = config.camera_noise;
   return p;
 }
 
@@ -43,9 +44,19 @@ std::map<std::string, pipeline::PinholeModel> cameraModels(const ProcessingConfi
 }
 
 // `config` with the calibrations and the depth limits in the clouds' unit.
+// The maps are kept for the caller or for the depth sigma.
+pipeline::ScanProcessor::Keep keepOf(const ProcessingConfig& config) {
+  return config.keep_maps || config.depth_sigma ? pipeline::ScanProcessor::Keep::kMapsAndCloud
+                                                : pipeline::ScanProcessor::Keep::kCloud;
+}
+
 ProcessingConfig inCloudUnit(ProcessingConfig config) {
   if (!(config.cloud_unit_mm > 0 && std::isfinite(config.cloud_unit_mm)))
     throw std::invalid_argument("cloud unit must be a positive number of mm");
+  if (config.depth_sigma && !config.camera_noise)
+    throw std::invalid_argument("the depth sigma (dds.points_confidence) needs camera_noise");
+  if (config.normals && config.normal_step < 1)
+    throw std::invalid_argument("normal step must be at least 1 px");
   if (config.cloud_unit_mm == 1.0) return config;
   const double per_mm = 1.0 / config.cloud_unit_mm;
   for (auto& [id, calibration] : config.calibrations) calibration = pipeline::inUnits(calibration, per_mm);
@@ -79,9 +90,7 @@ void SetProcessor::warmUp() {
     black.frames.assign(static_cast<std::size_t>(codec.frameCount()), zeros);
     black.stamps_ns.assign(black.frames.size(), 0);
     try {
-      processor_.process(codec, triangulator, black, 0, camera_id,
-                         config_.keep_maps ? pipeline::ScanProcessor::Keep::kMapsAndCloud
-                                           : pipeline::ScanProcessor::Keep::kCloud);
+      processor_.process(codec, triangulator, black, 0, camera_id, keepOf(config_));
     } catch (const std::exception&) {
       // A pattern that cannot decode at this size fails the same way on its
       // first scan, where the error is reported.
@@ -170,20 +179,75 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
         throw std::runtime_error("no calibration of camera '" + camera_id + "'");
       const pipeline::Codec& codec = decoder->second.codec();
       pipeline::DecodeTally tally;
-      auto [maps, cloud] = processor_.process(
-          codec, triangulator->second, *images, set.trigger_stamp_ns, camera_id,
-          config_.keep_maps ? pipeline::ScanProcessor::Keep::kMapsAndCloud
-                            : pipeline::ScanProcessor::Keep::kCloud,
-          &tally);
+      auto [maps, cloud] = processor_.process(codec, triangulator->second, *images,
+                                              set.trigger_stamp_ns, camera_id, keepOf(config_), &tally);
+      std::shared_ptr<const PointQuality> quality = pointQuality(codec.spec(), camera_id,
+                                                                 images->bit_depth, maps.get(), *cloud);
+      if (!config_.keep_maps) maps = nullptr;  // kept for the depth sigma only
       if (auto coloured = colouredCopy(set, camera_id, *cloud)) cloud = std::move(coloured);
       out.scans.push_back({camera_id, images->bit_depth, std::move(maps), std::move(cloud),
-                           pipeline::judgeDecodeTally(codec.spec(), codec.options(), tally)});
+                           pipeline::judgeDecodeTally(codec.spec(), codec.options(), tally),
+                           std::move(quality)});
     }
   } catch (const std::exception& e) {
     out.scans.clear();
     out.error = "processing sequence " + std::to_string(set.sequence_id) + ": " + e.what();
   }
   return out;
+}
+
+// The per-point quality of `cloud` (triangulated by `camera_id` from `maps`
+// of `spec`, images of `bit_depth`); nullptr when none is asked for. The
+// processor's row workers take blocks of rows, each with a copy of its rows
+// and `normal_step` more on either side, so that every value is the one the
+// whole-image functions give (their results depend on a pixel's row and
+// column neighbourhood only).
+std::shared_ptr<const PointQuality> SetProcessor::pointQuality(const pipeline::PatternSpec& spec,
+                                                               const std::string& camera_id, int bit_depth,
+                                                               const pipeline::ProjectorMaps* maps,
+                                                               const pipeline::PointCloud& cloud) {
+  if (!config_.depth_sigma && !config_.normals) return nullptr;
+  if (config_.depth_sigma && !maps) throw std::logic_error("depth sigma: the maps were not kept");
+  const int rows = cloud.height, cols = cloud.width;
+  auto quality = std::make_shared<PointQuality>();
+  if (config_.depth_sigma) quality->depth_sigma.create(rows, cols, CV_32FC1);
+  if (config_.normals) quality->normals.create(rows, cols, CV_32FC3);
+  pipeline::CameraNoise noise = config_.camera_noise.value_or(pipeline::CameraNoise{});
+  noise.bit_depth = bit_depth;
+  const pipeline::CameraProjectorCalibration& calibration = config_.calibrations.at(camera_id);
+  const int halo = config_.normals ? config_.normal_step : 0;
+  const float max_jump = static_cast<float>(config_.normal_max_jump_mm / config_.cloud_unit_mm);
+  constexpr int kBlockRows = 128;
+  try {
+    processor_.workers().run(rows, kBlockRows, [&](int begin, int end, int) {
+      const int lo = std::max(0, begin - halo), hi = std::min(rows, end + halo);
+      pipeline::PointCloud band;
+      band.width = cols;
+      band.height = hi - lo;
+      band.points.assign(cloud.points.begin() + static_cast<std::ptrdiff_t>(lo) * cols,
+                         cloud.points.begin() + static_cast<std::ptrdiff_t>(hi) * cols);
+      if (config_.depth_sigma) {
+        auto rowsOf = [&](const cv::Mat& m) { return m.empty() ? cv::Mat() : m.rowRange(lo, hi); };
+        pipeline::ProjectorMaps band_maps;
+        band_maps.up = rowsOf(maps->up);
+        band_maps.vp = rowsOf(maps->vp);
+        band_maps.modulation = rowsOf(maps->modulation);
+        band_maps.offset = rowsOf(maps->offset);
+        band_maps.status = rowsOf(maps->status);
+        pipeline::depthSigma(band_maps, band, calibration, spec, noise, config_.triangulator.use)
+            .rowRange(begin - lo, end - lo)
+            .copyTo(quality->depth_sigma.rowRange(begin, end));
+      }
+      if (config_.normals)
+        pipeline::organizedNormals(band, config_.normal_step, max_jump)
+            .rowRange(begin - lo, end - lo)
+            .copyTo(quality->normals.rowRange(begin, end));
+    });
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("per-point quality (dds.points_confidence / points_normals): ") +
+                                e.what());
+  }
+  return quality;
 }
 
 // A copy of `cloud` (triangulated by `camera_id`) with the intensity seen by

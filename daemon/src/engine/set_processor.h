@@ -11,10 +11,12 @@
 #include <string>
 #include <vector>
 
+#include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/config.h"
 #include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/motion_compensation.h"
+#include "sl/pipeline/point_quality.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
 #include "sl/pipeline/types.h"
@@ -40,12 +42,21 @@ struct ProcessingConfig {
   // points afterwards. Everything else here (triangulator depth limits
   // included) stays in mm.
   double cloud_unit_mm = 1.0;
+  // Per-point quality of each cloud (CameraScan::quality): the expected depth
+  // sigma (needs camera_noise and a phase-shift pattern; the maps are then
+  // kept until it is computed) and the normals.
+  bool depth_sigma = false;
+  bool normals = false;
+  int normal_step = 3;               // px, pipeline::organizedNormals
+  float normal_max_jump_mm = 5.0f;   // a depth jump beyond this has no normal
+  std::optional<pipeline::CameraNoise> camera_noise;  // bit depth: each scan's images'
 };
 
 // From the daemon's config for the sensor's cameras (`camera_ids`, in
 // synchroniser order): the first uses `calibration`, the others their entry
 // of `calibrations:` (if any); clouds in `cloud_unit_mm`; maps kept when
-// `keep_maps` (the DDS edge publishes them). No DDS settings are read.
+// `keep_maps` (the DDS edge publishes them); camera_noise from the config,
+// no per-point quality (the caller sets it). No DDS settings are read.
 ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids,
                                     double cloud_unit_mm = 1.0, bool keep_maps = false);
 
@@ -58,6 +69,8 @@ struct CameraScan {
   // From the decoder's counts (pipeline::judgeDecodeTally: no modulation
   // per frequency).
   pipeline::DecodeHealth health;
+  // Null unless depth_sigma or normals (depth sigma in cloud_unit_mm).
+  std::shared_ptr<const PointQuality> quality;
 };
 
 struct SetOutcome {
@@ -72,7 +85,7 @@ struct SetOutcome {
 class SetProcessor {
  public:
   // Throws std::invalid_argument (from the pipeline stages) on a pattern or
-  // calibration they reject.
+  // calibration they reject, or depth_sigma without camera_noise.
   explicit SetProcessor(const ProcessingConfig& config);
 
   // Processes `set` for `cameras` (each must have images in the set);
@@ -98,6 +111,10 @@ class SetProcessor {
   // Processes black frames once per camera, so that the first real scan
   // does not pay for its buffers' first page faults.
   void warmUp();
+  std::shared_ptr<const PointQuality> pointQuality(const pipeline::PatternSpec& spec,
+                                                   const std::string& camera_id, int bit_depth,
+                                                   const pipeline::ProjectorMaps* maps,
+                                                   const pipeline::PointCloud& cloud);
   std::shared_ptr<const pipeline::PointCloud> colouredCopy(const pipeline::ImageSet& set,
                                                            const std::string& camera_id,
                                                            const pipeline::PointCloud& cloud) const;

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -15,6 +16,7 @@
 #include "sl/daemon/hardware_config.h"
 #include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
+#include "sl/pipeline/point_quality.h"
 #include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/motion_compensation.h"
@@ -65,8 +67,12 @@ struct DdsConfig {
   bool publish_image_sets = false;
   // Depth (32FC1, m) and shading (mono8) images and camera_info, ROS 2 types.
   bool publish_images = false;
-  // What rt/<ns>/points carries: dds.points_decimation, dds.points_valid_only.
+  // What rt/<ns>/points carries: dds.points_decimation, dds.points_valid_only,
+  // dds.points_normals, dds.points_confidence.
   CloudLayout points_layout;
+  // dds.points_normal_step: the normals' central differences span +- this
+  // many pixels (pipeline::organizedNormals).
+  int points_normal_step = 3;
   // Clouds sent from their own memory instead of serialized by dds_write
   // (one 25 MB copy less per cloud; off with shared memory, see CloudWriter).
   bool points_zero_copy = true;
@@ -163,6 +169,10 @@ struct DaemonConfig {
   SoftwareTriggerConfig software_trigger;
   DdsConfig dds;
   RuntimeConfig runtime;
+  // The cameras' intensity noise for the depth sigma (`camera_noise:`,
+  // docs/metrology.md); for sensor: sim, by default the simulator's
+  // radiometry. Its bit depth is each scan's images'. Absent: unknown.
+  std::optional<pipeline::CameraNoise> camera_noise;
 
   const pipeline::PatternSpec* findPattern(const std::string& name) const;
 };

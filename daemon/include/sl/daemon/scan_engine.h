@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "sl/daemon/commands.h"
+#include "sl/daemon/cloud_layout.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/camera.h"
 #include "sl/drivers/projector.h"
@@ -104,6 +105,8 @@ struct ScanResult {
   // The image set the scan came from, as acquired (before motion
   // compensation).
   std::shared_ptr<const pipeline::ImageSet> images;
+  // Null unless ResultContents asks for depth sigma or normals.
+  std::shared_ptr<const PointQuality> quality;
 };
 
 struct EngineDevices {
@@ -129,6 +132,11 @@ struct ResultContents {
   // by a reliable writer): the writer's history holds the processing
   // thread's clouds, not copies.
   bool keeps_clouds = false;
+  // ScanResult::quality: the depth sigma (needs DaemonConfig::camera_noise)
+  // and the normals (central differences +- normal_step px).
+  bool depth_sigma = false;
+  bool normals = false;
+  int normal_step = 3;
 };
 
 // Thread-safe: start/stop/selectPattern/status may be called from any thread.
