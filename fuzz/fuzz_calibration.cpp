@@ -6,7 +6,7 @@
 #include <string>
 
 #include "fuzz_support.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/daemon/config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -16,7 +16,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string path = sl::fuzz::writeScratch(kNames[mode], data + 1, size - 1);
   try {
     if (mode < 2) {
-      sl::daemon::loadCalibration(path);
+      sl::files::loadCalibration(path);
     } else {
       // The fuzzed file as one of the pair, the other the valid sl_sensor
       // file of the seed corpus.
@@ -24,11 +24,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                                 (mode == 2 ? "/data/sl_sensor_projector.xml"
                                            : "/data/sl_sensor_camera.xml");
       if (mode == 2)
-        sl::daemon::loadSlSensorCalibration(path, other);
+        sl::files::loadSlSensorCalibration(path, other);
       else
-        sl::daemon::loadSlSensorCalibration(other, path);
+        sl::files::loadSlSensorCalibration(other, path);
     }
-  } catch (const sl::daemon::ConfigError&) {
+  } catch (const sl::files::ConfigError&) {
   }
   return 0;
 }

@@ -22,7 +22,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string text(reinterpret_cast<const char*>(data), size);
   try {
     sl::daemon::parseConfig(text, (sl::fuzz::scratchDir() / "fuzz.yaml").string());
-  } catch (const sl::daemon::ConfigError&) {
+  } catch (const sl::files::ConfigError&) {
   }
   return 0;
 }

@@ -4,13 +4,13 @@
 #include <string>
 
 #include "sl/daemon/config.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
   try {
-    sl::daemon::parsePatternText(text, "fuzz.yaml");
-  } catch (const sl::daemon::ConfigError&) {
+    sl::files::parsePatternText(text, "fuzz.yaml");
+  } catch (const sl::files::ConfigError&) {
   }
   return 0;
 }

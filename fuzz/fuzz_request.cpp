@@ -18,7 +18,7 @@
 
 #include "msg_convert.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/daemon/dds_bridge.h"
 #include "sl/daemon/devices.h"
 #include "sl/daemon/scan_engine.h"
@@ -26,6 +26,7 @@
 namespace {
 
 using namespace sl::daemon;
+using ::sl::dds::TopicNames;
 using namespace std::chrono_literals;
 
 struct Daemon {

@@ -3,9 +3,14 @@
 #include <cstdint>
 #include <set>
 
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::YamlMap;
+using ::sl::files::kMaxImagePixels;
+using ::sl::files::kMaxImageSide;
 
 namespace {
 

@@ -2,9 +2,12 @@
 #pragma once
 
 #include "sl/daemon/config.h"
-#include "yaml_reader.h"
+#include "sl/files/yaml_reader.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::YamlMap;
 
 // Reads `cameras:` (sensor hardware and fake_gige) and `fake_gige:` (sensor
 // fake_gige) into config.aravis. For fake_gige, config.sim must be parsed

@@ -11,6 +11,9 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::TriggerMode;
+
 namespace {
 
 using namespace std::chrono_literals;

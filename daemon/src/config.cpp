@@ -12,18 +12,29 @@
 
 #include <Eigen/Geometry>
 
-#include "calibration_yaml.h"
+#include "sl/files/calibration_yaml.h"
 #include "hardware_config_yaml.h"
-#include "pattern_config_yaml.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/pattern_config_yaml.h"
+#include "sl/files/calibration_io.h"
 #include "sl/pipeline/projector_response.h"
 #include "aravis_config_yaml.h"
 #include "sl/drivers/recording.h"
 #include "tf_tree.h"
-#include "yaml_reader.h"
-#include "sl/daemon/input_file.h"
+#include "sl/files/yaml_reader.h"
+#include "sl/files/input_file.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::ConfigError;
+using ::sl::files::InputKind;
+using ::sl::client::TriggerMode;
+using ::sl::files::YamlMap;
+using ::sl::files::loadCalibration;
+using ::sl::files::loadOpenCvCalibration;
+using ::sl::files::parseInputYaml;
+using ::sl::files::parseOpenCvCalibrationKeys;
+using ::sl::files::readInputFile;
 
 namespace {
 

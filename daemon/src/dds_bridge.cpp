@@ -10,20 +10,32 @@
 #include <string>
 #include <vector>
 
-#include "cloud_writer.h"
-#include "malformed_samples.h"
+#include "sl/dds/cloud_writer.h"
+#include "sl/dds/malformed_samples.h"
 #include "reader_acks.h"
 #include "request_dispatch.h"
 #include "request_origin.h"
 #include "service_bridge.h"
 #include "ros_graph.h"
 #include "ros_messages.h"
-#include "sl/daemon/cloud_layout.h"
-#include "sl/daemon/dds.h"
-#include "sl/daemon/dds_environment.h"
+#include "sl/dds/cloud_layout.h"
+#include "sl/dds/dds.h"
+#include "sl/dds/sensor_topics.h"
+#include "sl/dds/environment.h"
 #include "sl/daemon/log.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::CloudWriter;
+using ::sl::client::CommandResult;
+using ::sl::dds::MalformedSampleCounter;
+using ::sl::dds::PackedCloud;
+using ::sl::client::StartRequest;
+using ::sl::dds::TopicNames;
+using ::sl::dds::packCloud;
+using ::sl::dds::packsInPlace;
+using ::sl::dds::readDdsRequirements;
 
 namespace {
 
@@ -76,15 +88,6 @@ class EngineCommands : public CommandTarget {
 
 }  // namespace
 
-TopicNames TopicNames::forNamespace(const std::string& ns) {
-  return {"rt/" + ns + "/points", "rt/" + ns + "/projector_maps", "rt/" + ns + "/image_sets",
-          "rt/" + ns + "/status", "rq/" + ns + "/commandRequest", "rr/" + ns + "/commandReply",
-          "rt/" + ns + "/depth/image", "rt/" + ns + "/shading/image", "rt/" + ns + "/camera_info",
-          "rt/" + ns + "/depth/image_rect", "rt/" + ns + "/depth/camera_info",
-          "rt/" + ns + "/shading/camera_info", "rt/" + ns + "/shading/image/compressed",
-          "rt/" + ns + "/depth/image_rect/compressedDepth"};
-}
-
 bool FrameIds::isFirst(const std::string& camera_id) const { return camera_id == first_camera_id; }
 
 std::string FrameIds::of(const std::string& camera_id) const {
@@ -113,22 +116,12 @@ struct DdsBridge::Impl {
         frame_ids{camera_id, config.frame_id},
         camera(calibration.camera),
         cameras(cameraFrames(frame_ids, calibration, other_cameras)),
-        names(TopicNames::forNamespace(config.ns)),
-        participant(config.domain_id),
-        points_topic(participant, names.points, sensor_msgs_msg_dds__PointCloud2__desc),
-        maps_topic(participant, names.projector_maps, sl_msgs_msg_dds__ProjectorMaps__desc),
-        status_topic(participant, names.status, sl_msgs_msg_dds__Status__desc),
-        request_topic(participant, names.request, sl_msgs_msg_dds__CommandRequest__desc),
-        reply_topic(participant, names.reply, sl_msgs_msg_dds__CommandReply__desc),
-        depth_topic(participant, names.depth_image, sensor_msgs_msg_dds__Image__desc),
-        shading_topic(participant, names.shading_image, sensor_msgs_msg_dds__Image__desc),
-        info_topic(participant, names.camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
+        topics(config.domain_id, config.ns),
         depth_rect_topic(participant, names.depth_image_rect, sensor_msgs_msg_dds__Image__desc),
         depth_info_topic(participant, names.depth_camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
         shading_info_topic(participant, names.shading_camera_info, sensor_msgs_msg_dds__CameraInfo__desc),
         shading_png_topic(participant, names.shading_compressed, sensor_msgs_msg_dds__CompressedImage__desc),
         depth_png_topic(participant, names.depth_rect_compressed_depth, sensor_msgs_msg_dds__CompressedImage__desc),
-        sets_topic(participant, names.image_sets, sl_msgs_msg_dds__ImageSet__desc),
         // Clouds, maps, images: as configured (dds.qos; by default reliable
         // with a short keep-last history: a write waits at most
         // max_blocking_s for acknowledgements, then it is counted as timed out).
@@ -195,23 +188,24 @@ struct DdsBridge::Impl {
   const FrameIds frame_ids;
   const pipeline::PinholeModel camera;  // of the first camera, for camera_info
   const std::vector<CameraFrame> cameras;  // every camera, the first first (tf, diagnostics)
-  const TopicNames names;
+  dds::SensorTopics topics;
+  const TopicNames& names = topics.names;
   MalformedSampleCounter malformed{names.request, sl_msgs_msg_dds__CommandRequest__desc.m_typename};  // before the reader
-  dds::Participant participant;
-  dds::Topic<PointCloud2> points_topic;
-  dds::Topic<Maps> maps_topic;
-  dds::Topic<Status> status_topic;
-  dds::Topic<Request> request_topic;
-  dds::Topic<Reply> reply_topic;
-  dds::Topic<Image> depth_topic;
-  dds::Topic<Image> shading_topic;
-  dds::Topic<CameraInfo> info_topic;
+  dds::Participant& participant = topics.participant;
+  dds::Topic<PointCloud2>& points_topic = topics.points;
+  dds::Topic<Maps>& maps_topic = topics.projector_maps;
+  dds::Topic<Status>& status_topic = topics.status;
+  dds::Topic<Request>& request_topic = topics.request;
+  dds::Topic<Reply>& reply_topic = topics.reply;
+  dds::Topic<Image>& depth_topic = topics.depth_image;
+  dds::Topic<Image>& shading_topic = topics.shading_image;
+  dds::Topic<CameraInfo>& info_topic = topics.camera_info;
   dds::Topic<Image> depth_rect_topic;
   dds::Topic<CameraInfo> depth_info_topic;
   dds::Topic<CameraInfo> shading_info_topic;
   dds::Topic<CompressedImage> shading_png_topic;
   dds::Topic<CompressedImage> depth_png_topic;
-  dds::Topic<ImageSetMsg> sets_topic;
+  dds::Topic<ImageSetMsg>& sets_topic = topics.image_sets;
   CloudWriter points_writer;
   dds::Writer<Maps> maps_writer;
   dds::Writer<Status> status_writer;

@@ -9,7 +9,7 @@
 #include "aravis_devices.h"
 #endif
 #include "sl/daemon/log.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/camera_stamp_trigger.h"
 #include "sl/drivers/lightcrafter4500.h"
 #include "sl/drivers/recording.h"
@@ -18,6 +18,10 @@
 #include "sl/drivers/versavis.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::loadPattern;
+using ::sl::files::patternDifferences;
 
 namespace {
 

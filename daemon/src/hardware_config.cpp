@@ -6,6 +6,9 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::files::YamlMap;
+
 namespace {
 
 namespace dl = drivers::dlpc350;

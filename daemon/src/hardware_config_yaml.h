@@ -2,9 +2,12 @@
 #pragma once
 
 #include "sl/daemon/config.h"
-#include "yaml_reader.h"
+#include "sl/files/yaml_reader.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::YamlMap;
 
 // Parses `projector:` and `trigger:` into config.hardware and checks that
 // every pattern of config.patterns has a projector sequence of the same name

@@ -14,9 +14,12 @@
 #include <stdexcept>
 #include <thread>
 
-#include "sl/daemon/config_error.h"
+#include "sl/files/config_error.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::ConfigError;
 
 namespace {
 

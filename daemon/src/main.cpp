@@ -14,9 +14,9 @@
 #include <thread>
 
 #include "sl/daemon/config.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/daemon/dds_bridge.h"
-#include "sl/daemon/dds_environment.h"
+#include "sl/dds/environment.h"
 #include "sl/daemon/devices.h"
 #include "sl/daemon/log.h"
 #include "sl/daemon/scan_engine.h"
@@ -57,6 +57,11 @@ constexpr std::chrono::milliseconds kReloadDeadline{5000};
 void beginReload(const std::string& path, sl::daemon::ReloadWorker& reloads,
                  sl::daemon::ScanEngine& engine) {
   using namespace sl::daemon;
+  using ::sl::files::ConfigError;
+  using ::sl::dds::TopicNames;
+  using ::sl::dds::currentDdsHost;
+  using ::sl::dds::ddsEnvironmentProblems;
+  using ::sl::dds::readDdsRequirements;
   const std::string busy = reloads.begin(path);
   if (busy.empty()) {
     systemdNotify("RELOADING=1");
@@ -70,6 +75,11 @@ void beginReload(const std::string& path, sl::daemon::ReloadWorker& reloads,
 void finishReload(sl::daemon::ReloadWorker::Outcome outcome, const sl::daemon::DaemonConfig& running,
                   sl::daemon::ScanEngine& engine, sl::daemon::DdsBridge& bridge) {
   using namespace sl::daemon;
+  using ::sl::files::ConfigError;
+  using ::sl::dds::TopicNames;
+  using ::sl::dds::currentDdsHost;
+  using ::sl::dds::ddsEnvironmentProblems;
+  using ::sl::dds::readDdsRequirements;
   using Kind = ReloadWorker::Outcome::Kind;
   const std::string& path = outcome.path;
   if (outcome.kind == Kind::kTimedOut) {
@@ -114,6 +124,11 @@ void finishReload(sl::daemon::ReloadWorker::Outcome outcome, const sl::daemon::D
 // without RouDi): the daemon then still runs, slower, but never silently.
 void checkDdsEnvironment() {
   using namespace sl::daemon;
+  using ::sl::files::ConfigError;
+  using ::sl::dds::TopicNames;
+  using ::sl::dds::currentDdsHost;
+  using ::sl::dds::ddsEnvironmentProblems;
+  using ::sl::dds::readDdsRequirements;
   const char* uri = std::getenv("CYCLONEDDS_URI");
   if (uri == nullptr || *uri == '\0') return;
   try {
@@ -129,6 +144,11 @@ constexpr std::chrono::milliseconds kOtherDaemonWindow{1000};
 
 int run(const std::string& config_path, const sigset_t& signals) {
   using namespace sl::daemon;
+  using ::sl::files::ConfigError;
+  using ::sl::dds::TopicNames;
+  using ::sl::dds::currentDdsHost;
+  using ::sl::dds::ddsEnvironmentProblems;
+  using ::sl::dds::readDdsRequirements;
   const DaemonConfig config = loadConfig(config_path);
   checkDdsEnvironment();
   // One daemon per domain and namespace on this host: the lock arbitrates
@@ -252,7 +272,7 @@ int main(int argc, char** argv) {
       std::_Exit(rc);
     }
     return rc;
-  } catch (const sl::daemon::ConfigError& e) {
+  } catch (const sl::files::ConfigError& e) {
     sl::daemon::logError(std::string("config error: ") + e.what());
     endStartupWatch();
     return 2;

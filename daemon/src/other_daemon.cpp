@@ -3,10 +3,13 @@
 #include <cstring>
 #include <thread>
 
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/daemon/dds_bridge.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::TopicNames;
 
 // Through the built-in DCPSSubscription topic (every reader discovery has
 // seen, with its topic name): needs no permission under DDS Security, where

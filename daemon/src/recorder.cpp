@@ -6,10 +6,13 @@
 #include <system_error>
 
 #include "sl/daemon/log.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/recording.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::patternYaml;
 
 namespace fs = std::filesystem;
 

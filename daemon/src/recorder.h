@@ -42,7 +42,7 @@ class Recorder {
   // numbering of a recording already there). Throws std::runtime_error
   // naming the folder if it cannot be created, or when its file system has
   // less than the free-space floor left. Each set of a pattern of
-  // `patterns` gets its description (pattern.yml, daemon::patternYaml()).
+  // `patterns` gets its description (pattern.yml, files::patternYaml()).
   void start(const std::string& dir, const std::string& note,
              const std::vector<pipeline::PatternSpec>& patterns = {});
   // Stops accepting sets; queued sets are still written.

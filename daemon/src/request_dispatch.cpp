@@ -6,6 +6,11 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+
 using namespace msg;
 
 StartRequest toStartRequest(const Request& request, std::string& error) {

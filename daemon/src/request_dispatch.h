@@ -12,10 +12,14 @@
 
 #include "msg_convert.h"
 #include "request_guard.h"
-#include "sl/daemon/commands.h"
+#include "sl/client/commands.h"
 #include "sl/daemon/config.h"  // RequestLimits
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::client::StartRequest;
 
 // What requests act on: the ScanEngine in the daemon.
 class CommandTarget {

@@ -21,6 +21,9 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+
 struct RequestCounters {
   std::uint64_t received = 0;      // samples taken from the request reader
   std::uint64_t answered = 0;      // replies written

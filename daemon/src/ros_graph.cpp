@@ -8,6 +8,9 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::ScanState;
+
 namespace {
 
 char* chars(const std::string& s) { return const_cast<char*>(s.c_str()); }

@@ -11,7 +11,7 @@
 
 #include "reader_acks.h"    // MatchedReaderState
 #include "request_guard.h"  // RequestCounters
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/daemon/scan_engine.h"
 #include "tf_tree.h"
 

@@ -11,6 +11,13 @@
 
 namespace sl::daemon::msg {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::dds::PackedCloud;
+using ::sl::client::ScanState;
+using ::sl::client::TriggerMode;
+using ::sl::client::toReplyCode;
+
 namespace {
 
 // A sequence field borrowing `n` elements at `data`.

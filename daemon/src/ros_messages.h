@@ -24,12 +24,17 @@
 #include "msg_convert.h"
 #include "reader_acks.h"  // MatchedReaderState
 #include "request_guard.h"  // RequestCounters
-#include "sl/daemon/cloud_layout.h"
+#include "sl/dds/cloud_layout.h"
 #include "sl/daemon/scan_engine.h"  // EngineStatus
 #include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::daemon::msg {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::dds::PackedCloud;
+using ::sl::client::ScanState;
 
 // Base of the messages below: their samples point into them.
 class NonMovable {

@@ -4,9 +4,9 @@
 #include <cstdio>
 #include <vector>
 
-#include "malformed_samples.h"
+#include "sl/dds/malformed_samples.h"
 #include "request_origin.h"
-#include "ros2_service.h"
+#include "sl/dds/ros2_service.h"
 #include "sl/daemon/log.h"
 #include "sl_msgs/srv/GetConfig.h"
 #include "sl_msgs/srv/ListPatterns.h"
@@ -15,6 +15,9 @@
 #include "std_srvs/srv/Trigger.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::MalformedSampleCounter;
 
 namespace {
 

@@ -21,7 +21,7 @@
 #include <string>
 
 #include "request_dispatch.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 
 namespace sl::daemon {
 

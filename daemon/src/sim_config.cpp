@@ -6,11 +6,16 @@
 
 #include <Eigen/Geometry>
 
-#include "calibration_yaml.h"
+#include "sl/files/calibration_yaml.h"
 #include "sim_config_yaml.h"
-#include "sl/daemon/input_file.h"
+#include "sl/files/input_file.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::InputKind;
+using ::sl::files::YamlMap;
+using ::sl::files::checkInputFile;
 
 namespace {
 

@@ -4,9 +4,12 @@
 #include <filesystem>
 
 #include "sl/drivers/sim.h"
-#include "yaml_reader.h"
+#include "sl/files/yaml_reader.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::YamlMap;
 
 // Reads `sim:` into `sim` (files such as meshes and textures relative to
 // base_dir). Throws ConfigError naming file, line and key.

@@ -4,11 +4,17 @@
 #include <map>
 #include <utility>
 
-#include "sl/daemon/config_error.h"
-#include "sl/daemon/input_file.h"
-#include "yaml_reader.h"
+#include "sl/files/config_error.h"
+#include "sl/files/input_file.h"
+#include "sl/files/yaml_reader.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::files::ConfigError;
+using ::sl::files::InputKind;
+using ::sl::files::YamlMap;
+using ::sl::files::loadInputYaml;
 
 namespace {
 

@@ -13,9 +13,14 @@
 #include "sl/daemon/config.h"
 #include "sl/pipeline/camera_model.h"
 
+namespace sl::files {
+class YamlMap;
+}  // namespace sl::files
+
 namespace sl::daemon {
 
-class YamlMap;
+// Moved out of daemon/ (issue 34).
+using ::sl::files::YamlMap;
 
 // Reads `dds.tf` (keys publish, parent_frame, base_frame, projector_frame,
 // mount: {xyz: [m, m, m], rpy: [rad, rad, rad] | quaternion: [x, y, z, w]}).

@@ -22,8 +22,8 @@
 #include <string>
 #include <vector>
 
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/calibration_io.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/calibration.h"
@@ -130,7 +130,7 @@ TEST_CASE("real captures: SLStudio calibration poses reproduce calibration.xml",
   options.camera.tangential = false;
   const CalibrationResult r = sl::pipeline::calibrateCameraProjector(
       views, board, cv::Size(1688, 1352), cv::Size(1824, 1140), options);
-  const auto published = sl::daemon::loadCalibration((kSkull / "calibration.xml").string());
+  const auto published = sl::files::loadCalibration((kSkull / "calibration.xml").string());
   const auto& ref = published.calibration;
   const auto& c = r.calibration;
   const double seconds =
@@ -306,18 +306,18 @@ TEST_CASE("simulator round trip: calibration recovers the simulated rig", "[cali
 
 TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import round trip",
           "[calibration][io]") {
-  sl::daemon::CalibrationFile file;
+  sl::files::CalibrationFile file;
   auto& c = file.calibration;
   c.camera = {1440, 1080, 2401.5, 2399.25, 719.75, 540.125, {-0.08, 0.12, 0.0005, -0.0003, 0.01}};
   c.projector = {1824, 1140, 2200.5, 2201.0, 911.0, 1130.5, {0.02, -0.01, 0, 0, 0}};
   c.R = Eigen::AngleAxisd(0.27, Eigen::Vector3d(0.1, 1, 0.05).normalized()).toRotationMatrix();
   c.t = Eigen::Vector3d(-144.7, 1.5, 39.5);
-  file.errors = sl::daemon::CalibrationErrors{0.11, 0.22, 0.33};
+  file.errors = sl::files::CalibrationErrors{0.11, 0.22, 0.33};
   const fs::path dir = fs::path(SL_BINARY_DIR) / "test_calibration_io";
   fs::create_directories(dir);
 
   // Relative tolerance for intrinsics, absolute for distortion, R and t (mm).
-  auto same = [](const sl::daemon::CalibrationFile& a, const sl::daemon::CalibrationFile& b,
+  auto same = [](const sl::files::CalibrationFile& a, const sl::files::CalibrationFile& b,
                  double tolerance) {
     const auto& x = a.calibration;
     const auto& y = b.calibration;
@@ -340,8 +340,8 @@ TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import rou
   SECTION("export as .xml and .yaml reads back through loadCalibration") {
     for (const char* name : {"exported.xml", "exported.yaml"}) {
       const std::string path = (dir / name).string();
-      sl::daemon::exportOpenCvCalibration(file, path);
-      const auto back = sl::daemon::loadCalibration(path);
+      sl::files::exportOpenCvCalibration(file, path);
+      const auto back = sl::files::loadCalibration(path);
       same(file, back, 1e-12);
       REQUIRE(back.errors);
       CHECK(back.errors->stereo_rms_px == Approx(0.33));
@@ -376,15 +376,15 @@ TEST_CASE("calibration files: OpenCV FileStorage export and sl_sensor import rou
           << cv::Mat(d(c.projector)) << "calibration_error" << 0.22 << "resolution_x"
           << c.projector.width << "resolution_y" << c.projector.height;
     }
-    const auto imported = sl::daemon::loadSlSensorCalibration(camera, projector);
+    const auto imported = sl::files::loadSlSensorCalibration(camera, projector);
     same(file, imported, 1e-6);
     REQUIRE(imported.errors);
     CHECK(imported.errors->projector_rms_px == Approx(0.22));
     // One file alone is refused with a pointer to the pair import.
     CHECK_THROWS_WITH(
-        sl::daemon::loadCalibration(camera),
+        sl::files::loadCalibration(camera),
         Catch::Contains("sl_sensor camera file") && Catch::Contains("--import-sl-sensor"));
-    CHECK_THROWS_WITH(sl::daemon::loadSlSensorCalibration(projector, camera),
+    CHECK_THROWS_WITH(sl::files::loadSlSensorCalibration(projector, camera),
                       Catch::Contains("swapped"));
   }
 }
@@ -421,7 +421,7 @@ SkullComparison compareSkull(const sl::pipeline::CameraProjectorCalibration& cal
   }();
   REQUIRE(!reference.empty());
   const auto pattern =
-      sl::daemon::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/slstudio_2x3.yaml");
+      sl::files::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/slstudio_2x3.yaml");
   const auto frames = sl::tools::loadFrames(sl::tools::listImages((kSkull / "skull_2x3").string()));
   sl::pipeline::DecoderOptions decoder;
   decoder.min_modulation = 55.0f / 3.0f;  // the data README's mask

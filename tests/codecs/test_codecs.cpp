@@ -15,7 +15,7 @@
 #include <catch2/catch.hpp>
 
 #include "sl/daemon/config.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/codec.h"
@@ -278,7 +278,7 @@ TEST_CASE("decodeRows over row blocks equals decode", "[codecs]") {
 TEST_CASE("every preset in config/patterns loads and validates", "[codecs][yaml]") {
   int count = 0;
   for (const auto& entry : std::filesystem::directory_iterator(std::string(SL_SOURCE_DIR) + "/config/patterns")) {
-    const PatternSpec p = daemon::loadPattern(entry.path().string());
+    const PatternSpec p = files::loadPattern(entry.path().string());
     CAPTURE(entry.path().string());
     CHECK_NOTHROW(pipeline::makeCodec(p, {}));
     CHECK(p.projector_width == 1824);
@@ -286,10 +286,10 @@ TEST_CASE("every preset in config/patterns loads and validates", "[codecs][yaml]
   }
   CHECK(count >= 10);
   const PatternSpec gray_preset =
-      daemon::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/slstudio_gray.yaml");
+      files::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/slstudio_gray.yaml");
   CHECK(gray_preset.frameCount() == 12);
   const PatternSpec twoone =
-      daemon::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/sl_sensor_scan_2+1.yaml");
+      files::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/sl_sensor_scan_2+1.yaml");
   CHECK(twoone.frameCount() == 5);
 }
 
@@ -316,8 +316,8 @@ TEST_CASE("pattern file errors name the file, line and key", "[codecs][yaml]") {
       Case{"family: two_plus_one\ndirection: both\nfrequencies: [12, 1]\namplitude: 0.7\n", "key 'amplitude'"});
   std::string message;
   try {
-    daemon::parsePatternText(c.text, "p.yaml");
-  } catch (const daemon::ConfigError& e) {
+    files::parsePatternText(c.text, "p.yaml");
+  } catch (const files::ConfigError& e) {
     message = e.what();
   }
   CAPTURE(c.text, message);

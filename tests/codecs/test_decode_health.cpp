@@ -10,7 +10,7 @@
 
 #include <catch2/catch.hpp>
 
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/codec.h"
@@ -273,7 +273,7 @@ TEST_CASE("Gray + phase shift at a 60 px pitch: decoded right, and implausible d
 }
 
 TEST_CASE("a Gray stripe pitch in projector px from a pattern file", "[codecs][gray][yaml]") {
-  const PatternSpec p = daemon::parsePatternText(
+  const PatternSpec p = files::parsePatternText(
       "family: gray_phase_shift\ndirection: horizontal\npitch_px: 60\ncomplementary: true\n",
       "p.yaml");
   CHECK(p.gray_pitch_px == 60.0);

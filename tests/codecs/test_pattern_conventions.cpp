@@ -9,7 +9,7 @@
 #include <catch2/catch.hpp>
 
 #include "sl/daemon/config.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/pipeline/codec.h"
 
 using namespace sl;
@@ -20,8 +20,8 @@ namespace {
 
 std::string loadError(const std::string& text) {
   try {
-    daemon::parsePatternText(text, "p.yaml");
-  } catch (const daemon::ConfigError& e) {
+    files::parsePatternText(text, "p.yaml");
+  } catch (const files::ConfigError& e) {
     return e.what();
   }
   return "";
@@ -30,21 +30,21 @@ std::string loadError(const std::string& text) {
 }  // namespace
 
 TEST_CASE("a fringe pitch in projector px is any positive number", "[codecs][yaml][conventions]") {
-  const PatternSpec p = daemon::parsePatternText(
+  const PatternSpec p = files::parsePatternText(
       "family: phase_shift\ndirection: horizontal\nsteps: 3\npitches_px: [60, 1824]\n", "p.yaml");
   REQUIRE(p.frequencies.size() == 2);
   CHECK(p.frequencies[0] == Approx(1824.0 / 60));
   CHECK(p.frequencies[1] == Approx(1.0));
   CHECK(p.finestPeriod(1824) == Approx(60.0));
   // Rows: the pitch is along the projector's 1140 rows.
-  const PatternSpec v = daemon::parsePatternText(
+  const PatternSpec v = files::parsePatternText(
       "family: phase_shift\ndirection: vertical\nsteps: 4\npitches_px: [57, 1140]\n", "p.yaml");
   CHECK(v.frequencies[0] == Approx(20.0));
   // The paper's 3+3 with a pitch, or a non-integer number of periods.
-  const PatternSpec p33 = daemon::parsePatternText(
+  const PatternSpec p33 = files::parsePatternText(
       "family: phase_shift_3+3\ndirection: horizontal\npitch_px: 60\n", "p.yaml");
   CHECK(p33.frequencies[0] == Approx(30.4));
-  const PatternSpec f33 = daemon::parsePatternText(
+  const PatternSpec f33 = files::parsePatternText(
       "family: phase_shift_3+3\ndirection: horizontal\nfringes: 30.4\n", "p.yaml");
   CHECK(f33.frequencies[0] == Approx(30.4));
   CHECK_NOTHROW(pipeline::makeCodec(p, {}));
@@ -73,7 +73,7 @@ TEST_CASE("frequencies that cannot unwrap are refused at load time with the numb
   CHECK(f.find("key 'fringes'") != std::string::npos);
   CHECK(f.find("cannot be unwrapped") != std::string::npos);
   // With an intermediate frequency the same fine fringes are fine.
-  CHECK_NOTHROW(daemon::parsePatternText(
+  CHECK_NOTHROW(files::parsePatternText(
       "family: phase_shift\ndirection: horizontal\nsteps: 3\npitches_px: [6, 114, 1824]\n",
       "p.yaml"));
   // The limit is the formula's: PatternSpec itself refuses too.
@@ -87,7 +87,7 @@ TEST_CASE("frequencies that cannot unwrap are refused at load time with the numb
 TEST_CASE("frames that are not part of the code are skipped", "[codecs][yaml][conventions]") {
   // SLStudio-style Gray code + phase shift with a white and a black frame
   // after the Gray bits, thresholded against the fringe mean.
-  const PatternSpec p = daemon::parsePatternText(
+  const PatternSpec p = files::parsePatternText(
       "family: gray_phase_shift\ndirection: horizontal\nbits: 5\nsteps: 3\n"
       "reference_frames: false\ninverse: false\ncomplementary: true\nskip_frames: [6, 7]\n",
       "p.yaml");
@@ -102,7 +102,7 @@ TEST_CASE("frames that are not part of the code are skipped", "[codecs][yaml][co
   CHECK(codec->frameCount() == 11);
   CHECK(codec->generate().size() == 11);
   // The same with frame_order, which need not be a permutation now.
-  const PatternSpec q = daemon::parsePatternText(
+  const PatternSpec q = files::parsePatternText(
       "family: phase_shift\ndirection: horizontal\nfrequencies: [16, 1]\n"
       "frame_order: [-1, 3, 4, 5, -1, 0, 1, 2]\n",
       "p.yaml");
@@ -121,7 +121,7 @@ TEST_CASE("frames that are not part of the code are skipped", "[codecs][yaml][co
 TEST_CASE("Gray + phase shift without references or inverses loads; errors blame the right key",
           "[codecs][yaml][conventions]") {
   // Once refused with a message about `bits`.
-  const PatternSpec p = daemon::parsePatternText(
+  const PatternSpec p = files::parsePatternText(
       "family: gray_phase_shift\ndirection: horizontal\nbits: 6\nsteps: 4\ncomplementary: true\n"
       "reference_frames: false\ninverse: false\n",
       "p.yaml");
@@ -138,7 +138,7 @@ TEST_CASE("Gray + phase shift without references or inverses loads; errors blame
 }
 
 TEST_CASE("micro and modulated phase shifting in pattern files", "[codecs][yaml][conventions]") {
-  const PatternSpec micro = daemon::parsePatternText(
+  const PatternSpec micro = files::parsePatternText(
       "family: micro_phase_shift\ndirection: horizontal\npitches_px: [16, 16.5, 17, 17.5, 18, 18.5]\n",
       "p.yaml");
   CHECK(micro.family == PatternFamily::kMicroPhaseShift);
@@ -156,7 +156,7 @@ TEST_CASE("micro and modulated phase shifting in pattern files", "[codecs][yaml]
   CHECK(e.find("do not tell the periods") != std::string::npos);
   CHECK(loadError("family: micro_phase_shift\ndirection: horizontal\nfrequencies: [100]\n")
             .find("2..17 frequencies") != std::string::npos);
-  const PatternSpec modulated = daemon::parsePatternText(
+  const PatternSpec modulated = files::parsePatternText(
       "family: modulated_phase_shift\ndirection: vertical\nsteps: 4\nfrequencies: [16, 1]\n"
       "carrier_pitch_px: 10\n",
       "p.yaml");

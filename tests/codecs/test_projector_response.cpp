@@ -17,7 +17,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/projector_response.h"
 
@@ -245,7 +245,7 @@ TEST_CASE("sl_patterns --ramp and sl_calibrate --projector-response", "[codecs][
                               " --out " + response_file.string());
   REQUIRE(rc == 0);
   CHECK_THAT(text, Catch::Contains("from 9 levels"));
-  const std::vector<float> response = daemon::loadProjectorResponse(response_file.string());
+  const std::vector<float> response = files::loadProjectorResponse(response_file.string());
   REQUIRE(response.size() >= 9);
   for (double L : {0.25, 0.5, 0.75}) {
     CAPTURE(L);

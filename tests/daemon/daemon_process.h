@@ -18,7 +18,7 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include "sl/daemon/client.h"
+#include "sl/client/client.h"
 #include "sl/daemon/config.h"
 #include "support/time_scale.h"
 
@@ -151,9 +151,9 @@ class DaemonProcess : public ChildProcess {
 // The first status satisfying `done`, polling for at most `timeout` (the
 // last one read if none did).
 template <typename Done>
-std::optional<sl::daemon::StatusInfo> statusWhen(sl::daemon::SensorClient& client, Done done,
+std::optional<sl::client::StatusInfo> statusWhen(sl::client::SensorClient& client, Done done,
                                                  std::chrono::milliseconds timeout) {
-  std::optional<sl::daemon::StatusInfo> s;
+  std::optional<sl::client::StatusInfo> s;
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (std::chrono::steady_clock::now() < deadline) {
     s = client.status(std::chrono::seconds(1));

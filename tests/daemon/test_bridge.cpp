@@ -13,9 +13,9 @@
 #include <vector>
 
 #include "daemon_process.h"
-#include "sl/daemon/client.h"
+#include "sl/client/client.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/daemon/dds_bridge.h"
 #include "sl/daemon/devices.h"
 #include "sl/daemon/scan_engine.h"
@@ -55,11 +55,11 @@ struct InProcessDaemon {
   }
 };
 
-std::unique_ptr<sl::daemon::SensorClient> connectTo(const std::string& ns) {
-  sl::daemon::ClientOptions options;
+std::unique_ptr<sl::client::SensorClient> connectTo(const std::string& ns) {
+  sl::client::ClientOptions options;
   options.ns = ns;
   options.subscribe_points = false;
-  auto client = std::make_unique<sl::daemon::SensorClient>(options);
+  auto client = std::make_unique<sl::client::SensorClient>(options);
   REQUIRE(client->waitForDaemon(sl::test::scaledBound(20s)));
   return client;
 }
@@ -101,8 +101,8 @@ TEST_CASE("several bridges in one process each count their own malformed request
   CHECK(sa->requests_malformed == 4);
   CHECK(sb->requests_malformed == 5);
   // Both still answer.
-  CHECK(client_a->request(sl::daemon::Command::kListPatterns, "", 0, sl::test::scaledBound(5s)));
-  CHECK(client_b->request(sl::daemon::Command::kListPatterns, "", 0, sl::test::scaledBound(5s)));
+  CHECK(client_a->request(sl::client::Command::kListPatterns, "", 0, sl::test::scaledBound(5s)));
+  CHECK(client_b->request(sl::client::Command::kListPatterns, "", 0, sl::test::scaledBound(5s)));
 }
 
 // The request reader keeps at most 256 unread requests; what it refuses
@@ -183,7 +183,7 @@ TEST_CASE("a flooding client neither starves another client nor loses requests u
   // slctl's default timeout (5 s, retries included in request()).
   int honest_sent = 0, honest_answered = 0;
   for (; honest_sent < kHonest; ++honest_sent) {
-    const auto reply = honest->request(sl::daemon::Command::kStop, "", 0, sl::test::scaledBound(5s));
+    const auto reply = honest->request(sl::client::Command::kStop, "", 0, sl::test::scaledBound(5s));
     if (reply) ++honest_answered;  // NOT_RUNNING: nothing was scanning, but answered
     std::this_thread::sleep_for(50ms);
   }

@@ -1,4 +1,4 @@
-// CloudWriter (daemon/src/cloud_writer.h): clouds handed to Cyclone in their
+// CloudWriter (dds/include/sl/dds/cloud_writer.h): clouds handed to Cyclone in their
 // own memory must be the samples dds_write would have sent, byte for byte,
 // and must keep that memory alive exactly as long as Cyclone holds them.
 // Linked into test_e2e; the daemon's whole path (another process, the
@@ -17,16 +17,16 @@
 
 #include <dds/ddsi/ddsi_serdata.h>
 
-#include "cloud_writer.h"
+#include "sl/dds/cloud_writer.h"
 #include "daemon_process.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/daemon/dds_bridge.h"
 #include "sl/daemon/scan_engine.h"
 
 namespace {
 
-using sl::daemon::CloudWriter;
+using sl::dds::CloudWriter;
 using Cloud = CloudWriter::PointCloud2;
 namespace dds = sl::dds;
 
@@ -206,7 +206,7 @@ TEST_CASE("decimated clouds borrowed by a reader's history each arrive as packed
   sl::daemon::DdsBridge bridge(config, "cam", calibration);
   CHECK_FALSE(bridge.resultContents().keeps_clouds);  // packed: the bridge's buffers are held
   dds::Participant participant;
-  const std::string topic_name = sl::daemon::TopicNames::forNamespace(config.ns).points;
+  const std::string topic_name = sl::dds::TopicNames::forNamespace(config.ns).points;
   dds::Topic<Cloud> topic(participant, topic_name, sensor_msgs_msg_dds__PointCloud2__desc);
   dds::Reader<Cloud> reader(participant, topic, dds::Qos().reliable().keepLast(16));
   REQUIRE(reader.waitForWriters(1, DDS_SECS(10) * sl::test::kTimeScale));

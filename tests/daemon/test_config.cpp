@@ -10,10 +10,10 @@
 #include <regex>
 #include <sstream>
 
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/cloud_layout.h"
-#include "sl/daemon/dds_environment.h"
+#include "sl/dds/cloud_layout.h"
+#include "sl/dds/environment.h"
 #include "sl/daemon/log.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/projector_response.h"
@@ -53,7 +53,7 @@ TEST_CASE("the shipped sim config loads with the documented values") {
   CHECK(config.findPattern(config.runtime.default_pattern) != nullptr);
   CHECK(config.dds.ns == "sl");
   CHECK(config.synchroniser.image_interval_ns == 33'333'333);
-  CHECK(config.runtime.trigger == sl::daemon::TriggerMode::kHardware);
+  CHECK(config.runtime.trigger == sl::client::TriggerMode::kHardware);
   CHECK(config.software_trigger.settle_s == 0.01);
   // The decoder section is DecoderOptions' defaults (sl_eval decodes with those).
   const sl::pipeline::DecoderOptions decoder_defaults;
@@ -239,24 +239,24 @@ TEST_CASE("dds.points_decimation and dds.points_valid_only shape the published c
       cloud.points.push_back({float(u), float(v), 1000.0f + 10 * v + u, float(u + v)});
   cloud.points[1].z = cloud.points[3 + 2 * 5].z = nan;
   std::vector<float> buffer;
-  auto point = [](const sl::daemon::PackedCloud& p, std::size_t i) {
+  auto point = [](const sl::dds::PackedCloud& p, std::size_t i) {
     const float* f = reinterpret_cast<const float*>(p.data) + 4 * i;
     return std::vector<float>{f[0], f[1], f[2], f[3]};
   };
   SECTION("metres, whole: the cloud's own memory") {
-    const auto p = sl::daemon::packCloud(cloud, 1.0, {}, buffer);
+    const auto p = sl::dds::packCloud(cloud, 1.0, {}, buffer);
     CHECK(p.data == reinterpret_cast<const std::uint8_t*>(cloud.points.data()));
     CHECK(p.bytes == 20 * 16);
     CHECK((p.width == 5 && p.height == 4 && !p.dense));
   }
   SECTION("millimetres, every second pixel: 3 x 2, converted") {
-    const auto p = sl::daemon::packCloud(cloud, 1e-3, {2, false}, buffer);
+    const auto p = sl::dds::packCloud(cloud, 1e-3, {2, false}, buffer);
     REQUIRE((p.width == 3 && p.height == 2 && p.bytes == 6 * 16 && !p.dense));
     CHECK(point(p, 1) == std::vector<float>{2e-3f, 0.0f, 1002.0f * 1e-3f, 2.0f});  // (2, 0)
     CHECK(point(p, 5) == std::vector<float>{4e-3f, 2e-3f, 1024.0f * 1e-3f, 6.0f});  // (4, 2)
   }
   SECTION("valid only: 18 points in row order, height 1, dense") {
-    const auto p = sl::daemon::packCloud(cloud, 1e-3, {1, true}, buffer);
+    const auto p = sl::dds::packCloud(cloud, 1e-3, {1, true}, buffer);
     REQUIRE((p.width == 18 && p.height == 1 && p.bytes == 18 * 16 && p.dense));
     CHECK(point(p, 0)[2] == 1000.0f * 1e-3f);
     CHECK(point(p, 1)[2] == 1002.0f * 1e-3f);  // (1, 0) skipped
@@ -265,34 +265,34 @@ TEST_CASE("dds.points_decimation and dds.points_valid_only shape the published c
 }
 
 TEST_CASE("the DDS environment check names what the kernel or RouDi cannot give") {
-  using sl::daemon::DdsHost;
+  using sl::dds::DdsHost;
   // The shipped LAN config asks for 32 MiB / 8 MiB buffers.
-  const auto lan = sl::daemon::readDdsRequirements("file://" + std::string(SL_SOURCE_DIR) +
+  const auto lan = sl::dds::readDdsRequirements("file://" + std::string(SL_SOURCE_DIR) +
                                                    "/config/cyclonedds-lan.xml");
   REQUIRE(lan.receive_buffer_bytes);
   CHECK(*lan.receive_buffer_bytes == 32 << 20);
   CHECK(lan.send_buffer_bytes == std::optional<std::int64_t>(8 << 20));
   CHECK_FALSE(lan.shared_memory);
-  const auto small = sl::daemon::ddsEnvironmentProblems(lan, DdsHost{4 << 20, 4 << 20, false});
+  const auto small = sl::dds::ddsEnvironmentProblems(lan, DdsHost{4 << 20, 4 << 20, false});
   REQUIRE(small.size() == 2);
   CHECK(small[0].find("32 MiB socket receive buffer but net.core.rmem_max is 4 MiB") !=
         std::string::npos);
   CHECK(small[0].find("99-sl-sensor-sysctl.conf") != std::string::npos);
   CHECK(small[1].find("net.core.wmem_max") != std::string::npos);
-  CHECK(sl::daemon::ddsEnvironmentProblems(lan, DdsHost{64 << 20, 16 << 20, false}).empty());
+  CHECK(sl::dds::ddsEnvironmentProblems(lan, DdsHost{64 << 20, 16 << 20, false}).empty());
   // Inline XML, units, comments ignored; shared memory without RouDi.
-  const auto inline_xml = sl::daemon::readDdsRequirements(
+  const auto inline_xml = sl::dds::readDdsRequirements(
       "<CycloneDDS><Domain><!-- <SocketReceiveBufferSize max=\"1GiB\"/> -->"
       "<Internal><SocketReceiveBufferSize min=\"default\" max=\"6000 KB\"/></Internal>"
       "<SharedMemory><Enable>true</Enable></SharedMemory></Domain></CycloneDDS>");
   CHECK(inline_xml.receive_buffer_bytes == std::optional<std::int64_t>(6'000'000));
   CHECK(inline_xml.shared_memory);
   const auto no_roudi =
-      sl::daemon::ddsEnvironmentProblems(inline_xml, DdsHost{4 << 20, 4 << 20, false});
+      sl::dds::ddsEnvironmentProblems(inline_xml, DdsHost{4 << 20, 4 << 20, false});
   REQUIRE(no_roudi.size() == 2);
   CHECK(no_roudi[1].find("no iceoryx RouDi is running") != std::string::npos);
-  CHECK(sl::daemon::ddsEnvironmentProblems(inline_xml, DdsHost{8 << 20, 4 << 20, true}).empty());
-  CHECK_THROWS_WITH(sl::daemon::readDdsRequirements("file:///nonexistent/cyclone.xml"),
+  CHECK(sl::dds::ddsEnvironmentProblems(inline_xml, DdsHost{8 << 20, 4 << 20, true}).empty());
+  CHECK_THROWS_WITH(sl::dds::readDdsRequirements("file:///nonexistent/cyclone.xml"),
                     Catch::Contains("cannot read '/nonexistent/cyclone.xml'"));
 }
 
@@ -320,7 +320,7 @@ TEST_CASE("a missing file and malformed YAML are one clear error") {
   try {
     sl::daemon::loadConfig("/nonexistent/sl.yaml");
     FAIL("no error");
-  } catch (const sl::daemon::ConfigError& e) {
+  } catch (const sl::files::ConfigError& e) {
     CHECK(std::string(e.what()) == "/nonexistent/sl.yaml: cannot open: No such file or directory (config file)");
   }
   const std::string message = errorOf("sensor: sim\nsim: {seed: [1,\n");
@@ -332,7 +332,7 @@ TEST_CASE("a missing file and malformed YAML are one clear error") {
 
 TEST_CASE("SLStudio's calibration.xml imports and round-trips through the project's format") {
   const std::string xml = std::string(SL_SHARED_DATA_DIR) + "/slstudio-skull/calibration.xml";
-  const sl::daemon::CalibrationFile slstudio = sl::daemon::loadCalibration(xml);
+  const sl::files::CalibrationFile slstudio = sl::files::loadCalibration(xml);
   const auto& c = slstudio.calibration;
   CHECK(c.camera.width == 1688);
   CHECK(c.camera.height == 1352);
@@ -348,8 +348,8 @@ TEST_CASE("SLStudio's calibration.xml imports and round-trips through the projec
   CHECK(slstudio.errors->stereo_rms_px == Approx(0.4219975));
 
   const std::string yaml = "/tmp/sl_test_calibration_" + std::to_string(::getpid()) + ".yaml";
-  sl::daemon::saveCalibration(slstudio, yaml);
-  const sl::daemon::CalibrationFile again = sl::daemon::loadCalibration(yaml);
+  sl::files::saveCalibration(slstudio, yaml);
+  const sl::files::CalibrationFile again = sl::files::loadCalibration(yaml);
   std::remove(yaml.c_str());
   CHECK(again.calibration.camera.fx == c.camera.fx);
   CHECK(again.calibration.projector.distortion == c.projector.distortion);
@@ -361,11 +361,11 @@ TEST_CASE("SLStudio's calibration.xml imports and round-trips through the projec
 }
 
 TEST_CASE("calibration files that cannot be used are one clear error") {
-  CHECK_THROWS_WITH(sl::daemon::loadCalibration("/nonexistent/c.yaml"),
+  CHECK_THROWS_WITH(sl::files::loadCalibration("/nonexistent/c.yaml"),
                     "/nonexistent/c.yaml: calibration file not found");
   const std::string bad = "/tmp/sl_test_bad_calibration_" + std::to_string(::getpid()) + ".yaml";
   std::ofstream(bad) << "format: sl-sensor-calibration/1\ncamera: {width: 10}\n";
-  CHECK_THROWS_WITH(sl::daemon::loadCalibration(bad),
+  CHECK_THROWS_WITH(sl::files::loadCalibration(bad),
                     Catch::Contains("key 'camera.height' is required"));
   std::remove(bad.c_str());
 }
@@ -375,10 +375,10 @@ TEST_CASE("calibration files that cannot be used are one clear error") {
 TEST_CASE("malformed XML calibration files are refused before OpenCV parses them") {
   const std::string path = "/tmp/sl_test_bad_calibration_" + std::to_string(::getpid()) + ".xml";
   std::ofstream(path) << "<?xml versiveorsn=";  // the fuzzer's 18 bytes
-  CHECK_THROWS_WITH(sl::daemon::loadCalibration(path),
+  CHECK_THROWS_WITH(sl::files::loadCalibration(path),
                     Catch::StartsWith(path + ":1: malformed XML: "));
   std::ofstream(path) << "<?xml version=\"1.0\"?>\n<opencv_storage>\n<K type_id=\"opencv-matrix\">\n";
-  CHECK_THROWS_WITH(sl::daemon::loadCalibration(path), Catch::Contains(": malformed XML: "));
+  CHECK_THROWS_WITH(sl::files::loadCalibration(path), Catch::Contains(": malformed XML: "));
   std::remove(path.c_str());
 }
 
@@ -436,7 +436,7 @@ TEST_CASE("a relative recording_root goes under the user's data folder, not besi
 // FIFO, grew without bound on /dev/zero, hung on the alias bomb).
 TEST_CASE("config files that are not regular, bounded, single YAML documents are refused",
           "[files]") {
-  using sl::daemon::ConfigError;
+  using sl::files::ConfigError;
   using sl::daemon::loadConfig;
   const std::string dir = "/tmp/sl_test_files_" + std::to_string(::getpid());
   std::filesystem::create_directories(dir);

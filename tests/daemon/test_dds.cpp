@@ -27,7 +27,7 @@
 #include <vector>
 
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl_msgs/msg/CommandReply.h"
 #include "sl_msgs/msg/CommandRequest.h"
 

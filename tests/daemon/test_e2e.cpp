@@ -46,9 +46,9 @@
 #include "sensor_msgs/msg/CameraInfo.h"
 #include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/client.h"
-#include "sl/daemon/dds.h"
+#include "sl/files/calibration_io.h"
+#include "sl/client/client.h"
+#include "sl/dds/dds.h"
 #include "sl_msgs/msg/CommandReply.h"
 #include "sl_msgs/msg/CommandRequest.h"
 #include "sl_msgs/msg/ImageSet.h"
@@ -62,7 +62,7 @@
 #include "sl/drivers/sim.h"
 
 using namespace std::chrono_literals;
-using sl::daemon::Command;
+using sl::client::Command;
 // Waits and upper bounds on time: x10 in sanitizer builds.
 using sl::test::kTimeScale;
 using sl::test::scaledBound;
@@ -152,18 +152,18 @@ PlaneStats comparePlane(const sl::pipeline::PointCloud& cloud, const sl::daemon:
 }
 
 // A client of the daemon on namespace `ns`, once the daemon answers (bounded).
-std::unique_ptr<sl::daemon::SensorClient> connect(const std::string& ns, bool points = true) {
-  sl::daemon::ClientOptions options;
+std::unique_ptr<sl::client::SensorClient> connect(const std::string& ns, bool points = true) {
+  sl::client::ClientOptions options;
   options.ns = ns;
   options.subscribe_points = points;
-  auto client = std::make_unique<sl::daemon::SensorClient>(options);
+  auto client = std::make_unique<sl::client::SensorClient>(options);
   REQUIRE(client->waitForDaemon(scaledBound(20s)));
   return client;
 }
 
 // Requests `count` scans of `pattern`; returns the time before the request:
 // clouds stamped after it belong to this request.
-std::int64_t startScans(sl::daemon::SensorClient& client, const std::string& pattern, int count) {
+std::int64_t startScans(sl::client::SensorClient& client, const std::string& pattern, int count) {
   const std::int64_t t0 = sl::test::nowNs();
   const auto reply = client.request(Command::kStart, pattern, count, scaledBound(5s));
   REQUIRE(reply);
@@ -183,7 +183,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
   REQUIRE(daemon.started());
 
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
 
   SECTION("three scans match the ground truth") {
     const auto t0 = startScans(client, "3+3_horizontal", 3);
@@ -222,7 +222,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
     auto reply = client.request(Command::kStart, "no_such_pattern", 1, scaledBound(5s));
     REQUIRE(reply);
     CHECK_FALSE(reply->accepted);
-    CHECK(reply->code == sl::daemon::CommandResult::Code::kUnknownPattern);
+    CHECK(reply->code == sl::client::CommandResult::Code::kUnknownPattern);
     CHECK(reply->reason.find("no_such_pattern") != std::string::npos);
     CHECK(reply->patterns.size() == config.patterns.size());
 
@@ -237,18 +237,18 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
 
     reply = client.request(Command::kStart, "", -2, scaledBound(5s));
     REQUIRE(reply);
-    CHECK(reply->code == sl::daemon::CommandResult::Code::kInvalidCount);
+    CHECK(reply->code == sl::client::CommandResult::Code::kInvalidCount);
 
     reply = client.request(Command::kStop, "", 0, scaledBound(5s));
     REQUIRE(reply);
-    CHECK(reply->code == sl::daemon::CommandResult::Code::kNotRunning);
+    CHECK(reply->code == sl::client::CommandResult::Code::kNotRunning);
 
     reply = client.request(Command::kStart, "3+3_both", 0, scaledBound(5s));  // continuous
     REQUIRE(reply);
     CHECK(reply->accepted);
     reply = client.request(Command::kStart, "3+3_horizontal", 1, scaledBound(5s));
     REQUIRE(reply);
-    CHECK(reply->code == sl::daemon::CommandResult::Code::kBusy);
+    CHECK(reply->code == sl::client::CommandResult::Code::kBusy);
     const auto t0 = sl::test::nowNs();
     CHECK(client.receiveCloud(t0, scaledBound(10s)));  // the continuous scan delivers
     reply = client.request(Command::kStop, "", 0, scaledBound(5s));
@@ -268,7 +268,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
                                                       sl::dds::Qos().reliable().keepLast(256));
     REQUIRE(replies.waitForWriters(1, DDS_SECS(10) * kTimeScale));
     constexpr int kClients = 3, kRequests = 5;
-    std::vector<std::unique_ptr<sl::daemon::SensorClient>> clients;
+    std::vector<std::unique_ptr<sl::client::SensorClient>> clients;
     for (int c = 0; c < kClients; ++c) clients.push_back(connect(ns, /*points=*/false));
     // Each client asks for a pattern only it names; every request id is
     // used by every client (ids count from 1 per client).
@@ -279,7 +279,7 @@ TEST_CASE("sl_sensord scans the simulated scene over DDS within the noise-model 
         for (int r = 0; r < kRequests; ++r) {
           const std::string name = "client" + std::to_string(c) + "_request" + std::to_string(r);
           const auto reply = clients[c]->request(Command::kStart, name, 1, scaledBound(5s));
-          if (reply && reply->code == sl::daemon::CommandResult::Code::kUnknownPattern &&
+          if (reply && reply->code == sl::client::CommandResult::Code::kUnknownPattern &&
               reply->reason.find("'" + name + "'") != std::string::npos)
             ++own_replies;
         }
@@ -397,10 +397,10 @@ TEST_CASE("sl_sensord sends READY=1 to systemd once it is up") {
   CHECK(watch_elapsed < scaledBound(1500ms));  // 5 pings at 0.1 s intervals
   // The daemon answers requests once it said it is ready.
   const auto client_owner = connect(ns, /*points=*/false);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
   const auto status = client.status(scaledBound(5s));
   REQUIRE(status);
-  CHECK(status->state == sl::daemon::ScanState::kIdle);
+  CHECK(status->state == sl::client::ScanState::kIdle);
   const auto exit_status = daemon.terminate(5s);
   REQUIRE(exit_status);
   CHECK(*exit_status == 0);
@@ -434,7 +434,7 @@ TEST_CASE("switching patterns during a continuous scan never mixes patterns") {
   sl::dds::Reader<sl_msgs_msg_dds__ProjectorMaps_> reader(participant, topic,
                                                     sl::dds::Qos().reliable().keepLast(8));
   const auto client_owner = connect(ns, /*points=*/false);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
   REQUIRE(reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
 
   struct Sample {
@@ -561,11 +561,11 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
     sl::test::DaemonProcess daemon(live_path);
     REQUIRE(daemon.started());
     const auto client_owner = connect(ns);
-    sl::daemon::SensorClient& client = *client_owner;
+    sl::client::SensorClient& client = *client_owner;
     const auto t0 = sl::test::nowNs();
     auto reply = client.request(Command::kStart, "3+3_horizontal", 3, scaledBound(5s), "../escape");
     REQUIRE(reply);
-    CHECK(reply->code == sl::daemon::CommandResult::Code::kInvalidCommand);
+    CHECK(reply->code == sl::client::CommandResult::Code::kInvalidCommand);
     reply = client.request(Command::kStart, "3+3_horizontal", 3, scaledBound(5s), "rec1");
     REQUIRE(reply);
     REQUIRE(reply->accepted);
@@ -586,9 +586,9 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
 
   // 2. Replay them with the same calibration and patterns.
   const std::string calibration_path = "/tmp/sl_test_" + ns + "_calibration.yaml";
-  sl::daemon::CalibrationFile calibration;
+  sl::files::CalibrationFile calibration;
   calibration.calibration = config.calibration;
-  sl::daemon::saveCalibration(calibration, calibration_path);
+  sl::files::saveCalibration(calibration, calibration_path);
   YAML::Node replay = YAML::Clone(live);
   replay.remove("sim");
   replay["sensor"] = "replay";
@@ -600,7 +600,7 @@ TEST_CASE("a recording replayed through the daemon gives identical clouds") {
     sl::test::DaemonProcess daemon(replay_path);
     REQUIRE(daemon.started());
     const auto client_owner = connect(ns);
-    sl::daemon::SensorClient& client = *client_owner;
+    sl::client::SensorClient& client = *client_owner;
     const auto t0 = startScans(client, "3+3_horizontal", 3);
     for (int i = 0; i < 3; ++i) {
       const auto cloud = client.receiveCloud(t0, scaledBound(10s));
@@ -661,9 +661,9 @@ TEST_CASE("image sets recorded as MCAP by sl_view replay through the daemon into
   REQUIRE(sl::drivers::RecordingReader::open(mcap)->size() == kScans);
 
   const std::string calibration_path = "/tmp/sl_test_" + ns + "_calibration.yaml";
-  sl::daemon::CalibrationFile calibration;
+  sl::files::CalibrationFile calibration;
   calibration.calibration = config.calibration;
-  sl::daemon::saveCalibration(calibration, calibration_path);
+  sl::files::saveCalibration(calibration, calibration_path);
   YAML::Node replay = YAML::Clone(live);
   replay.remove("sim");
   replay["sensor"] = "replay";
@@ -717,7 +717,7 @@ TEST_CASE("motion compensation on a static scene keeps the accuracy") {
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
   const auto t0 = startScans(client, "3+3_horizontal", 2);
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   for (int i = 0; i < 2; ++i) {
@@ -767,7 +767,7 @@ TEST_CASE("depth and shading images and camera_info accompany each cloud") {
   sl::dds::Reader<Image> shading_reader(participant, shading_topic, qos);
   sl::dds::Reader<Info> info_reader(participant, info_topic, qos);
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
   REQUIRE(depth_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
   REQUIRE(shading_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
   REQUIRE(info_reader.waitForWriters(1, DDS_SECS(10) * kTimeScale));
@@ -836,7 +836,7 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
   auto scanValid = [&] {
     const auto t0 = sl::test::nowNs();
     REQUIRE(client.request(Command::kStart, "", 1, scaledBound(5s))->accepted);
@@ -881,7 +881,7 @@ TEST_CASE("SIGHUP applies run-time settings and refuses the rest") {
   root["sim"]["seed"] = 1;
   std::ofstream(path) << root;
   daemon.signal(SIGHUP);
-  std::optional<sl::daemon::StatusInfo> after;
+  std::optional<sl::client::StatusInfo> after;
   for (int i = 0; i < 30 * kTimeScale && (!after || !after->last_error.empty()); ++i) {
     std::this_thread::sleep_for(100ms);
     after = client.status(scaledBound(1s));
@@ -906,13 +906,13 @@ TEST_CASE("requests that fail to deserialize are counted, not lost without a tra
   sl::test::DaemonProcess daemon(path);
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
   const auto before = client.status(scaledBound(5s));
   REQUIRE(before);
   CHECK(before->requests_malformed == 0);
   const std::string writer = std::string(SL_BINARY_DIR) + "/tests/malformed_writer " + ns + " 7";
   REQUIRE(std::system(writer.c_str()) == 0);
-  std::optional<sl::daemon::StatusInfo> s;
+  std::optional<sl::client::StatusInfo> s;
   for (int i = 0; i < 50 * kTimeScale && (!s || s->requests_malformed < 7); ++i) {
     std::this_thread::sleep_for(100ms);
     s = client.status(scaledBound(1s));
@@ -927,7 +927,7 @@ TEST_CASE("requests that fail to deserialize are counted, not lost without a tra
   const auto refused =
       client.request(Command::kSetPattern, std::string(101, 'p'), 0, scaledBound(5s));
   REQUIRE(refused);
-  CHECK(refused->code == sl::daemon::CommandResult::Code::kInvalidOption);
+  CHECK(refused->code == sl::client::CommandResult::Code::kInvalidOption);
   CHECK(refused->reason.find("pattern is 101 bytes, more than 100") != std::string::npos);
   REQUIRE(daemon.terminate(5s) == 0);
 }
@@ -948,7 +948,7 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   sl::test::DaemonProcess daemon(sl::test::writeConfigFile(root, ns));
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns, /*points=*/false);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
 
   const std::string subscriber = std::string(SL_BINARY_DIR) + "/tests/points_subscriber";
   const std::string reading_file = "/tmp/sl_test_" + ns + "_reading",
@@ -970,8 +970,8 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   REQUIRE_FALSE(stuck_guid.empty());
 
   REQUIRE(client.request(Command::kStart, "", 0, scaledBound(5s))->accepted);
-  std::optional<sl::daemon::StatusInfo> s;
-  sl::daemon::PointsReaderInfo of_reading, of_stuck;  // as listed in s
+  std::optional<sl::client::StatusInfo> s;
+  sl::client::PointsReaderInfo of_reading, of_stuck;  // as listed in s
   bool listed_reading = false, listed_stuck = false;
   const auto deadline = std::chrono::steady_clock::now() + scaledBound(30s);
   while (std::chrono::steady_clock::now() < deadline) {
@@ -1061,11 +1061,11 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
   }
   const std::string calibration_top = "/tmp/sl_test_" + ns + "_top_calibration.yaml";
   const std::string calibration_left = "/tmp/sl_test_" + ns + "_left_calibration.yaml";
-  sl::daemon::CalibrationFile file;
+  sl::files::CalibrationFile file;
   file.calibration = top.sim.rig;
-  sl::daemon::saveCalibration(file, calibration_top);
+  sl::files::saveCalibration(file, calibration_top);
   file.calibration = left.sim.rig;
-  sl::daemon::saveCalibration(file, calibration_left);
+  sl::files::saveCalibration(file, calibration_left);
 
   YAML::Node replay = YAML::Clone(root);
   replay.remove("sim");
@@ -1076,7 +1076,7 @@ TEST_CASE("two cameras: each pattern is triangulated by its camera, switched wit
   sl::test::DaemonProcess daemon(sl::test::writeConfigFile(replay, ns + "_replay"));
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
 
   // Two clouds per phase, each checked against the ground truth of the camera
   // that must have triangulated it.
@@ -1129,12 +1129,12 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
   sl::test::DaemonProcess daemon(config_path);
   REQUIRE(daemon.started());
   const auto client_owner = connect(ns);
-  sl::daemon::SensorClient& client = *client_owner;
+  sl::client::SensorClient& client = *client_owner;
 
-  sl::daemon::StartRequest request;
+  sl::client::StartRequest request;
   request.pattern = "3+3_horizontal";
   request.count = 3;
-  request.trigger = sl::daemon::TriggerMode::kSoftware;
+  request.trigger = sl::client::TriggerMode::kSoftware;
   request.cameras = {"sim_top"};
   request.motion_compensation = false;
   const auto t0 = sl::test::nowNs();
@@ -1172,7 +1172,7 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
   }
   const auto status = client.status(scaledBound(3s));
   REQUIRE(status);
-  CHECK(status->trigger == sl::daemon::TriggerMode::kSoftware);
+  CHECK(status->trigger == sl::client::TriggerMode::kSoftware);
   CHECK(status->cameras == std::vector<std::string>{"sim_top"});
   CHECK(status->sets_incomplete == 0);
 
@@ -1180,7 +1180,7 @@ TEST_CASE("software-triggered scans match the ground truth at the lower rate") {
   request.cameras = {"left"};
   auto rejected = client.start(request, scaledBound(5s));
   REQUIRE(rejected);
-  CHECK(rejected->code == sl::daemon::CommandResult::Code::kInvalidOption);
+  CHECK(rejected->code == sl::client::CommandResult::Code::kInvalidOption);
   CHECK(rejected->reason.find("unknown camera 'left'") != std::string::npos);
   REQUIRE(daemon.terminate(5s) == 0);
 }

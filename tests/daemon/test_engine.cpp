@@ -23,7 +23,7 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/devices.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/daemon/scan_engine.h"
 #include "sl/drivers/forwarding.h"
 #include "sl/drivers/recording.h"
@@ -115,10 +115,10 @@ TEST_CASE("the engine reports unhealthy while a device thread is stuck, and stil
 
 namespace {
 
-using sl::daemon::CommandResult;
-using sl::daemon::ScanState;
-using sl::daemon::StartRequest;
-using sl::daemon::TriggerMode;
+using sl::client::CommandResult;
+using sl::client::ScanState;
+using sl::client::StartRequest;
+using sl::client::TriggerMode;
 
 // A projector without single-pattern projection (as the LightCrafter driver).
 class SequenceOnlyProjector : public sl::drivers::Projector {
@@ -232,7 +232,7 @@ TEST_CASE("an intensity camera the sensor lacks stops the daemon at start-up") {
   // A config mistake: ConfigError, so sl_sensord exits 2 (systemd does not restart it).
   CHECK_THROWS_AS(sl::daemon::ScanEngine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
                                          [](const sl::daemon::ScanResult&) {}),
-                  sl::daemon::ConfigError);
+                  sl::files::ConfigError);
 }
 
 // Software trigger, continuous: a pattern switch takes effect at the next
@@ -774,10 +774,10 @@ TEST_CASE("a recorded set keeps its pattern's description", "[engine][record]") 
   REQUIRE(pattern != nullptr);
   const std::string described = sets[0] + "/pattern.yml";
   REQUIRE(std::filesystem::exists(described));
-  const sl::pipeline::PatternSpec recorded = sl::daemon::loadPattern(described);
+  const sl::pipeline::PatternSpec recorded = sl::files::loadPattern(described);
   CHECK(recorded.name == pattern->name);
   CHECK(recorded.frequencies == pattern->frequencies);
-  CHECK(sl::daemon::patternDifferences(recorded, *pattern).empty());
+  CHECK(sl::files::patternDifferences(recorded, *pattern).empty());
   std::filesystem::remove_all(root);
 }
 
@@ -807,7 +807,7 @@ TEST_CASE("a replay refuses a config pattern other than the recorded description
   }
   set.cameras = {camera};
   sl::drivers::createRecording(root, "test");
-  sl::drivers::writeRecordedSet(root, 1, set, sl::daemon::patternYaml(*recorded));
+  sl::drivers::writeRecordedSet(root, 1, set, sl::files::patternYaml(*recorded));
   config.sensor = sl::daemon::SensorKind::kReplay;
   config.replay.dir = root;
   std::shared_ptr<void> keep_alive;

@@ -21,15 +21,15 @@
 #include "engine/stage_latency.h"
 #include "engine/start_validation.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/scan_processor.h"
 
-using sl::daemon::CommandResult;
-using sl::daemon::ScanState;
-using sl::daemon::StartRequest;
-using sl::daemon::TriggerMode;
+using sl::client::CommandResult;
+using sl::client::ScanState;
+using sl::client::StartRequest;
+using sl::client::TriggerMode;
 using Code = CommandResult::Code;
 
 namespace {

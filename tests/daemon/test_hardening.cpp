@@ -28,9 +28,9 @@
 #include "daemon_process.h"
 #include "instance_lock.h"
 #include "reload_worker.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/config_error.h"
+#include "sl/files/config_error.h"
 #include "support/time_scale.h"
 
 using namespace std::chrono_literals;
@@ -83,7 +83,7 @@ TEST_CASE("the instance lock admits one holder and names it to the next", "[lock
     try {
       InstanceLock second(dir.path.string(), 7, "a/b");
       FAIL("a second lock was granted");
-    } catch (const sl::daemon::ConfigError& e) {
+    } catch (const sl::files::ConfigError& e) {
       const std::string what = e.what();
       INFO(what);
       CHECK(what.find("another sl_sensord (pid " + std::to_string(::getpid()) + ")") != std::string::npos);
@@ -133,10 +133,10 @@ TEST_CASE("two daemons started at the same moment on one namespace: exactly one 
     // The winner still runs; in the first round it is seen serving requests.
     CHECK(!winner.waitExit(200ms));
     if (round == 0) {
-      sl::daemon::ClientOptions options;
+      sl::client::ClientOptions options;
       options.ns = ns;
       options.subscribe_points = false;
-      sl::daemon::SensorClient client(options);
+      sl::client::SensorClient client(options);
       CHECK(client.waitForDaemon(scaledBound(20s)));
     }
     CHECK(winner.terminate(5s) == 0);
@@ -154,7 +154,7 @@ sl::daemon::DaemonConfig naiveLoader(const std::string& path) {
   std::ifstream in(path);
   std::string word;
   in >> word;
-  throw sl::daemon::ConfigError(path + ": read '" + word + "'");
+  throw sl::files::ConfigError(path + ": read '" + word + "'");
 }
 
 // Opens the FIFO for writing (a blocked reader then opens too), writes a
@@ -202,7 +202,7 @@ TEST_CASE("a reload past its deadline is refused and never waited for", "[reload
 
   // A load that returns in time: its result, or its error.
   ReloadWorker worker([](const std::string& path) {
-                        if (path == "bad") throw sl::daemon::ConfigError("bad: no such key");
+                        if (path == "bad") throw sl::files::ConfigError("bad: no such key");
                         return sl::daemon::parseConfig(readText(sl::test::sourcePath("config/sim.yaml")),
                                                        "sim.yaml");
                       },
@@ -238,10 +238,10 @@ TEST_CASE("SIGTERM ends the daemon within 2 s whatever a reload is doing", "[rel
   std::ofstream(config) << root;
   sl::test::DaemonProcess daemon(config);
   REQUIRE(daemon.started());
-  sl::daemon::ClientOptions options;
+  sl::client::ClientOptions options;
   options.ns = ns;
   options.subscribe_points = false;
-  sl::daemon::SensorClient client(options);
+  sl::client::SensorClient client(options);
   REQUIRE(client.waitForDaemon(scaledBound(20s)));
 
   // The plane's texture is a FIFO without a writer: a naive reader blocks.
@@ -256,7 +256,7 @@ TEST_CASE("SIGTERM ends the daemon within 2 s whatever a reload is doing", "[rel
   // The refusal is in the status: refused at once by the bounded reader, or
   // by the deadline (5 s) of a load that blocked.
   const auto refused = sl::test::statusWhen(
-      client, [](const sl::daemon::StatusInfo& s) { return s.last_error.find("config reload") != std::string::npos; },
+      client, [](const sl::client::StatusInfo& s) { return s.last_error.find("config reload") != std::string::npos; },
       scaledBound(15s));
   REQUIRE(refused);
   INFO("last_error: " << refused->last_error);
@@ -278,7 +278,7 @@ TEST_CASE("SIGTERM ends the daemon within 2 s whatever a reload is doing", "[rel
   std::ofstream(config) << replay;
   daemon.signal(SIGHUP);
   const auto timed_out = sl::test::statusWhen(
-      client, [](const sl::daemon::StatusInfo& s) { return s.last_error.find("did not finish") != std::string::npos; },
+      client, [](const sl::client::StatusInfo& s) { return s.last_error.find("did not finish") != std::string::npos; },
       scaledBound(15s));
   REQUIRE(timed_out);
   CHECK(timed_out->last_error.find("config reload refused: loading " + config +
@@ -286,7 +286,7 @@ TEST_CASE("SIGTERM ends the daemon within 2 s whatever a reload is doing", "[rel
   // A further reload is refused while that load blocks.
   daemon.signal(SIGHUP);
   const auto still = sl::test::statusWhen(
-      client, [](const sl::daemon::StatusInfo& s) { return s.last_error.find("has not returned") != std::string::npos; },
+      client, [](const sl::client::StatusInfo& s) { return s.last_error.find("has not returned") != std::string::npos; },
       scaledBound(10s));
   REQUIRE(still);
   CHECK(still->last_error.find("config reload refused: the reload of " + config) == 0);
@@ -351,7 +351,7 @@ TEST_CASE("config mistakes that need no device are exit 2 before any device open
     try {
       sl::daemon::loadConfig(config);
       FAIL("loaded");
-    } catch (const sl::daemon::ConfigError& e) {
+    } catch (const sl::files::ConfigError& e) {
       INFO(e.what());
       CHECK(std::string(e.what()).find(c.expected) != std::string::npos);
     }
@@ -385,7 +385,7 @@ TEST_CASE("config mistakes that need no device are exit 2 before any device open
 // --- calibration files through the bounded reader ---------------------------
 
 TEST_CASE("calibration, key-mapping and projector-response files are read bounded", "[files]") {
-  using sl::daemon::ConfigError;
+  using sl::files::ConfigError;
   TempDir dir("calibration_files");
   // A FIFO: loadProjectorResponse and loadOpenCvCalibration opened it and
   // blocked for ever; now refused before any read. (The test runs the
@@ -414,14 +414,14 @@ TEST_CASE("calibration, key-mapping and projector-response files are read bounde
   const std::string fifo_xml = dir / "fifo.xml";
   REQUIRE(::mkfifo(fifo_yaml.c_str(), 0600) == 0);
   REQUIRE(::mkfifo(fifo_xml.c_str(), 0600) == 0);
-  refusedWithin([&] { sl::daemon::loadProjectorResponse(fifo_yaml); }, "is a FIFO");
-  refusedWithin([&] { sl::daemon::loadCalibration(fifo_yaml); }, "is a FIFO");
-  refusedWithin([&] { sl::daemon::loadCalibration(fifo_xml); }, "is a FIFO");
-  refusedWithin([&] { sl::daemon::loadSlSensorCalibration(fifo_yaml, fifo_xml); }, "is a FIFO");
+  refusedWithin([&] { sl::files::loadProjectorResponse(fifo_yaml); }, "is a FIFO");
+  refusedWithin([&] { sl::files::loadCalibration(fifo_yaml); }, "is a FIFO");
+  refusedWithin([&] { sl::files::loadCalibration(fifo_xml); }, "is a FIFO");
+  refusedWithin([&] { sl::files::loadSlSensorCalibration(fifo_yaml, fifo_xml); }, "is a FIFO");
   refusedWithin(
       [&] {
-        sl::daemon::loadOpenCvCalibration(
-            fifo_xml, sl::daemon::parseOpenCvCalibrationKeys(
+        sl::files::loadOpenCvCalibration(
+            fifo_xml, sl::files::parseOpenCvCalibrationKeys(
                           "camera.matrix=K,camera.distortion=k,camera.width=8,camera.height=8,"
                           "projector.matrix=P,projector.distortion=p,projector.width=8,"
                           "projector.height=8,rotation=R,translation=T"));
@@ -429,7 +429,7 @@ TEST_CASE("calibration, key-mapping and projector-response files are read bounde
       "is a FIFO");
   const std::string zero = dir / "zero.yaml";  // a device behind a name that looks right
   std::filesystem::create_symlink("/dev/zero", zero);
-  refusedWithin([&] { sl::daemon::loadCalibration(zero); }, "is a device");
+  refusedWithin([&] { sl::files::loadCalibration(zero); }, "is a device");
 
   // Alias bombs and second documents: yaml-cpp read them whole (the second
   // document silently ignored).
@@ -441,8 +441,8 @@ TEST_CASE("calibration, key-mapping and projector-response files are read bounde
       out << c << ": &" << c << " [*" << char(c - 1) << ", *" << char(c - 1) << ", *"
           << char(c - 1) << ", *" << char(c - 1) << "]\n";
   }
-  refusedWithin([&] { sl::daemon::loadCalibration(bomb); }, "aliases");
-  refusedWithin([&] { sl::daemon::parseOpenCvCalibrationKeys(bomb); }, "aliases");
+  refusedWithin([&] { sl::files::loadCalibration(bomb); }, "aliases");
+  refusedWithin([&] { sl::files::parseOpenCvCalibrationKeys(bomb); }, "aliases");
   const std::string two = dir / "two.yaml";
   {
     // A complete calibration followed by a second document.
@@ -450,20 +450,20 @@ TEST_CASE("calibration, key-mapping and projector-response files are read bounde
     out << readText(sl::test::sourcePath("config/hardware-paper-calibration.yaml"))
         << "---\nformat: sl-sensor-calibration/1\n";
   }
-  refusedWithin([&] { sl::daemon::loadCalibration(two); }, "more than one YAML document");
+  refusedWithin([&] { sl::files::loadCalibration(two); }, "more than one YAML document");
   const std::string response = dir / "response.yaml";
   std::ofstream(response) << "format: sl-sensor-projector-response/1\ngamma: 2.2\n---\ngamma: 1\n";
-  refusedWithin([&] { sl::daemon::loadProjectorResponse(response); }, "more than one YAML document");
+  refusedWithin([&] { sl::files::loadProjectorResponse(response); }, "more than one YAML document");
   // Larger than the kind's limit: refused before reading.
   const std::string big = dir / "big.yaml";
   std::ofstream(big).close();
   std::filesystem::resize_file(big, 17 << 20);  // sparse
-  refusedWithin([&] { sl::daemon::loadCalibration(big); }, "more than the limit");
+  refusedWithin([&] { sl::files::loadCalibration(big); }, "more than the limit");
 
   // Good files still load, parsed from the text read once.
-  const auto own = sl::daemon::loadCalibration(sl::test::sourcePath("config/hardware-paper-calibration.yaml"));
+  const auto own = sl::files::loadCalibration(sl::test::sourcePath("config/hardware-paper-calibration.yaml"));
   CHECK(own.calibration.camera.width == 1440);
   const std::string good_response = dir / "good_response.yaml";
   std::ofstream(good_response) << "format: sl-sensor-projector-response/1\ngamma: 2.2\n";
-  CHECK(sl::daemon::loadProjectorResponse(good_response).size() > 2);
+  CHECK(sl::files::loadProjectorResponse(good_response).size() > 2);
 }

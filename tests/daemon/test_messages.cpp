@@ -20,6 +20,17 @@
 #include "sl/pipeline/point_quality.h"
 
 using namespace sl::daemon;
+using ::sl::dds::CloudLayout;
+using ::sl::client::CommandResult;
+using ::sl::dds::PackedCloud;
+using ::sl::dds::PointQuality;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+using ::sl::dds::floatsPerPoint;
+using ::sl::dds::maxPackedBytes;
+using ::sl::dds::packCloud;
+using ::sl::dds::packsInPlace;
 using Code = CommandResult::Code;
 
 namespace {

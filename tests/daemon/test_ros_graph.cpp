@@ -13,13 +13,13 @@
 
 #include "ros_graph.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/config_error.h"
+#include "sl/files/config_error.h"
 #include "support/config_text.h"
 #include "tf_tree.h"
 
 namespace {
 
-using sl::daemon::ConfigError;
+using sl::files::ConfigError;
 using sl::daemon::TfConfig;
 
 // config/sim.yaml with `tf_block` (lines indented under dds:) added to dds.
@@ -196,7 +196,7 @@ TEST_CASE("dds.tf.mount.hand_eye: the mount from an sl_handeye result", "[ros_gr
 }
 
 TEST_CASE("diagnosticsOf: levels from the daemon's state", "[ros_graph][diagnostics]") {
-  using sl::daemon::ScanState;
+  using sl::client::ScanState;
   constexpr std::uint8_t kOk = 0, kWarn = 1, kError = 2;
   sl::daemon::EngineStatus s;
   sl::daemon::DiagnosticInputs in;

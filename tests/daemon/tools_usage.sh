@@ -21,7 +21,8 @@ check() {  # check EXPECTED_EXIT CMD...
   fi
 }
 tools=("$bin/tools/slctl" "$bin/tools/sl_view/sl_view" "$bin/tools/sl_process" "$bin/tools/sl_patterns"
-       "$bin/tools/sl_calibrate" "$bin/tools/sl_register" "$bin/tools/sl_eval")
+       "$bin/tools/sl_calibrate" "$bin/tools/sl_register" "$bin/tools/sl_eval" "$bin/tools/sl_handeye"
+       "$bin/tools/sl_verify")
 for t in "${tools[@]}"; do
   [ -x "$t" ] || { echo "FAIL: $t not built"; failed=1; continue; }
   check 0 "$t" --help

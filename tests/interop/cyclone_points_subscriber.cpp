@@ -8,7 +8,7 @@
 
 #include "cloud_digest.h"
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "subscriber_args.h"
 
 namespace {

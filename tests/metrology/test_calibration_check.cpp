@@ -20,7 +20,7 @@
 #include <utility>
 
 #include "board_sim.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/calibration_check.h"
 
@@ -164,10 +164,10 @@ TEST_CASE("sl_verify: rendered scans with a moved projector fail; --correct writ
   const fs::path dir = fs::path(SL_BINARY_DIR) / "test_metrology_verify";
   fs::remove_all(dir);
   fs::create_directories(dir);
-  sl::daemon::CalibrationFile file;
+  sl::files::CalibrationFile file;
   file.calibration = rig;
   file.source = "test_metrology: the simulator's rig before the knock";
-  sl::daemon::saveCalibration(file, (dir / "calibration.yaml").string());
+  sl::files::saveCalibration(file, (dir / "calibration.yaml").string());
   sl::pipeline::PhaseShift33Pattern pattern;
   pattern.name = "3+3_both";
   pattern.direction = sl::pipeline::Direction::kBoth;
@@ -197,7 +197,7 @@ TEST_CASE("sl_verify: rendered scans with a moved projector fail; --correct writ
   CHECK(output.find("camera-projector consistency") != std::string::npos);
   REQUIRE(fs::exists(dir / "corrected.yaml"));
   const CameraProjectorCalibration corrected =
-      sl::daemon::loadCalibration((dir / "corrected.yaml").string()).calibration;
+      sl::files::loadCalibration((dir / "corrected.yaml").string()).calibration;
   const double rotation_deg = degrees(Eigen::AngleAxisd(truth.R * corrected.R.transpose()).angle());
   const double translation_mm = (corrected.t - truth.t).norm();
   std::printf("sl_verify --correct on 3 rendered views (projector moved 0.2 deg, 0.5 mm): corrected "

@@ -19,7 +19,7 @@
 #include <string>
 
 #include "board_sim.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/hand_eye.h"
 
@@ -269,10 +269,10 @@ TEST_CASE("sl_handeye: robot poses file + rendered pose folders -> the mount", "
   const fs::path dir = fs::path(SL_BINARY_DIR) / "test_metrology_handeye";
   fs::remove_all(dir);
   fs::create_directories(dir);
-  sl::daemon::CalibrationFile calibration;
+  sl::files::CalibrationFile calibration;
   calibration.calibration = rig;
   calibration.source = "test_metrology: the simulator's rig";
-  sl::daemon::saveCalibration(calibration, (dir / "calibration.yaml").string());
+  sl::files::saveCalibration(calibration, (dir / "calibration.yaml").string());
   // Four scans: the fewest that rotate about two axes with some margin.
   sl::pipeline::PhaseShift33Pattern pattern;
   pattern.name = "3+3_both";

@@ -17,9 +17,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/frame_files.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/daemon/config.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl_process/process.h"
 
 namespace fs = std::filesystem;
@@ -92,7 +92,7 @@ TEST_CASE("numbered file names without padding decode in numeric order", "[proce
   REQUIRE(files.size() == 12);
   for (int i = 0; i < 12; ++i) CHECK(fs::path(files[i]).filename() == names[i]);
 
-  const auto pattern = daemon::loadPattern(kPatterns + "slstudio_gray.yaml");
+  const auto pattern = files::loadPattern(kPatterns + "slstudio_gray.yaml");
   const auto reference =
       tools::decodeCapture(pattern, tools::loadFrames(tools::listImages(kData + "/skull_gray")), {});
   const auto renamed = tools::decodeCapture(pattern, tools::loadFrames(files), {});
@@ -202,7 +202,7 @@ TEST_CASE("maps and phase without a calibration", "[process][phase]") {
 }
 
 TEST_CASE("an OpenCV FileStorage calibration under its author's keys", "[process][calibration]") {
-  const auto xml = daemon::loadCalibration(kData + "/calibration.xml");
+  const auto xml = files::loadCalibration(kData + "/calibration.xml");
   const auto& c = xml.calibration;
   const fs::path dir = scratch("opencv_keys");
   for (const char* ext : {".yml", ".xml", ".json"}) {
@@ -243,7 +243,7 @@ TEST_CASE("an OpenCV FileStorage calibration under its author's keys", "[process
     }
     CAPTURE(ext);
     const auto imported =
-        daemon::loadOpenCvCalibration(file, daemon::parseOpenCvCalibrationKeys(keys)).calibration;
+        files::loadOpenCvCalibration(file, files::parseOpenCvCalibrationKeys(keys)).calibration;
     CHECK(imported.camera.width == 1688);
     CHECK(imported.projector.width == 1824);
     CHECK(imported.camera.fx == Approx(c.camera.fx));
@@ -272,19 +272,19 @@ TEST_CASE("an OpenCV FileStorage calibration under its author's keys", "[process
   // Mistakes name the file and the key.
   const std::string file = (dir / "stereo.yml").string();
   CHECK(errorOf([&] {
-          daemon::loadOpenCvCalibration(
-              file, daemon::parseOpenCvCalibrationKeys(
+          files::loadOpenCvCalibration(
+              file, files::parseOpenCvCalibrationKeys(
                         "camera.matrix=K1,camera.distortion=dist_coeffs,camera.width=image_width,"
                         "camera.height=image_height,projector.matrix=proj_K,"
                         "projector.distortion=proj_dist,projector.width=1824,"
                         "projector.height=1140,rotation=om,translation=T"));
         }).find("key 'K1' missing") != std::string::npos);
   CHECK(errorOf([&] {
-          daemon::parseOpenCvCalibrationKeys("camera.matrix=K1,rotation=om");
+          files::parseOpenCvCalibrationKeys("camera.matrix=K1,rotation=om");
         }).find("lacks 'camera.distortion'") != std::string::npos);
   CHECK(errorOf([&] {
-          daemon::loadOpenCvCalibration(
-              file, daemon::parseOpenCvCalibrationKeys(
+          files::loadOpenCvCalibration(
+              file, files::parseOpenCvCalibrationKeys(
                         "camera.matrix=camera_matrix,camera.distortion=dist_coeffs,"
                         "camera.width=image_width,camera.height=image_height,"
                         "projector.matrix=proj_K,projector.distortion=proj_dist,"
@@ -348,10 +348,10 @@ TEST_CASE("phase smoothing of a single-frequency 3-step capture", "[process][smo
   // (the projector's non-linearity on the unit-frequency phase); the noise
   // is what smoothing removes: measured as the difference minus its own
   // local mean (a 6 px Gaussian over the valid pixels).
-  const auto p33 = daemon::loadPattern(kPatterns + "slstudio_2x3.yaml");
+  const auto p33 = files::loadPattern(kPatterns + "slstudio_2x3.yaml");
   const auto reference =
       tools::decodeCapture(p33, tools::loadFrames(tools::listImages(kData + "/skull_2x3")), {});
-  const auto single = daemon::parsePatternText(
+  const auto single = files::parsePatternText(
       "name: unit_3step\nfamily: phase_shift\ndirection: horizontal\nsteps: 3\nfrequencies: [1]\n",
       "unit.yaml");
   std::vector<std::string> files;

@@ -12,8 +12,8 @@
 
 #include <catch2/catch.hpp>
 
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/calibration_io.h"
+#include "sl/files/pattern_config.h"
 #include "sl_process/process.h"
 
 namespace fs = std::filesystem;
@@ -44,8 +44,8 @@ std::vector<ReferencePoint> readReference() {
 
 tools::ProcessResult run(const std::string& pattern_file, const std::string& folder,
                          float min_modulation) {
-  const auto pattern = daemon::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/" + pattern_file);
-  const auto calibration = daemon::loadCalibration(kData + "/calibration.xml").calibration;
+  const auto pattern = files::loadPattern(std::string(SL_SOURCE_DIR) + "/config/patterns/" + pattern_file);
+  const auto calibration = files::loadCalibration(kData + "/calibration.xml").calibration;
   const auto frames = tools::loadFrames(tools::listImages(kData + "/" + folder));
   pipeline::DecoderOptions decoder;
   decoder.min_modulation = min_modulation;

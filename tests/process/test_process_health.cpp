@@ -18,8 +18,8 @@
 #include <catch2/catch.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/calibration_io.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/recording.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
@@ -95,13 +95,13 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
   const fs::path recording = dir / "recording";
   drivers::createRecording(recording.string(), "test");
   drivers::writeRecordedSet(recording.string(), 1, set);
-  drivers::writeRecordedSet(recording.string(), 2, set, daemon::patternYaml(recorded));
+  drivers::writeRecordedSet(recording.string(), 2, set, files::patternYaml(recorded));
   const std::string images = (recording / "set_000001").string();
   const std::string described = (recording / "set_000002").string();
-  daemon::CalibrationFile calibration;
+  files::CalibrationFile calibration;
   calibration.calibration = sim.rig;
   const std::string calibration_path = (dir / "rig.yaml").string();
-  daemon::saveCalibration(calibration, calibration_path);
+  files::saveCalibration(calibration, calibration_path);
   const std::string common = " --calibration " + calibration_path + " --images " + images;
   const std::string common_described =
       " --calibration " + calibration_path + " --images " + described;
@@ -218,23 +218,23 @@ TEST_CASE("patternYaml() gives every preset back; patternDifferences() names wha
     const std::string path = entry.path().string();
     pipeline::PatternSpec spec;
     try {
-      spec = daemon::loadPattern(path);
+      spec = files::loadPattern(path);
     } catch (const std::exception&) {
       continue;  // not a pattern file (the calibration pattern of sl_calibrate, say)
     }
     ++presets;
-    INFO(path << "\n" << daemon::patternYaml(spec));
-    const pipeline::PatternSpec back = daemon::parsePatternText(daemon::patternYaml(spec), path);
+    INFO(path << "\n" << files::patternYaml(spec));
+    const pipeline::PatternSpec back = files::parsePatternText(files::patternYaml(spec), path);
     CHECK(back.name == spec.name);
     CHECK(back.frameCount() == spec.frameCount());
-    CHECK(daemon::patternDifferences(spec, back).empty());
+    CHECK(files::patternDifferences(spec, back).empty());
     CHECK(back.frequencies == spec.frequencies);
   }
   CHECK(presets >= 10);
   pipeline::PatternSpec a, b;
   b.frequencies = {40, 1};
   b.steps = 4;
-  const auto d = daemon::patternDifferences(a, b);
+  const auto d = files::patternDifferences(a, b);
   REQUIRE(d.size() == 3);
   CHECK(d[0] == "frames: 6 vs 8");
   CHECK(d[1] == "steps: 3 vs 4");

@@ -225,7 +225,7 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
   std::string message;
   try {
     sl::daemon::parseConfig(withScene(c.items), "test.yaml");
-  } catch (const sl::daemon::ConfigError& e) {
+  } catch (const sl::files::ConfigError& e) {
     message = e.what();
   }
   INFO("message: " << message);

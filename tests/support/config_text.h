@@ -21,7 +21,7 @@ inline std::string shippedSimConfigText() {
 inline std::string configErrorOf(const std::string& yaml) {
   try {
     daemon::parseConfig(yaml, "test.yaml");
-  } catch (const daemon::ConfigError& e) {
+  } catch (const files::ConfigError& e) {
     return e.what();
   }
   return "";

@@ -24,7 +24,7 @@
 #include "sensor_msgs/msg/CameraInfo.h"
 #include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 #include "sl_msgs/msg/Status.h"
 
 namespace {

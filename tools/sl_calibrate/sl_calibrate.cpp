@@ -25,8 +25,8 @@
 #include "common/cli.h"
 #include "common/frame_files.h"
 #include "residual_plot.h"
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/calibration_io.h"
+#include "sl/files/pattern_config.h"
 #include "sl/pipeline/calibration.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/pattern_spec.h"
@@ -246,7 +246,7 @@ Args parseArgs(int argc, char** argv) {
 }
 
 pl::PatternSpec patternSpec(const Args& a) {
-  if (fs::exists(a.pattern)) return sl::daemon::loadPattern(a.pattern);
+  if (fs::exists(a.pattern)) return sl::files::loadPattern(a.pattern);
   if (a.pattern != "3+3_both")
     throw std::runtime_error("--pattern: '" + a.pattern +
                              "' is neither a pattern file nor the built-in 3+3_both");
@@ -349,7 +349,7 @@ int run(const Args& a) {
         a.bit_depth > 0 ? a.bit_depth : (frames.front().depth() == CV_8U ? 8 : 16);
     const std::vector<float> response =
         pl::estimateProjectorResponse(frames, levels, bit_depth);
-    sl::daemon::saveProjectorResponse(
+    sl::files::saveProjectorResponse(
         response, "sl_calibrate --projector-response " + a.response_dir + " (" + utcNow() + ")",
         a.out);
     // The gamma a power law would have at mid grey, for the report.
@@ -360,9 +360,9 @@ int run(const Args& a) {
     return 0;
   }
   if (!a.import_sl_sensor.empty()) {
-    auto file = sl::daemon::loadSlSensorCalibration(a.import_sl_sensor[0], a.import_sl_sensor[1]);
-    sl::daemon::saveCalibration(file, a.out);
-    if (!a.export_opencv.empty()) sl::daemon::exportOpenCvCalibration(file, a.export_opencv);
+    auto file = sl::files::loadSlSensorCalibration(a.import_sl_sensor[0], a.import_sl_sensor[1]);
+    sl::files::saveCalibration(file, a.out);
+    if (!a.export_opencv.empty()) sl::files::exportOpenCvCalibration(file, a.export_opencv);
     std::cout << "imported " << file.source << " -> " << a.out << "\n";
     return 0;
   }
@@ -377,9 +377,9 @@ int run(const Args& a) {
   // Sinusoid-only sequences average to the offset A; others use the codec's A.
   const bool mean_shading = spec.family == pl::PatternFamily::kPhaseShift;
 
-  std::optional<sl::daemon::CalibrationFile> primary;
+  std::optional<sl::files::CalibrationFile> primary;
   if (!a.secondary_of.empty()) {
-    primary = sl::daemon::loadCalibration(a.secondary_of);
+    primary = sl::files::loadCalibration(a.secondary_of);
     const auto& projector = primary->calibration.projector;
     if (projector.width != spec.projector_width || projector.height != spec.projector_height)
       throw std::runtime_error("pattern '" + spec.name + "' is for a " +
@@ -501,20 +501,20 @@ int run(const Args& a) {
   if (beyond)
     std::cerr << "sl_calibrate: stereo RMS " << result.report.stereo_rms_px
               << " px beyond --max-rms " << a.max_rms_px << " px, accepted (--accept)\n";
-  sl::daemon::CalibrationFile file;
+  sl::files::CalibrationFile file;
   file.calibration = result.calibration;
-  file.errors = sl::daemon::CalibrationErrors{result.report.camera_rms_px,
+  file.errors = sl::files::CalibrationErrors{result.report.camera_rms_px,
                                               result.report.projector_rms_px,
                                               result.report.stereo_rms_px};
-  file.board = sl::daemon::CalibrationBoard{a.board.cols, a.board.rows, a.board.square_mm};
+  file.board = sl::files::CalibrationBoard{a.board.cols, a.board.rows, a.board.square_mm};
   file.date = utcNow();
   std::string source = primary ? "sl_calibrate (secondary camera, projector of " +
                                      a.secondary_of + "): poses"
                                : "sl_calibrate: poses";
   for (const auto& v : views) source += " " + v.label;
   file.source = source;
-  sl::daemon::saveCalibration(file, a.out);
-  if (!a.export_opencv.empty()) sl::daemon::exportOpenCvCalibration(file, a.export_opencv);
+  sl::files::saveCalibration(file, a.out);
+  if (!a.export_opencv.empty()) sl::files::exportOpenCvCalibration(file, a.export_opencv);
   std::cout << "wrote " << a.out << " and " << a.report_dir << "/\n";
   return 0;
 }

@@ -57,7 +57,7 @@
 
 #include "common/point_cloud2_cdr.h"
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 
 namespace {
 
@@ -143,7 +143,7 @@ std::int64_t realtimeNs() {
 
 // Daemon's cloud writer QoS (daemon/src/dds_bridge.cpp).
 dds::Qos writerQos() { return dds::Qos().reliable(DDS_MSECS(200)).keepLast(4).xcdr1(); }
-// slctl's cloud reader QoS (daemon/src/client.cpp).
+// slctl's cloud reader QoS (client/src/client.cpp).
 dds::Qos readerQos() { return dds::Qos().reliable().keepLast(8); }
 
 int publish(const Args& a) {

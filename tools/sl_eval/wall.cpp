@@ -343,14 +343,14 @@ std::vector<Captured> scanWall(const EvalOptions& options, const drivers::SimHei
         current_index = int(k);
       }
       sim->setMotion(plan.bases[k], motion);
-      daemon::StartRequest request;
+      client::StartRequest request;
       request.pattern = plan.pattern;
       request.count = 1;
-      request.trigger = daemon::TriggerMode::kSoftware;
+      request.trigger = client::TriggerMode::kSoftware;
       request.cameras = {plan.camera};
       request.motion_compensation = true;
       const std::size_t before = captured.size();
-      const daemon::CommandResult started = engine.start(request);
+      const client::CommandResult started = engine.start(request);
       if (!started.accepted())
         throw std::runtime_error("wall: start request for " + plan.name + " scan " +
                                  std::to_string(k) + " refused: " + started.reason);
@@ -360,18 +360,18 @@ std::vector<Captured> scanWall(const EvalOptions& options, const drivers::SimHei
           break;
         lock.unlock();
         const daemon::EngineStatus st = engine.status();
-        if (st.state == daemon::ScanState::kIdle || st.state == daemon::ScanState::kError)
+        if (st.state == client::ScanState::kIdle || st.state == client::ScanState::kError)
           throw std::runtime_error("wall: no cloud for " + plan.name + " scan " + std::to_string(k) +
-                                   " (engine " + daemon::toString(st.state) + ", last error: " +
+                                   " (engine " + client::toString(st.state) + ", last error: " +
                                    st.last_error + ")");
         say("waiting for " + plan.name + " scan " + std::to_string(k + 1) + ": engine " +
-            daemon::toString(st.state) + ", " + std::to_string(st.scans_done) + " done");
+            client::toString(st.state) + ", " + std::to_string(st.scans_done) + " done");
       }
       if (captured.back().pattern != plan.pattern || captured.back().camera != plan.camera)
         throw std::runtime_error("wall: " + plan.name + " scan " + std::to_string(k) + " came as " +
                                  captured.back().pattern + " / " + captured.back().camera +
                                  ", requested " + plan.pattern + " / " + plan.camera);
-      for (int i = 0; i < 2000 && engine.status().state != daemon::ScanState::kIdle; ++i)
+      for (int i = 0; i < 2000 && engine.status().state != client::ScanState::kIdle; ++i)
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
       truth.push_back(plan.bases[k] * motion.poseAt(reference_frame, config.sim.camera_fps) *
                       camera_to_sensor);

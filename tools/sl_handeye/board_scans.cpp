@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "common/frame_files.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/pipeline/decoder.h"
 #include "sl/pipeline/pattern.h"
 
@@ -56,7 +56,7 @@ pipeline::PatternSpec boardScanPattern(const std::string& pattern, int fringes,
                                        int projector_width, int projector_height) {
   pipeline::PatternSpec spec;
   if (std::filesystem::exists(pattern)) {
-    spec = sl::daemon::loadPattern(pattern);
+    spec = sl::files::loadPattern(pattern);
   } else if (pattern == "3+3_both") {
     pipeline::PhaseShift33Pattern p;
     p.name = pattern;

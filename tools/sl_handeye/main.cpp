@@ -23,7 +23,7 @@
 #include <vector>
 
 #include "board_scans.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/pipeline/calibration.h"
 #include "sl/pipeline/hand_eye.h"
 
@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
   try {
     board.validate();
     const pl::CameraProjectorCalibration calibration =
-        sl::daemon::loadCalibration(calibration_path).calibration;
+        sl::files::loadCalibration(calibration_path).calibration;
     const pl::PatternSpec spec = sl::tools::boardScanPattern(
         pattern, fringes, calibration.projector.width, calibration.projector.height);
     std::vector<pl::HandEyeView> views;

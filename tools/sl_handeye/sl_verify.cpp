@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "board_scans.h"
-#include "sl/daemon/calibration_io.h"
+#include "sl/files/calibration_io.h"
 #include "sl/pipeline/calibration_check.h"
 
 namespace fs = std::filesystem;
@@ -137,7 +137,7 @@ int main(int argc, char** argv) {
                                  ": the file exists; give a new name (the old calibration is "
                                  "kept as it is)");
     }
-    const sl::daemon::CalibrationFile file = sl::daemon::loadCalibration(calibration_path);
+    const sl::files::CalibrationFile file = sl::files::loadCalibration(calibration_path);
     const pl::CameraProjectorCalibration& calibration = file.calibration;
     const pl::PatternSpec spec = sl::tools::boardScanPattern(
         pattern, fringes, calibration.projector.width, calibration.projector.height);
@@ -162,13 +162,13 @@ int main(int argc, char** argv) {
       const pl::VerificationResult recheck =
           pl::verifyCalibration(fix.calibration, views, board, thresholds);
       print("sl_verify: the corrected calibration on the same scans", recheck);
-      sl::daemon::CalibrationFile corrected = file;
+      sl::files::CalibrationFile corrected = file;
       corrected.calibration = fix.calibration;
       corrected.errors.reset();
       corrected.date = utcNow();
       corrected.source = "sl_verify --correct of " + calibration_path + " on " +
                          std::to_string(views.size()) + " board views: " + text;
-      sl::daemon::saveCalibration(corrected, correct_path);
+      sl::files::saveCalibration(corrected, correct_path);
       std::printf("sl_verify: wrote %s (%s left as it was)\n", correct_path.c_str(),
                   calibration_path.c_str());
     }

@@ -21,8 +21,8 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/calibration_io.h"
+#include "sl/files/pattern_config.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/projector_images.h"
 
@@ -96,10 +96,10 @@ int main(int argc, char** argv) {
   }
   if (pattern_path.empty() || out_dir.empty()) return usage("PATTERN.yaml and --out are required");
   try {
-    const sl::pipeline::PatternSpec spec = sl::daemon::loadPattern(pattern_path);
+    const sl::pipeline::PatternSpec spec = sl::files::loadPattern(pattern_path);
     std::vector<cv::Mat> images = sl::pipeline::generatePatternImages(spec);
     if (!calibration_path.empty()) {
-      const auto calibration = sl::daemon::loadCalibration(calibration_path).calibration;
+      const auto calibration = sl::files::loadCalibration(calibration_path).calibration;
       for (cv::Mat& image : images) image = sl::pipeline::predistort(image, calibration.projector);
     }
     const std::filesystem::path dir(out_dir);

@@ -29,8 +29,8 @@
 
 #include "common/cli.h"
 #include "common/frame_files.h"
-#include "sl/daemon/calibration_io.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/calibration_io.h"
+#include "sl/files/pattern_config.h"
 #include "sl/pipeline/projector_response.h"
 #include "sl_process/process.h"
 
@@ -180,11 +180,11 @@ int main(int argc, char** argv) {
     return usage("--undistort-images needs --calibration");
 
   try {
-    const sl::pipeline::PatternSpec pattern = sl::daemon::loadPattern(pattern_path);
+    const sl::pipeline::PatternSpec pattern = sl::files::loadPattern(pattern_path);
     std::optional<sl::pipeline::CameraProjectorCalibration> calibration;
     if (!calibration_path.empty() && calibration_keys.empty()) {
       try {
-        calibration = sl::daemon::loadCalibration(calibration_path).calibration;
+        calibration = sl::files::loadCalibration(calibration_path).calibration;
       } catch (const std::exception& e) {
         // A file of another tool's keys reads as one with missing keys.
         const std::string message = e.what();
@@ -194,8 +194,8 @@ int main(int argc, char** argv) {
                                  "--calibration-keys (sl_process --help, docs/calibration.md)");
       }
     } else if (!calibration_path.empty())
-      calibration = sl::daemon::loadOpenCvCalibration(
-                        calibration_path, sl::daemon::parseOpenCvCalibrationKeys(calibration_keys))
+      calibration = sl::files::loadOpenCvCalibration(
+                        calibration_path, sl::files::parseOpenCvCalibrationKeys(calibration_keys))
                         .calibration;
     // Before reading any image: a pattern made for another projector, a
     // recording made with another pattern.
@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
       throw std::invalid_argument("give one of --projector-gamma, --projector-response and "
                                   "--estimate-gamma");
     if (!response_path.empty())
-      decoder.projector_response = sl::daemon::loadProjectorResponse(response_path);
+      decoder.projector_response = sl::files::loadProjectorResponse(response_path);
     if (estimate_gamma) {
       const auto e = sl::pipeline::estimateProjectorGamma(pattern, frames.frames, frames.bit_depth);
       std::cout << "sl_process: projector gamma " << e.gamma << " estimated from " << e.pixels

@@ -12,7 +12,7 @@
 
 #include "common/frame_files.h"
 #include "common/ply.h"
-#include "sl/daemon/pattern_config.h"
+#include "sl/files/pattern_config.h"
 #include "sl/drivers/recording.h"
 
 namespace sl::tools {
@@ -70,8 +70,8 @@ bool checkRecordedSet(const pipeline::PatternSpec& pattern, const std::string& p
   }
   const fs::path described = fs::path(images_dir) / drivers::kRecordedPatternFile;
   if (fs::exists(described)) {
-    const pipeline::PatternSpec recorded = daemon::loadPattern(described.string());
-    const std::vector<std::string> differences = daemon::patternDifferences(recorded, pattern);
+    const pipeline::PatternSpec recorded = files::loadPattern(described.string());
+    const std::vector<std::string> differences = files::patternDifferences(recorded, pattern);
     if (!differences.empty()) {
       std::string list;
       for (const std::string& d : differences) list += "\n  " + d;

@@ -30,8 +30,8 @@
 #include "options.h"
 #include "preview.h"
 #include "raw_topics.h"
-#include "sl/daemon/client.h"
-#include "sl/daemon/dds.h"
+#include "sl/client/client.h"
+#include "sl/dds/dds.h"
 
 #ifndef SL_VIEW_WEB_DIR
 #define SL_VIEW_WEB_DIR "tools/sl_view/web"
@@ -86,7 +86,7 @@ int usage(const std::string& error) {
   return 2;
 }
 
-std::string requestJson(const std::string& text, sl::daemon::SensorClient& client) {
+std::string requestJson(const std::string& text, sl::client::SensorClient& client) {
   Json::Value req;
   Json::CharReaderBuilder b;
   std::string errors;
@@ -96,8 +96,8 @@ std::string requestJson(const std::string& text, sl::daemon::SensorClient& clien
   const std::string command = req.get("command", "").asString();
   const std::string pattern = req.get("pattern", "").asString();
   const int count = req.get("count", 0).asInt();
-  using sl::daemon::Command;
-  std::optional<sl::daemon::CommandReplyInfo> reply;
+  using sl::client::Command;
+  std::optional<sl::client::CommandReplyInfo> reply;
   const auto timeout = std::chrono::milliseconds(5000);
   if (command == "start") {
     reply = client.request(Command::kStart, pattern, count, timeout);
@@ -117,7 +117,7 @@ std::string requestJson(const std::string& text, sl::daemon::SensorClient& clien
   Json::Value out;
   out["command"] = command;
   out["accepted"] = reply->accepted;
-  out["code"] = sl::daemon::toString(reply->code);
+  out["code"] = sl::client::toString(reply->code);
   out["reason"] = reply->reason;
   out["patterns"] = Json::Value(Json::arrayValue);
   for (const auto& p : reply->patterns) out["patterns"].append(p);
@@ -181,7 +181,7 @@ int serve(int argc, char** argv) {
                         schema.definition, "ros2msg"});
   }
 
-  sl::daemon::SensorClient client(sl::view::clientOptions(topics));
+  sl::client::SensorClient client(sl::view::clientOptions(topics));
   std::vector<sl::view::ServiceInfo> services;
   services.push_back({1, "/" + topics.ns + "/command", "sl_msgs/srv/Command",
                       [&client](const std::string& req) { return requestJson(req, client); }});

@@ -23,7 +23,7 @@
 #include "common/ros2_schemas.h"
 #include "options.h"
 #include "raw_topics.h"
-#include "sl/daemon/client.h"
+#include "sl/client/client.h"
 
 namespace sl::view {
 
@@ -218,7 +218,7 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
   }
 
   const auto t0 = std::chrono::steady_clock::now();
-  std::optional<daemon::SensorClient> client;
+  std::optional<client::SensorClient> client;
   if (scan >= 0) {
     client.emplace(clientOptions(topics));
     if (!client->waitForDaemon(std::chrono::seconds(10))) {
@@ -244,7 +244,7 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
                                  ": the daemon's writer QoS does not match this reader (policy id " +
                                  std::to_string(policy) + ")");
     }
-    const auto reply = client->request(daemon::Command::kStart, "", static_cast<int>(scan),
+    const auto reply = client->request(client::Command::kStart, "", static_cast<int>(scan),
                                       std::chrono::seconds(10));
     if (!reply) {
       std::cerr << "sl_view record: the daemon did not answer the scan request\n";
@@ -435,7 +435,7 @@ int recordMain(int argc, char** argv, const std::atomic<bool>& stop) {
     });
   }
   if (scan == 0) {
-    const auto reply = client->request(daemon::Command::kStop, "", 0, std::chrono::seconds(10));
+    const auto reply = client->request(client::Command::kStop, "", 0, std::chrono::seconds(10));
     if (!reply || !reply->accepted)
       std::cerr << "sl_view record: could not stop the scan: "
                 << (reply ? reply->reason : std::string("no reply")) << "\n";

@@ -40,8 +40,8 @@ bool parseTopicOption(ArgCursor& args, RawTopicsOptions& topics) {
   return true;
 }
 
-daemon::ClientOptions clientOptions(const RawTopicsOptions& topics) {
-  daemon::ClientOptions co;
+client::ClientOptions clientOptions(const RawTopicsOptions& topics) {
+  client::ClientOptions co;
   co.domain_id = topics.domain_id;
   co.ns = topics.ns;
   co.subscribe_points = false;

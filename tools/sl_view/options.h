@@ -9,7 +9,7 @@
 #include <string>
 
 #include "raw_topics.h"
-#include "sl/daemon/client.h"
+#include "sl/client/client.h"
 
 namespace sl::view {
 
@@ -37,6 +37,6 @@ class ArgCursor {
 bool parseTopicOption(ArgCursor& args, RawTopicsOptions& topics);
 
 // A daemon client on the same domain and namespace, not reading clouds.
-daemon::ClientOptions clientOptions(const RawTopicsOptions& topics);
+client::ClientOptions clientOptions(const RawTopicsOptions& topics);
 
 }  // namespace sl::view

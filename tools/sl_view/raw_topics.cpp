@@ -11,7 +11,7 @@
 #include "sensor_msgs/msg/CameraInfo.h"
 #include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
-#include "sl/daemon/dds_bridge.h"
+#include "sl/dds/topic_names.h"
 #include "sl_msgs/msg/ImageSet.h"
 #include "sl_msgs/msg/ProjectorMaps.h"
 #include "sl_msgs/msg/Status.h"
@@ -50,7 +50,7 @@ std::uint64_t nowNs() {
 }  // namespace
 
 std::vector<TopicInfo> daemonTopics(const std::string& ns) {
-  const auto names = daemon::TopicNames::forNamespace(ns);
+  const auto names = dds::TopicNames::forNamespace(ns);
   const auto topic = [](const std::string& dds_name, const char* type) {
     return TopicInfo{dds_name, rosName(dds_name), type};
   };

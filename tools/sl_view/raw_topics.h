@@ -11,7 +11,7 @@
 #include <string_view>
 #include <vector>
 
-#include "sl/daemon/dds.h"
+#include "sl/dds/dds.h"
 
 namespace sl::view {
 
@@ -23,7 +23,7 @@ struct TopicInfo {
   std::string type_name;  // "sensor_msgs/msg/PointCloud2"
 };
 
-// The topics the daemon publishes (sl::daemon::TopicNames) for namespace ns.
+// The topics the daemon publishes (sl::dds::TopicNames) for namespace ns.
 std::vector<TopicInfo> daemonTopics(const std::string& ns);
 
 // One received sample, holding a reference on Cyclone's serialized data (no

@@ -21,14 +21,14 @@
 
 #include "common/cli.h"
 #include "common/ply.h"
-#include "sl/daemon/client.h"
-#include "sl/daemon/dds.h"
+#include "sl/client/client.h"
+#include "sl/dds/dds.h"
 
 namespace {
 
 using namespace std::chrono_literals;
-using sl::daemon::Command;
-using sl::daemon::SensorClient;
+using sl::client::Command;
+using sl::client::SensorClient;
 
 constexpr const char* kUsage =
     "usage: slctl [options] COMMAND\n"
@@ -72,7 +72,7 @@ struct Args {
   std::string pattern;
   sl::tools::LengthUnit unit = sl::tools::LengthUnit::kMetre;  // files as the topics: metres
   bool pcd = false;
-  sl::daemon::StartRequest start;  // options of scan / start / record
+  sl::client::StartRequest start;  // options of scan / start / record
   bool start_options_given = false;
   bool wait = false;                // record: until the recording has ended
   std::set<std::string> options;    // every option given, to check it fits the command
@@ -156,8 +156,8 @@ Args parseArgs(int argc, char** argv) {
       else usageError("--format must be ply or pcd, not '" + v + "'");
     } else if (a == "--trigger") {
       const std::string v = value();
-      if (v == "hardware") args.start.trigger = sl::daemon::TriggerMode::kHardware;
-      else if (v == "software") args.start.trigger = sl::daemon::TriggerMode::kSoftware;
+      if (v == "hardware") args.start.trigger = sl::client::TriggerMode::kHardware;
+      else if (v == "software") args.start.trigger = sl::client::TriggerMode::kSoftware;
       else usageError("--trigger must be hardware or software, not '" + v + "'");
       args.start_options_given = true;
     } else if (a == "--delay") {
@@ -230,7 +230,7 @@ int noDaemon(const Args& args) {
 // Sends a request and reports a rejection; returns the exit code (0 = accepted).
 int sendCommand(SensorClient& client, const Args& args, Command command,
                 const std::string& pattern, int count,
-                sl::daemon::CommandReplyInfo* reply_out = nullptr) {
+                sl::client::CommandReplyInfo* reply_out = nullptr) {
   const auto reply = client.request(command, pattern, count, toMs(args.timeout_s));
   if (!reply) {
     std::cerr << "slctl: the daemon did not reply within " << args.timeout_s << " s\n";
@@ -238,7 +238,7 @@ int sendCommand(SensorClient& client, const Args& args, Command command,
   }
   if (reply_out) *reply_out = *reply;
   if (!reply->accepted) {
-    std::cerr << "slctl: request rejected (" << sl::daemon::toString(reply->code)
+    std::cerr << "slctl: request rejected (" << sl::client::toString(reply->code)
               << "): " << reply->reason << "\n";
     return 4;
   }
@@ -248,7 +248,7 @@ int sendCommand(SensorClient& client, const Args& args, Command command,
 // Sends a START with the request's options; returns the exit code (0 = accepted).
 int sendStart(SensorClient& client, const Args& args, const std::string& recording, int count,
               std::string* accepted_note = nullptr) {
-  sl::daemon::StartRequest request = args.start;
+  sl::client::StartRequest request = args.start;
   request.pattern = args.pattern;
   request.count = count;
   request.recording = recording;
@@ -258,7 +258,7 @@ int sendStart(SensorClient& client, const Args& args, const std::string& recordi
     return 3;
   }
   if (!reply->accepted) {
-    std::cerr << "slctl: request rejected (" << sl::daemon::toString(reply->code)
+    std::cerr << "slctl: request rejected (" << sl::client::toString(reply->code)
               << "): " << reply->reason << "\n";
     return 4;
   }
@@ -305,8 +305,8 @@ int scan(SensorClient& client, const Args& args) {
   // says so, and the wait ends there instead of at the timeout.
   auto endedWithError = [&]() -> std::optional<std::string> {
     const auto s = client.status(std::chrono::milliseconds(1));
-    if (!s || s->state == sl::daemon::ScanState::kScanning || s->state == sl::daemon::ScanState::kDegraded ||
-        s->state == sl::daemon::ScanState::kWaiting || s->last_error.empty() || s->last_error_ns < requested_at)
+    if (!s || s->state == sl::client::ScanState::kScanning || s->state == sl::client::ScanState::kDegraded ||
+        s->state == sl::client::ScanState::kWaiting || s->last_error.empty() || s->last_error_ns < requested_at)
       return std::nullopt;
     return s->last_error;
   };
@@ -369,16 +369,16 @@ int scan(SensorClient& client, const Args& args) {
 int printStatus(SensorClient& client, const Args& args) {
   const auto s = client.status(toMs(args.timeout_s));
   if (!s) return noDaemon(args);
-  std::printf("state:            %s\n", sl::daemon::toString(s->state));
-  if (s->state == sl::daemon::ScanState::kDegraded)
+  std::printf("state:            %s\n", sl::client::toString(s->state));
+  if (s->state == sl::client::ScanState::kDegraded)
     std::printf("degraded:         %s\n", s->degraded_reason.c_str());
   std::printf("pattern:          %s\n", s->pattern.c_str());
   std::printf("scans:            %llu of %s\n", static_cast<unsigned long long>(s->scans_done),
               s->scans_requested ? std::to_string(s->scans_requested).c_str() : "continuous");
-  if (s->state == sl::daemon::ScanState::kWaiting)
+  if (s->state == sl::client::ScanState::kWaiting)
     std::printf("starts in:        %.1f s\n",
                 (s->start_at_ns - sl::pipeline::systemClockNs()) * 1e-9);
-  std::printf("trigger:          %s\n", sl::daemon::toString(s->trigger));
+  std::printf("trigger:          %s\n", sl::client::toString(s->trigger));
   std::string cameras;
   for (const auto& id : s->cameras) cameras += (cameras.empty() ? "" : ", ") + id;
   std::printf("cameras:          %s\n", cameras.c_str());
@@ -438,7 +438,7 @@ int watch(SensorClient& client, const Args& args) {
         s->scans_requested ? std::to_string(s->scans_requested) : std::string("continuous");
     std::printf("%-8s %-20s %-8s scans %6llu of %-10s rate %5.2f Hz frames %5.1f Hz  dropped "
                 "frames %llu sets %llu  incomplete %llu%s%s\n",
-                sl::daemon::toString(s->state), s->pattern.c_str(), sl::daemon::toString(s->trigger),
+                sl::client::toString(s->state), s->pattern.c_str(), sl::client::toString(s->trigger),
                 static_cast<unsigned long long>(s->scans_done), of.c_str(), s->scan_rate_hz,
                 s->frame_rate_hz,
                 static_cast<unsigned long long>(s->frames_dropped),
@@ -467,7 +467,7 @@ int waitForRecording(SensorClient& client, const Args& args, std::uint64_t sets_
     const auto s = client.status(toMs(args.timeout_s));
     if (!s) return noDaemon(args);
     if (s->recording == args.positional[0]) seen = true;
-    const bool idle = s->state == sl::daemon::ScanState::kIdle && s->recording.empty();
+    const bool idle = s->state == sl::client::ScanState::kIdle && s->recording.empty();
     // The recorder's thread may still write queued sets after the request
     // ended: done once the count held for two status periods.
     if (!idle || s->sets_recorded != settled_count) {
@@ -482,7 +482,7 @@ int waitForRecording(SensorClient& client, const Args& args, std::uint64_t sets_
       if (!s->last_error.empty()) std::printf("daemon: %s\n", s->last_error.c_str());
       return 0;
     }
-    if (s->state == sl::daemon::ScanState::kError) {
+    if (s->state == sl::client::ScanState::kError) {
       std::cerr << "slctl: the recording ended in an error: " << s->last_error << "\n";
       return 1;
     }
@@ -498,7 +498,7 @@ int waitForRecording(SensorClient& client, const Args& args, std::uint64_t sets_
 }
 
 int run(const Args& args) {
-  sl::daemon::ClientOptions options;
+  sl::client::ClientOptions options;
   options.domain_id = args.domain;
   options.ns = args.ns;
   options.subscribe_points = args.command == "scan";
@@ -537,13 +537,13 @@ int run(const Args& args) {
     return rc;
   }
   if (args.command == "patterns") {
-    sl::daemon::CommandReplyInfo reply;
+    sl::client::CommandReplyInfo reply;
     if (const int rc = sendCommand(client, args, Command::kListPatterns, "", 0, &reply)) return rc;
     for (const auto& name : reply.patterns) std::printf("%s\n", name.c_str());
     return 0;
   }
   if (args.command == "config") {
-    sl::daemon::CommandReplyInfo reply;
+    sl::client::CommandReplyInfo reply;
     if (const int rc = sendCommand(client, args, Command::kGetConfig, "", 0, &reply)) return rc;
     std::fputs(reply.detail.c_str(), stdout);
     return 0;

@@ -6,6 +6,9 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::TriggerMode;
+
 namespace {
 
 std::string secondsText(double s) {

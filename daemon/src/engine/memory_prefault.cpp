@@ -1,11 +1,14 @@
 #include "engine/memory_prefault.h"
 
-#include "sl/daemon/cloud_layout.h"
-#include "sl/daemon/dds.h"
+#include "sl/dds/cloud_layout.h"
+#include "sl/dds/dds.h"
 
 #include <algorithm>
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::maxPackedBytes;
 
 namespace {
 

@@ -10,6 +10,12 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+
 using namespace std::chrono_literals;
 
 RequestControl::RequestControl(const DaemonConfig& config, Links links)

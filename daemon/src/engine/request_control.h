@@ -27,6 +27,12 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+
 // Thread-safe: one mutex guards every member below it; the generation is an
 // atomic so that the data threads can tag and filter without the mutex.
 class RequestControl {

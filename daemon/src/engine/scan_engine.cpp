@@ -30,6 +30,12 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 

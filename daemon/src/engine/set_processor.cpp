@@ -11,6 +11,9 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::PointQuality;
+
 ProcessingConfig processingConfigOf(const DaemonConfig& config, const std::vector<std::string>& camera_ids,
                                     double cloud_unit_mm, bool keep_maps) {
   ProcessingConfig p;

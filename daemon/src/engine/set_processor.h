@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "sl/daemon/cloud_layout.h"
+#include "sl/dds/cloud_layout.h"
 #include "sl/daemon/config.h"
 #include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/decoder.h"
@@ -22,6 +22,9 @@
 #include "sl/pipeline/types.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::PointQuality;
 
 // What set processing needs, and nothing else.
 struct ProcessingConfig {

@@ -6,6 +6,13 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::files::ConfigError;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+
 namespace {
 
 std::string joined(const std::vector<std::string>& names) {

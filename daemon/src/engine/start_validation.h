@@ -13,6 +13,12 @@
 
 namespace sl::daemon {
 
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
+
 // What validation reads besides the request.
 struct StartContext {
   const DaemonConfig* config = nullptr;

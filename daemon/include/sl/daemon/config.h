@@ -10,9 +10,9 @@
 #include <vector>
 
 #include "sl/daemon/aravis_config.h"
-#include "sl/daemon/cloud_layout.h"
-#include "sl/daemon/commands.h"  // TriggerMode
-#include "sl/daemon/config_error.h"
+#include "sl/dds/cloud_layout.h"
+#include "sl/client/commands.h"  // TriggerMode
+#include "sl/files/config_error.h"
 #include "sl/daemon/hardware_config.h"
 #include "sl/drivers/replay.h"
 #include "sl/drivers/sim.h"
@@ -25,6 +25,10 @@
 #include "sl/pipeline/triangulator.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::dds::CloudLayout;
+using ::sl::client::TriggerMode;
 
 // Writer QoS of one published topic (`dds.qos.<topic>`). Keep-last writers
 // never wait for a slow reader beyond their history: a reader that falls

@@ -30,17 +30,10 @@
 
 #include "sl/daemon/config.h"
 #include "sl/daemon/scan_engine.h"
+#include "sl/dds/topic_names.h"
 #include "sl/pipeline/camera_model.h"
 
 namespace sl::daemon {
-
-struct TopicNames {
-  std::string points, projector_maps, image_sets, status, request, reply;
-  std::string depth_image, shading_image, camera_info;
-  std::string depth_image_rect, depth_camera_info, shading_camera_info;
-  std::string shading_compressed, depth_rect_compressed_depth;
-  static TopicNames forNamespace(const std::string& ns);
-};
 
 // ROS frame ids of the clouds and images: dds.frame_id for the first camera,
 // "<camera id>_optical_frame" for the others. camera_info is published for

@@ -27,8 +27,8 @@
 #include <thread>
 #include <vector>
 
-#include "sl/daemon/commands.h"
-#include "sl/daemon/cloud_layout.h"
+#include "sl/client/commands.h"
+#include "sl/dds/cloud_layout.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/camera.h"
 #include "sl/drivers/projector.h"
@@ -36,6 +36,13 @@
 #include "sl/pipeline/types.h"
 
 namespace sl::daemon {
+
+// Moved out of daemon/ (issue 34).
+using ::sl::client::CommandResult;
+using ::sl::dds::PointQuality;
+using ::sl::client::ScanState;
+using ::sl::client::StartRequest;
+using ::sl::client::TriggerMode;
 
 struct EngineStatus {
   std::uint64_t version = 0;  // increases on every change worth publishing

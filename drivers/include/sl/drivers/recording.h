@@ -6,7 +6,7 @@
 //   <dir>/set_000001/meta.yml    sequence_id, pattern, trigger_stamp_ns and
 //                                per camera: id, bit_depth, stamps_ns[]
 //   <dir>/set_000001/pattern.yml the pattern file of the projected sequence
-//                                (daemon::patternYaml(); sets written with
+//                                (files::patternYaml(); sets written with
 //                                a description only, recordings before it
 //                                have none): sl_process checks it
 //   <dir>/set_000001/<camera>_<i>.png   frame i of that camera, lossless PNG
