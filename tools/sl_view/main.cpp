@@ -311,21 +311,28 @@ int serve(int argc, char** argv) {
       if (ws.subscribed(channel)) ws.publish({channel, s->receive_ns, s->bytes(), s});
     });
     const auto now = std::chrono::steady_clock::now();
+    const Daemon daemon_before = daemon;
+    std::string said;  // written after /stats has the new state, so that both agree
     if (last_status && now - *last_status < kDaemonGone) {
-      if (daemon != Daemon::kPresent) std::cerr << "sl_view: daemon found (status on rt/" << topics.ns << "/status)\n";
+      if (daemon != Daemon::kPresent) said = "sl_view: daemon found (status on rt/" + topics.ns + "/status)\n";
       daemon = Daemon::kPresent;
     } else if (daemon == Daemon::kPresent || (daemon == Daemon::kUnknown && now - started > kDaemonGone)) {
-      std::cerr << "sl_view: no daemon: no status on rt/" << topics.ns << "/status (domain "
-                << topics.domain_id << ") for " << std::chrono::duration_cast<std::chrono::seconds>(kDaemonGone).count()
-                << " s; the page shows \"no daemon\" until one answers\n";
+      said = "sl_view: no daemon: no status on rt/" + topics.ns + "/status (domain " +
+             std::to_string(topics.domain_id) + ") for " +
+             std::to_string(std::chrono::duration_cast<std::chrono::seconds>(kDaemonGone).count()) +
+             " s; the page shows \"no daemon\" until one answers\n";
       daemon = Daemon::kAbsent;
     }
-    if (now - stats_at > std::chrono::milliseconds(500)) {
+    // GET /stats follows a change of the daemon's state at once (a client that
+    // read "daemon found" on stderr must not then read daemon=false), otherwise
+    // twice a second.
+    if (daemon != daemon_before || now - stats_at > std::chrono::milliseconds(500)) {
       stats_at = std::chrono::steady_clock::now();
       std::string json = ddsStats();
       std::lock_guard<std::mutex> lock(dds_stats_mutex);
       dds_stats_json = std::move(json);
     }
+    if (!said.empty()) std::cerr << said << std::flush;
   }
   ws.stop();
   for (std::size_t i = 0; i < raw.topics().size(); ++i) {
