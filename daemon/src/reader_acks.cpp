@@ -60,14 +60,16 @@ void ReaderAckMonitor::written() {
   const std::uint64_t n = ++written_;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
+    counted_[n % kLostWindow] = false;  // the slot held sample n - kLostWindow
     if (depth_ > 0 && n > depth_) {
       const std::uint64_t pushed_out = n - depth_;
       bool anyone = false;
       for (auto& [handle, r] : readers_) {
         // A reader is owed the samples written after it matched
         // (acked_through starts there) and acknowledges them or not.
-        if (!r.state.reliable || r.acked_through >= pushed_out) continue;
+        if (!r.state.reliable || std::max(r.acked_through, r.lost_through) >= pushed_out) continue;
         ++r.state.lost;
+        r.lost_through = pushed_out;
         anyone = true;
         if (r.state.acknowledging) {
           r.state.acknowledging = false;
@@ -76,7 +78,7 @@ void ReaderAckMonitor::written() {
                      std::to_string(depth_) + " unacknowledged (lost for that reader)");
         }
       }
-      if (anyone) ++lost_total_;
+      if (anyone) countLost(pushed_out);
     }
   }
   wake_.notify_all();
@@ -91,6 +93,29 @@ std::vector<MatchedReaderState> ReaderAckMonitor::readers() const {
   std::vector<MatchedReaderState> out;
   for (const Reader* r : sorted) out.push_back(r->state);
   return out;
+}
+
+void ReaderAckMonitor::countLost(std::uint64_t n) {
+  const std::uint64_t newest = written_.load();
+  if (n + kLostWindow > newest) {
+    if (counted_[n % kLostWindow]) return;
+    counted_[n % kLostWindow] = true;
+  }
+  ++lost_total_;
+}
+
+void ReaderAckMonitor::welcomeBack(Reader& r, std::uint64_t written_now) {
+  const std::uint64_t from = std::max(r.acked_through, r.lost_through);
+  const std::uint64_t gap = written_now > from ? written_now - from : 0;
+  if (r.state.reliable) {
+    for (std::uint64_t n = from + 1; n <= written_now; ++n) countLost(n);
+    r.state.lost += gap;
+  }
+  logWarning("points reader " + r.state.guid + " matched again after its lease expired: " +
+             std::to_string(r.state.reliable ? gap : 0) +
+             " clouds written while it was away are lost to it (" +
+             std::to_string(r.state.lost) + " in all)");
+  r.lost_through = written_now;
 }
 
 void ReaderAckMonitor::refreshMatched() {
@@ -110,19 +135,41 @@ void ReaderAckMonitor::refreshMatched() {
     if (!data) continue;  // gone meanwhile
     Reader r;
     std::memcpy(r.key, data->key.v, 16);
-    r.state.guid = guidText(r.key);
+    const std::string guid = guidText(r.key);
+    const auto back = departed_.find(guid);
+    const bool returning = back != departed_.end();
+    if (returning) {
+      r = back->second;  // keeps its place in readers() and its count
+      departed_.erase(back);
+      welcomeBack(r, written_now);
+    }
+    r.state.guid = guid;
     dds_reliability_kind_t kind = DDS_RELIABILITY_BEST_EFFORT;
     dds_duration_t blocking = 0;
     r.state.reliable = dds_qget_reliability(data->qos, &kind, &blocking) &&
                        kind == DDS_RELIABILITY_RELIABLE;
     dds_builtintopic_free_endpoint(data);
     r.acked_through = written_now;  // not owed what was written before it matched
-    r.order = next_order_++;
+    if (!returning) r.order = next_order_++;
     r.seen = true;
     readers_.emplace(handles[i], r);
   }
-  for (auto it = readers_.begin(); it != readers_.end();)
-    it = it->second.seen ? std::next(it) : readers_.erase(it);
+  for (auto it = readers_.begin(); it != readers_.end();) {
+    if (it->second.seen) {
+      ++it;
+      continue;
+    }
+    Reader gone = it->second;
+    it = readers_.erase(it);
+    gone.departed = next_departure_++;
+    departed_[gone.state.guid] = gone;
+    if (departed_.size() > kDepartedKept) {
+      auto oldest = std::min_element(departed_.begin(), departed_.end(), [](const auto& a, const auto& b) {
+        return a.second.departed < b.second.departed;
+      });
+      departed_.erase(oldest);
+    }
+  }
 }
 
 bool ReaderAckMonitor::waitForAcks(const unsigned char key[16], dds_duration_t timeout) {

@@ -20,6 +20,14 @@
 // n - d out of the history, each reliable reader acked through less than
 // n - d, and matched before n - d was written, has lost it.
 //
+// A reader whose participant is silent for longer than its lease (a stopped
+// process) is unmatched by Cyclone and matched again, with the same GUID,
+// when it resumes; the samples written while it was away never reach it
+// (volatile). Its entry is kept by GUID meanwhile (the last kDepartedKept
+// readers to go), and on its return everything written after what it had
+// acknowledged or been counted as losing is added to its loss, so its count
+// continues instead of restarting at 0.
+//
 // Exact for a reader that stops acknowledging; the thread learns of an
 // acknowledgement at most one sample and ~20 ms late, so a reader that
 // acknowledges more than about d - 1 sample intervals late is counted as
@@ -36,6 +44,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <mutex>
@@ -69,8 +78,13 @@ class ReaderAckMonitor {
   // The readers matched now, in the order they matched.
   std::vector<MatchedReaderState> readers() const;
   // Samples that at least one reader lost, since start-up (readers that
-  // have gone away included).
+  // have gone away included). A sample more than kLostWindow samples old
+  // when a returning reader's gap is counted may be counted twice if
+  // another reader lost it too.
   std::uint64_t lost() const { return lost_total_.load(); }
+
+  static constexpr std::size_t kDepartedKept = 256;
+  static constexpr std::uint64_t kLostWindow = 4096;
 
  private:
   struct Reader {
@@ -78,11 +92,18 @@ class ReaderAckMonitor {
     std::uint64_t order = 0;         // when first seen, for readers()
     unsigned char key[16] = {};      // GUID, network byte order (builtin topic key)
     std::uint64_t acked_through = 0; // samples 1..acked_through acknowledged
+    std::uint64_t lost_through = 0;  // samples up to here counted (lost or acked)
     bool seen = false;               // still matched (refresh)
+    std::uint64_t departed = 0;      // departure order, in departed_
   };
 
   void run();
   void refreshMatched();
+  // Counts sample `n` in lost_total_ unless already counted; mutex_ held.
+  void countLost(std::uint64_t n);
+  // A reader matched again after its lease expired: what was written while
+  // it was away is lost to it. mutex_ held.
+  void welcomeBack(Reader& r, std::uint64_t written_now);
   // True if the reader acknowledged everything written when the call began
   // (or is no longer matched), waiting at most `timeout`.
   bool waitForAcks(const unsigned char key[16], dds_duration_t timeout);
@@ -93,6 +114,9 @@ class ReaderAckMonitor {
   std::atomic<std::uint64_t> lost_total_{0};
   mutable std::mutex mutex_;
   std::map<dds_instance_handle_t, Reader> readers_;  // guarded by mutex_
+  std::map<std::string, Reader> departed_;           // by GUID, guarded by mutex_
+  std::uint64_t next_departure_ = 0;                 // guarded by mutex_
+  std::vector<bool> counted_ = std::vector<bool>(kLostWindow);  // sample % window; mutex_
   std::uint64_t next_order_ = 0;                     // guarded by mutex_
   std::condition_variable wake_;                     // written() or stop
   bool stopping_ = false;                            // guarded by mutex_

@@ -5,8 +5,10 @@
  * acknowledge them, as for a client that stopped reading. (In the test's own
  * process such a reader would hold back every reader of the process.)
  * Writes its reader's GUID, as Cyclone prints GUIDs, to GUID_FILE once
- * matched with the daemon's writer, then runs until killed.
- * Usage: points_subscriber NAMESPACE read|stuck GUID_FILE */
+ * matched with the daemon's writer, then runs until killed. With TAKEN_FILE
+ * (mode "read"), writes there the number of clouds taken so far after each
+ * take.
+ * Usage: points_subscriber NAMESPACE read|stuck GUID_FILE [TAKEN_FILE] */
 #include <stdio.h>
 #include <string.h>
 
@@ -20,8 +22,9 @@ static unsigned word(const dds_guid_t* g, int i) {
 }
 
 int main(int argc, char** argv) {
-  if (argc != 4 || (strcmp(argv[2], "read") != 0 && strcmp(argv[2], "stuck") != 0)) {
-    fprintf(stderr, "usage: points_subscriber NAMESPACE read|stuck GUID_FILE\n");
+  if ((argc != 4 && argc != 5) ||
+      (strcmp(argv[2], "read") != 0 && strcmp(argv[2], "stuck") != 0)) {
+    fprintf(stderr, "usage: points_subscriber NAMESPACE read|stuck GUID_FILE [TAKEN_FILE]\n");
     return 2;
   }
   const int reads = strcmp(argv[2], "read") == 0;
@@ -59,12 +62,23 @@ int main(int argc, char** argv) {
   if (!f) return 1;
   fprintf(f, "%x:%x:%x:%x\n", word(&guid, 0), word(&guid, 1), word(&guid, 2), word(&guid, 3));
   fclose(f);
+  unsigned long long taken = 0;
   for (;;) {
     if (reads) {
       void* samples[8] = {NULL};
       dds_sample_info_t infos[8];
       const dds_return_t n = dds_take(reader, samples, infos, 8, 8);
-      if (n > 0) dds_return_loan(reader, samples, n);
+      if (n > 0) {
+        for (dds_return_t i = 0; i < n; ++i) taken += infos[i].valid_data ? 1 : 0;
+        dds_return_loan(reader, samples, n);
+        if (argc == 5) {
+          FILE* t = fopen(argv[4], "w");
+          if (t) {
+            fprintf(t, "%llu\n", taken);
+            fclose(t);
+          }
+        }
+      }
     }
     dds_sleepfor(DDS_MSECS(20));
   }

@@ -27,8 +27,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <future>
@@ -1002,6 +1004,95 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   CHECK(s->clouds_lost_to_readers >= of_stuck.clouds_lost);
   REQUIRE(client.request(Command::kStop, "", 0, scaledBound(5s))->accepted);
   REQUIRE(daemon.terminate(5s) == 0);
+}
+
+// A reader whose process stops for longer than its participant's lease is
+// unmatched by the daemon and matched again, with the same GUID, when it
+// resumes; the clouds written meanwhile never reach it. The status must list
+// it again with every cloud it missed (published minus taken), not restart
+// its count at 0, and the total must include them. The subscriber's lease is
+// 2 s (x kTimeScale) and it is stopped for three leases.
+TEST_CASE("a points reader away longer than its lease keeps its count of lost clouds") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("lease");
+  YAML::Node root = YAML::LoadFile(sl::test::sourcePath("fuzz/data/request_daemon.yaml"));
+  root["dds"]["namespace"] = ns;
+  sl::test::DaemonProcess daemon(sl::test::writeConfigFile(root, ns));
+  REQUIRE(daemon.started());
+  const auto client_owner = connect(ns, /*points=*/false);
+  sl::client::SensorClient& client = *client_owner;
+
+  const std::string subscriber = std::string(SL_BINARY_DIR) + "/tests/points_subscriber";
+  const std::string guid_file = "/tmp/sl_test_" + ns + "_guid",
+                    taken_file = "/tmp/sl_test_" + ns + "_taken";
+  std::filesystem::remove(guid_file);
+  std::filesystem::remove(taken_file);
+  const auto lease = std::chrono::seconds(2 * kTimeScale);
+  const std::string dds_uri = std::getenv("CYCLONEDDS_URI");
+  setenv("CYCLONEDDS_URI",
+         (dds_uri + ",<Discovery><LeaseDuration>" + std::to_string(lease.count()) +
+          "s</LeaseDuration></Discovery>")
+             .c_str(),
+         1);
+  sl::test::ChildProcess reader({subscriber, ns, "read", guid_file, taken_file});
+  setenv("CYCLONEDDS_URI", dds_uri.c_str(), 1);
+  std::string guid;
+  for (int i = 0; i < 200 * kTimeScale && guid.empty(); ++i) {
+    std::ifstream(guid_file) >> guid;
+    if (guid.empty()) std::this_thread::sleep_for(50ms);
+  }
+  REQUIRE_FALSE(guid.empty());
+
+  auto listed = [&](const sl::client::StatusInfo& st) -> std::optional<sl::client::PointsReaderInfo> {
+    for (const auto& r : st.points_readers)
+      if (r.guid == guid) return r;
+    return std::nullopt;
+  };
+  REQUIRE(client.request(Command::kStart, "", 0, scaledBound(5s))->accepted);
+  std::this_thread::sleep_for(2s);
+  reader.signal(SIGSTOP);
+  // Unmatched once its lease has passed.
+  bool unlisted = false;
+  const auto away_until = std::chrono::steady_clock::now() + 3 * lease;
+  while (std::chrono::steady_clock::now() < away_until) {
+    std::this_thread::sleep_for(200ms);
+    if (const auto st = client.status(scaledBound(1s)); st && !listed(*st)) unlisted = true;
+  }
+  reader.signal(SIGCONT);
+  CHECK(unlisted);
+  // Matched again and taking clouds.
+  std::optional<sl::client::PointsReaderInfo> back;
+  const auto deadline = std::chrono::steady_clock::now() + scaledBound(20s);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(200ms);
+    const auto st = client.status(scaledBound(1s));
+    if (st && (back = listed(*st)) && back->acknowledging) break;
+  }
+  REQUIRE(back);
+  std::this_thread::sleep_for(1s);
+  REQUIRE(client.request(Command::kStop, "", 0, scaledBound(5s))->accepted);
+  std::this_thread::sleep_for(1s * kTimeScale);  // the last clouds reach the reader
+  const auto st = client.status(scaledBound(1s));
+  REQUIRE(st);
+  back = listed(*st);
+  REQUIRE(back);
+  unsigned long long taken = 0;
+  std::ifstream(taken_file) >> taken;
+  REQUIRE(taken > 0);
+  REQUIRE(st->scans_done >= taken);
+  const std::uint64_t missed = st->scans_done - taken;
+  INFO("published " << st->scans_done << ", taken " << taken << ", reported lost "
+                    << back->clouds_lost << ", total " << st->clouds_lost_to_readers);
+  // Three leases at 5 Hz: clouds were missed, and every one is counted, give
+  // or take the writer's history of 4 (which the reader may have got just
+  // before it stopped or been counted as losing) and one in flight.
+  CHECK(missed >= 5);
+  CHECK(back->clouds_lost + 5 >= missed);
+  CHECK(back->clouds_lost <= missed + 5);
+  CHECK(st->clouds_lost_to_readers >= back->clouds_lost);
+  REQUIRE(daemon.terminate(5s) == 0);
+  std::filesystem::remove(guid_file);
+  std::filesystem::remove(taken_file);
 }
 
 // Two cameras (issue 7): the horizontal pattern is triangulated by the camera
