@@ -253,6 +253,7 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.frames_unmatched = s.frames_unmatched;
       info.sets_overflow = s.sets_overflow;
       info.writes_timed_out = s.writes_timed_out;
+      info.images_not_compressed = s.images_not_compressed;
       info.sets_not_recorded = s.sets_not_recorded;
       info.trigger = s.trigger == sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE ? TriggerMode::kSoftware
                                                              : TriggerMode::kHardware;

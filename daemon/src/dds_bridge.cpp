@@ -5,11 +5,15 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "sl/daemon/bounded_queue.h"
 #include "sl/dds/cloud_writer.h"
 #include "sl/dds/malformed_samples.h"
 #include "reader_acks.h"
@@ -51,9 +55,9 @@ dds::Qos writerQos(const TopicQos& q) {
   return qos.keepLast(q.depth).xcdr1();
 }
 
-// zlib level of the compressed images: the fastest (the publish thread
-// encodes them; image_transport's default, 9, takes several times longer
-// for little gain on these images).
+// zlib level of the compressed images: the fastest (image_transport's
+// default, 9, takes several times longer for little gain on these images,
+// and the encoder thread must keep up with the scan rate).
 constexpr int kPngLevel = 1;
 
 // Why the points writer must serialize clouds (empty: it may borrow them).
@@ -168,6 +172,7 @@ struct DdsBridge::Impl {
     if (config.tf.publish)
       tf_static.emplace(participant, sensorTransforms(config.tf, cameras), pipeline::systemClockNs());
     discovery.publish();  // after every reader and writer exists
+    encoder = std::thread([this] { encodeLoop(); });
   }
 
   // A buffer for a packed cloud that no earlier sample still borrows. The
@@ -250,6 +255,34 @@ struct DdsBridge::Impl {
   // two results; it is published once). Publish thread only.
   pipeline::TimestampNs last_set_stamp_ns = -1;
 
+  // The compressed images are encoded on a thread of their own: publish()
+  // hands over copies of the images and goes on. At most one scan's images
+  // wait; a newer scan's replace them, and each scan whose images were not
+  // compressed (replaced, or the encoding failed) is counted.
+  BoundedQueue<std::function<void()>> encode_jobs{1};
+  std::atomic<std::uint64_t> encodings_failed{0};
+  std::atomic<bool> encoder_stopping{false};
+  std::thread encoder;  // started last in the constructor, joined first (~Impl)
+
+  ~Impl() {
+    encoder_stopping = true;
+    encode_jobs.close();
+    if (encoder.joinable()) encoder.join();
+  }
+  void encodeLoop() {
+    while (!encoder_stopping) {
+      std::optional<std::function<void()>> job = encode_jobs.pop(std::chrono::milliseconds(200));
+      if (!job) continue;
+      try {
+        (*job)();
+      } catch (const std::exception& e) {
+        ++encodings_failed;
+        logWarning(std::string("compressed images not published: ") + e.what());
+      }
+    }
+  }
+  std::uint64_t imagesNotCompressed() const { return encode_jobs.dropped() + encodings_failed.load(); }
+
   EdgeCounters edgeCounters();
   void publishStatus(const EngineStatus& s, const std::vector<std::string>& patterns);
   void publishDiagnostics(const EngineStatus& s);
@@ -263,6 +296,7 @@ void DdsBridge::Impl::publishDiagnostics(const EngineStatus& status) {
   for (const auto& c : cameras) in.camera_ids.push_back(c.id);
   in.requests = edge.requests;
   in.writes_timed_out = edge.writes_timed_out;
+  in.images_not_compressed = edge.images_not_compressed;
   in.clouds_lost_to_readers = edge.clouds_lost_to_readers;
   in.points_readers = edge.points_readers;
   diagnostics.publish(diagnosticsOf(status, in), pipeline::systemClockNs());
@@ -274,6 +308,7 @@ EdgeCounters DdsBridge::Impl::edgeCounters() {
   c.replies_timed_out = dispatcher.repliesTimedOut();
   c.requests_malformed = malformed.count() + services.notServed();
   c.writes_timed_out = writes_timed_out.load();
+  c.images_not_compressed = imagesNotCompressed();
   // Samples the full request reader refused (reading the status resets its
   // change count).
   dds_sample_rejected_status_t rejected{};
@@ -366,9 +401,11 @@ void DdsBridge::publish(const ScanResult& result) {
     const ScanImages images(*result.cloud, result.cloud_unit_m, result.bit_depth, frame_id);
     count(d.depth_writer.write(images.depth()));
     count(d.shading_writer.write(images.shading()));
-    // Compressed siblings cost an encoding: only for matched readers.
+    // Compressed siblings cost an encoding: only for matched readers, on
+    // the encoder thread, from copies.
+    std::shared_ptr<const OwnedImage> shading_copy, depth_copy;
     if (d.shading_png_writer.matchedReaders() > 0)
-      count(d.shading_png_writer.write(CompressedPngMessage(images.shading(), kPngLevel).sample()));
+      shading_copy = std::make_shared<const OwnedImage>(images.shading());
     // camera_info describes the first camera (whose frame is dds.frame_id);
     // images of other cameras carry their own frame_id and no camera_info
     // (nor a rectified depth image: the bridge has the first camera's model).
@@ -382,9 +419,20 @@ void DdsBridge::publish(const ScanResult& result) {
         const RectifiedDepthMessage rectified(images.depthValues(), *d.rectifier, stamp, frame_id);
         count(d.depth_rect_writer.write(rectified.sample()));
         if (d.depth_png_writer.matchedReaders() > 0)
-          count(d.depth_png_writer.write(CompressedDepthMessage(rectified.sample(), kPngLevel).sample()));
+          depth_copy = std::make_shared<const OwnedImage>(rectified.sample());
         d.depth_info_writer.write(CameraInfoMessage(d.camera, stamp, frame_id, true).sample());
       }
+    }
+    if (shading_copy || depth_copy) {
+      d.encode_jobs.push([&d, shading_copy, depth_copy] {
+        auto count_write = [&d](bool written) {
+          if (!written) ++d.writes_timed_out;
+        };
+        if (shading_copy)
+          count_write(d.shading_png_writer.write(CompressedPngMessage(shading_copy->sample(), kPngLevel).sample()));
+        if (depth_copy)
+          count_write(d.depth_png_writer.write(CompressedDepthMessage(depth_copy->sample(), kPngLevel).sample()));
+      });
     }
   }
 }

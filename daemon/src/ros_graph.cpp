@@ -140,6 +140,7 @@ std::vector<Diagnostic> diagnosticsOf(const EngineStatus& s, const DiagnosticInp
   add("processing_ms", number(s.processing_ms));
   add("publish_ms", number(s.publish_ms));
   add("writes_timed_out", std::to_string(in.writes_timed_out));
+  add("images_not_compressed", std::to_string(in.images_not_compressed));
   add("clouds_lost_to_readers", std::to_string(in.clouds_lost_to_readers));
   for (const auto& r : in.points_readers)
     add("clouds lost by points reader " + r.guid,

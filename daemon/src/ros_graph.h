@@ -49,6 +49,7 @@ struct DiagnosticInputs {
   std::vector<std::string> camera_ids;   // every camera of the sensor
   RequestCounters requests;
   std::uint64_t writes_timed_out = 0;
+  std::uint64_t images_not_compressed = 0;
   std::uint64_t clouds_lost_to_readers = 0;
   std::vector<MatchedReaderState> points_readers;
 };

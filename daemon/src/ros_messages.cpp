@@ -164,6 +164,16 @@ RectifiedDepthMessage::RectifiedDepthMessage(const std::vector<float>& raw_depth
   borrow(msg_.data, reinterpret_cast<std::uint8_t*>(depth_.data()), depth_.size() * 4);
 }
 
+OwnedImage::OwnedImage(const Image& image)
+    : frame_id_(image.header.frame_id ? image.header.frame_id : ""),
+      encoding_(image.encoding ? image.encoding : ""),
+      pixels_(image.data._buffer, image.data._buffer + image.data._length),
+      msg_(image) {
+  msg_.header.frame_id = frame_id_.data();
+  msg_.encoding = encoding_.data();
+  borrow(msg_.data, pixels_.data(), pixels_.size());
+}
+
 CompressedPngMessage::CompressedPngMessage(const Image& image, int png_level)
     : frame_id_(image.header.frame_id ? image.header.frame_id : ""),
       format_(std::string(image.encoding ? image.encoding : "") + "; png compressed ") {
@@ -292,6 +302,7 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.frames_unmatched = s.frames_unmatched;
   msg.sets_overflow = s.sets_overflow;
   msg.writes_timed_out = edge.writes_timed_out;
+  msg.images_not_compressed = edge.images_not_compressed;
   msg.sets_not_recorded = s.sets_not_recorded;
   msg.trigger = s.trigger == TriggerMode::kSoftware ? sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE
                                                     : sl_msgs_msg_dds__Status_Constants_TRIGGER_HARDWARE;

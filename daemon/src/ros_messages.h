@@ -124,6 +124,19 @@ class RectifiedDepthMessage : NonMovable {
   Image msg_{};
 };
 
+// A copy of a sensor_msgs/Image that owns its pixels and strings, for a
+// message built later on another thread (the compressed images).
+class OwnedImage : NonMovable {
+ public:
+  explicit OwnedImage(const Image& image);
+  const Image& sample() const { return msg_; }
+
+ private:
+  std::string frame_id_, encoding_;
+  std::vector<std::uint8_t> pixels_;
+  Image msg_{};
+};
+
 // sensor_msgs/CompressedImage of a mono8 or mono16 `image` as
 // image_transport's compressed plugin writes it in png mode
 // (compressed_image_transport: format "<encoding>; png compressed ", data a
@@ -191,6 +204,7 @@ struct EdgeCounters {
   std::uint64_t writes_timed_out = 0;  // also counted in sets_dropped
   std::uint64_t requests_rejected = 0;       // refusals of the full request reader
   std::uint64_t clouds_lost_to_readers = 0;  // clouds at least one points reader lost
+  std::uint64_t images_not_compressed = 0;   // scans whose compressed images were skipped
   std::vector<MatchedReaderState> points_readers;
 };
 

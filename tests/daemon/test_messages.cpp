@@ -500,6 +500,7 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   edge.writes_timed_out = 5;
   edge.requests_rejected = 6;
   edge.clouds_lost_to_readers = 7;
+  edge.images_not_compressed = 12;
   edge.points_readers = {{"1:2:3:4", true, false, 7}, {"5:6:7:8", false, true, 0}};
   const msg::StatusMessage message(s, {"a", "b", "c"}, edge, kStamp + 1);
   const msg::Status& m = message.sample();
@@ -524,6 +525,7 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK(m.decode_consistent_fraction == 0.58);
   CHECK(m.decode_residual_median == 0.25);
   CHECK(m.clouds_implausible == 11);
+  CHECK(m.images_not_compressed == 12);
   REQUIRE(m.points_readers._length == 2);
   CHECK(str(m.points_readers._buffer[0].guid) == "1:2:3:4");
   CHECK(m.points_readers._buffer[0].reliable);

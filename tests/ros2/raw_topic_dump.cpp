@@ -7,8 +7,9 @@
 //   TYPE: Image, CameraInfo, PointCloud2, CompressedImage (sensor_msgs/msg)
 // Prints "ready" once every reader has matched a writer, then writes
 // OUT_DIR/NAME_<k>.cdr (k = 1, 2, ...) until every topic gave COUNT
-// samples (exit 0) or TIMEOUT_S passed (exit 1). Readers: reliable,
-// keep-all, volatile.
+// samples (exit 0) or TIMEOUT_S passed (exit 1, the counts on stderr).
+// OUT_DIR "-": counts the samples, writes no file (a reader for benchmarks).
+// Readers: reliable, keep-all, volatile.
 #include <dds/dds.h>
 #include <dds/ddsi/ddsi_serdata.h>
 
@@ -100,7 +101,8 @@ int main(int argc, char** argv) {
           std::vector<char> bytes(size);
           ddsi_serdata_to_ser(serdata, 0, size, bytes.data());
           ++s.taken;
-          std::ofstream(out + "/" + s.name + "_" + std::to_string(s.taken) + ".cdr", std::ios::binary)
+          if (out != "-")
+            std::ofstream(out + "/" + s.name + "_" + std::to_string(s.taken) + ".cdr", std::ios::binary)
               .write(bytes.data(), static_cast<std::streamsize>(size));
         }
         ddsi_serdata_unref(serdata);

@@ -418,6 +418,8 @@ int printStatus(SensorClient& client, const Args& args) {
   std::printf("requests malformed: %llu, refused by the full request reader: %llu\n",
               u(s->requests_malformed), u(s->requests_rejected));
   std::printf("clouds lost to readers: %llu\n", u(s->clouds_lost_to_readers));
+  std::printf("images not compressed: %llu (scans whose compressed images a matched reader did not get)\n",
+              u(s->images_not_compressed));
   for (const auto& r : s->points_readers)
     std::printf("  points reader %s: %s, %llu clouds lost\n", r.guid.c_str(),
                 !r.reliable          ? "best effort (losses not visible to the daemon)"

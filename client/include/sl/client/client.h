@@ -71,6 +71,7 @@ struct StatusInfo {
   // Decode health of the latest scan and implausible clouds (EngineStatus).
   double decode_modulated_fraction = 0, decode_consistent_fraction = 0, decode_residual_median = 0;
   std::uint64_t clouds_implausible = 0;
+  std::uint64_t images_not_compressed = 0;  // see sl_msgs/Status.msg
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };
