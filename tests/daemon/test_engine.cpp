@@ -1065,3 +1065,68 @@ TEST_CASE("runtime.publish_implausible publishes implausible clouds, counted, th
   CHECK(clouds >= 3);
   CHECK(engine.stop().accepted());
 }
+
+// A storm of SET_PATTERN requests (100/s, as many clients would send) during
+// a continuous hardware-triggered scan: every switch waits for a complete
+// sequence of the running schedule, a request replaces the pending pattern
+// but not its time, so the storm delays switches and never stops scanning.
+// The status says so in last_error, never `degraded` with a device as cause.
+TEST_CASE("a storm of pattern switches delays them and never stops scanning", "[engine][storm]") {
+  auto config = simConfig();
+  config.runtime.stall_timeout_s *= sl::test::kTimeScale;
+  const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
+  std::mutex mutex;
+  std::map<std::string, int> clouds_of;  // pattern -> clouds, guarded by mutex
+  std::atomic<int> clouds{0};
+  sl::daemon::ScanEngine engine(config, {sim->cameras(), sim->projector(), sim->triggerSource()},
+                                [&](const sl::daemon::ScanResult& r) {
+                                  std::lock_guard lock(mutex);
+                                  ++clouds_of[r.pattern];
+                                  ++clouds;
+                                });
+  const std::vector<std::string> patterns = engine.patterns();
+  REQUIRE(patterns.size() >= 2);
+  REQUIRE(engine.start("", 0).accepted());
+  const auto first_until = std::chrono::steady_clock::now() + sl::test::scaledBound(5s);
+  while (clouds == 0 && std::chrono::steady_clock::now() < first_until) std::this_thread::sleep_for(10ms);
+  REQUIRE(clouds > 0);
+
+  const int before = clouds;
+  int requests = 0, degraded = 0;
+  bool said_delayed = false;
+  std::string degraded_cause, last_requested;
+  const auto storm_until = std::chrono::steady_clock::now() + sl::test::scaledBound(6s);
+  while (std::chrono::steady_clock::now() < storm_until) {
+    // The worst case: every request names a pattern other than the running one.
+    last_requested = engine.status().pattern == patterns[0] ? patterns[1] : patterns[0];
+    const CommandResult reply = engine.selectPattern(last_requested);
+    INFO("request " << requests << ": " << reply.reason);
+    REQUIRE(reply.accepted());
+    ++requests;
+    const sl::daemon::EngineStatus s = engine.status();
+    if (s.state == ScanState::kDegraded) {
+      ++degraded;
+      degraded_cause = s.degraded_reason;
+    }
+    said_delayed = said_delayed || s.last_error.find("pattern switches delayed") != std::string::npos;
+    std::this_thread::sleep_for(10ms);
+  }
+  const int during = clouds - before;
+  std::map<std::string, int> seen;
+  {
+    std::lock_guard lock(mutex);
+    seen = clouds_of;
+  }
+  INFO(requests << " requests, " << during << " clouds during the storm, degraded " << degraded
+                << " times (" << degraded_cause << ")");
+  CHECK(during >= 10);
+  CHECK(degraded == 0);
+  CHECK(said_delayed);
+  CHECK(seen.size() == patterns.size());  // the switches were delayed, not dropped
+  // The latest request wins once the storm is over.
+  const auto settle_until = std::chrono::steady_clock::now() + sl::test::scaledBound(3s);
+  while (engine.status().pattern != last_requested && std::chrono::steady_clock::now() < settle_until)
+    std::this_thread::sleep_for(10ms);
+  CHECK(engine.status().pattern == last_requested);
+  CHECK(engine.stop().accepted());
+}

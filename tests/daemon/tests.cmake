@@ -80,6 +80,10 @@ add_test(NAME tools_usage COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/tools_
 add_test(NAME systemd_unit COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/verify_unit.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
 
+# A participant that publishes forged clouds on a points topic (dds_security).
+add_executable(forged_points daemon/forged_points.c)
+target_link_libraries(forged_points PRIVATE sl_idl CycloneDDS::ddsc)
+
 # DDS Security: identities, governance and permissions (scripts/dds-security.sh).
 add_test(NAME dds_security COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/security.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})

@@ -86,7 +86,7 @@ fail() {
 sl_sim_config() {
   local ns=$1 out=$2
   shift 2
-  local args=(-e "s/^  namespace: sl$/  namespace: $ns/")
+  local args=(-e "s|^  namespace: sl$|  namespace: $ns|")
   if [ "${time_scale:-1}" -ne 1 ]; then
     local fps age
     fps=$(sed -n 's/^  camera_fps: *\([0-9.]*\).*/\1/p' "$src/config/sim.yaml")

@@ -32,8 +32,9 @@
 // 4, XCDR1. header.stamp = CLOCK_REALTIME just before the write; the first 8
 // bytes of data carry the sequence number.
 // The subscriber (reliable, keep-last 8, like slctl) takes clouds until it has
-// seen the last sequence number or no cloud came for 3 s (or --timeout S
-// passed), and prints: clouds received and lost (missing sequence numbers),
+// seen the last sequence number or no cloud came for --quiet S (default 3; a
+// slow configuration needs more, or the clouds still on their way count as
+// lost) or --timeout S passed, and prints: clouds received and lost (missing sequence numbers),
 // clouds/s delivered (first to last receive), latency = receive time
 // (CLOCK_REALTIME after the take, i.e. after deserialization) - header.stamp,
 // median / p99 / max. Same machine, so the same clock on both sides.
@@ -72,6 +73,7 @@ struct Args {
   double rate_hz = 5;
   std::uint32_t width = 1440, height = 1080;
   double timeout_s = 120;
+  double quiet_s = 3;  // sub: ends after this long without a cloud
   double duration_s = 30;
   int depth = 4;
   bool best_effort = false;
@@ -82,7 +84,7 @@ struct Args {
 [[noreturn]] void usage(const std::string& why) {
   std::fprintf(stderr,
                "sl_dds_bench: %s\n"
-               "usage: sl_dds_bench sub [--topic T] [--count N] [--timeout S]\n"
+               "usage: sl_dds_bench sub [--topic T] [--count N] [--timeout S] [--quiet S]\n"
                "       sl_dds_bench pub [--topic T] [--count N] [--rate HZ] [--width W] "
                "[--height H]\n"
                "       sl_dds_bench listen [--topic T] [--duration S] [--timeout S] [--depth N] "
@@ -119,6 +121,8 @@ Args parse(int argc, char** argv) {
       a.height = static_cast<std::uint32_t>(number);
     else if (opt == "--timeout" && number > 0)
       a.timeout_s = number;
+    else if (opt == "--quiet" && number > 0)
+      a.quiet_s = number;
     else if (opt == "--duration" && number > 0)
       a.duration_s = number;
     else if (opt == "--depth" && number >= 1)
@@ -244,7 +248,8 @@ int subscribe(const Args& a) {
   auto last_sample = std::chrono::steady_clock::now();
   bool got_last = false;
   while (!got_last && std::chrono::steady_clock::now() < deadline) {
-    if (received > 0 && std::chrono::steady_clock::now() - last_sample > std::chrono::seconds(3))
+    if (received > 0 &&
+        std::chrono::steady_clock::now() - last_sample > std::chrono::duration<double>(a.quiet_s))
       break;
     if (!waitset.wait(DDS_MSECS(200))) continue;
     dds::Loan<Cloud> loan = reader.take(8);

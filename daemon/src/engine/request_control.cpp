@@ -113,29 +113,29 @@ CommandResult RequestControl::selectPattern(const std::string& name) {
   }
   if (scanning) {
     // Continuous hardware-triggered scan: the control thread switches at the
-    // end of the sequence in progress (a sequence of the running pattern
-    // starts every frame_count image intervals from the last trigger).
-    // Before the first trigger there is nothing to finish: switch now. A
-    // later request replaces a switch still pending.
-    if (switch_draining_) {  // the projector already stopped at the boundary
-      switch_pattern_ = name;
-      return {};
-    }
-    if (!switch_pattern_.empty() && name == current_pattern_) {
+    // end of a complete sequence of the running schedule (switchTimeLocked).
+    // A request while a switch is pending replaces its pattern but keeps its
+    // time, so that a storm of requests delays switches and never stops the
+    // projector before a sequence completes.
+    if (!switch_pattern_.empty() && name == current_pattern_ && !switch_draining_) {
       // Back to the running pattern before the pending switch happened:
       // cancel it and release the boundary hold.
       switch_pattern_.clear();
-      tellSchedule({generation_.load(), SwitchPending{std::numeric_limits<pipeline::TimestampNs>::max()}});
+      if (switch_at_ns_ != 0)
+        tellSchedule({generation_.load(), SwitchPending{std::numeric_limits<pipeline::TimestampNs>::max()}});
+      switch_at_ns_ = 0;
+      return {};
+    }
+    if (!switch_pattern_.empty()) {
+      switch_pattern_ = name;
+      noteSwitchDelayedLocked();
       return {};
     }
     if (name == current_pattern_) return {};
-    const pipeline::TimestampNs period =
-        config_.findPattern(current_pattern_)->frameCount() * config_.synchroniser.image_interval_ns;
-    const pipeline::TimestampNs last = links_.last_trigger_ns();
-    const pipeline::TimestampNs now = pipeline::systemClockNs();
-    switch_at_ns_ = last > 0 && now >= last ? last + ((now - last) / period + 1) * period : now;
     switch_pattern_ = name;
-    tellSchedule({generation_.load(), SwitchPending{switch_at_ns_}});
+    switch_at_ns_ = 0;
+    switch_replaced_ = false;
+    switchTimeLocked(pipeline::systemClockNs());
     changed_.notify_all();
     return {};
   }
@@ -164,6 +164,10 @@ bool RequestControl::serviceTimers() {
   }
   if (state_ != ScanState::kScanning || switch_pattern_.empty()) return false;
   const pipeline::TimestampNs now = pipeline::systemClockNs();
+  if (switch_at_ns_ == 0 && !switchTimeLocked(now)) {
+    changed_.wait_for(lock, 5ms);  // until the running schedule's first trigger
+    return true;
+  }
   if (switch_draining_) {
     // The old pattern's last frame is exposed one image interval before the
     // boundary (half an interval of slack for stamp jitter).
@@ -351,13 +355,49 @@ void RequestControl::shutDown() {
   changed_.notify_all();
 }
 
+// Decides when the pending switch happens, once the running schedule has
+// delivered its first trigger: at the end of the sequence in progress (its
+// sequences start every frame_count image intervals from its latest
+// trigger), so that every schedule completes at least one sequence. Without
+// a trigger of the running schedule for two sequences plus the grouping's
+// max_age (a silent trigger source), the switch happens now. False while
+// still waiting for the first trigger.
+bool RequestControl::switchTimeLocked(pipeline::TimestampNs now) {
+  const pipeline::TimestampNs period =
+      config_.findPattern(current_pattern_)->frameCount() * config_.synchroniser.image_interval_ns;
+  const pipeline::TimestampNs last = links_.last_trigger_ns();
+  if (last > 0 && last >= schedule_start_ns_) {  // older triggers are an earlier schedule's
+    switch_at_ns_ = now >= last ? last + ((now - last) / period + 1) * period : last + period;
+  } else if (now >= schedule_start_ns_ + 2 * period + config_.synchroniser.max_age_ns) {
+    switch_at_ns_ = now;
+  } else {
+    return false;
+  }
+  tellSchedule({generation_.load(), SwitchPending{switch_at_ns_}});
+  return true;
+}
+
+// A request replaced a pending switch: requests come faster than the running
+// pattern completes its sequences. Said once in last_error (repeats refresh
+// its time and count); cleared by a switch that no request replaced.
+void RequestControl::noteSwitchDelayedLocked() {
+  static const std::string kMessage =
+      "pattern switches delayed: requests come faster than the running pattern completes a "
+      "sequence; each switch waits for one, the latest request wins";
+  switch_replaced_ = true;
+  const bool repeat = last_error_ == kMessage && error_source_ == "switch";
+  setErrorLocked(kMessage, "switch");
+  if (!repeat) ++status_version_;
+}
+
 // Starts a new projector schedule of `count` sequences (0 = until stop) of
 // pattern `name` as a new generation. Throws what the projector throws.
 void RequestControl::launchLocked(const std::string& name, int frame_count, int count) {
   const std::uint64_t next = generation_.load() + 1;
   links_.projector->select(name);
   current_pattern_ = name;
-  tellSchedule({next, RunStarted{name, frame_count, pipeline::systemClockNs()}});
+  schedule_start_ns_ = pipeline::systemClockNs();
+  tellSchedule({next, RunStarted{name, frame_count, schedule_start_ns_}});
   generation_ = next;
   links_.projector->start(count);
 }
@@ -410,11 +450,17 @@ void RequestControl::switchLocked() {
   const std::string name = std::exchange(switch_pattern_, std::string());
   const pipeline::TimestampNs boundary = std::exchange(switch_at_ns_, 0);
   switch_draining_ = false;
+  if (!std::exchange(switch_replaced_, false) && error_source_ == "switch") {
+    last_error_.clear();
+    error_source_.clear();
+    last_error_ns_ = 0;
+  }
   try {
     links_.projector->select(name);
     current_pattern_ = name;
+    schedule_start_ns_ = pipeline::systemClockNs();
     tellSchedule({generation_.load(), PatternSwitched{name, config_.findPattern(name)->frameCount(),
-                                                      pipeline::systemClockNs(), boundary}});
+                                                      schedule_start_ns_, boundary}});
     links_.projector->start(0);
   } catch (const std::exception& e) {
     finishLocked(std::string("projector: ") + e.what());
@@ -434,6 +480,7 @@ void RequestControl::finishLocked(const std::string& error) {
   state_ = ScanState::kIdle;
   launch_at_ns_ = 0;
   switch_pattern_.clear();
+  switch_at_ns_ = 0;
   switch_draining_ = false;
   links_.recorder->stop();
   recording_.clear();

@@ -126,6 +126,8 @@ class RequestControl {
   void beginLocked();
   void launchLocked(const std::string& name, int frame_count, int count);
   void switchLocked();
+  bool switchTimeLocked(pipeline::TimestampNs now);
+  void noteSwitchDelayedLocked();
   void finishLocked(const std::string& error);
   // How late a finite request's last images may come before its sets count
   // as lost: as long as the grouping waits for a sequence's frames
@@ -159,10 +161,16 @@ class RequestControl {
   // kWaiting: the request begins at launch_at_ns_ (system clock).
   pipeline::TimestampNs launch_at_ns_ = 0;
   int pending_count_ = 0;
+  // When the running projector schedule was started (system clock): triggers
+  // stamped before it are an earlier schedule's.
+  pipeline::TimestampNs schedule_start_ns_ = 0;
   // A pattern switch of a continuous hardware-triggered scan, carried out at
-  // switch_at_ns_, the end of the sequence in progress ("" = none).
+  // switch_at_ns_, the end of a complete sequence of the running schedule
+  // ("" = none; switch_at_ns_ 0 = not decided before its first trigger).
+  // switch_replaced_: a later request replaced the pattern (a storm).
   std::string switch_pattern_;
   pipeline::TimestampNs switch_at_ns_ = 0;
+  bool switch_replaced_ = false;
   // After the projector stopped at the boundary: the new schedule starts once
   // every camera delivered the old pattern's last frame (a restart may
   // discard frames not yet read out), or at drain_until_ at the latest.
