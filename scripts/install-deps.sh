@@ -20,7 +20,9 @@ packages=(
   libopen3d-dev   # sl_register: ICP, normals, kd-trees, pose-graph optimisation
   systemd
   iproute2   # ss: the interop test checks Fast DDS binds only 127.0.0.1
-  # ROS 2 interop test (tests/interop): Fast DDS, its IDL code generator
+  # Fast DDS: the daemon's ROS 2 services for rmw_fastrtps clients
+  # (dds/, sl_dds_fastdds; optional at build time) and the ROS 2 interop
+  # test (tests/interop) with Fast DDS's IDL code generator
   # (Java: pulls default-jre-headless) and the sensor_msgs/std_msgs .msg
   # definitions the test checks its IDL against.
   libfastrtps-dev fastddsgen ros-sensor-msgs

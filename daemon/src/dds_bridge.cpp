@@ -76,6 +76,32 @@ std::string serializeReason(const DdsConfig& config) {
   return {};
 }
 
+// Where the ROS 2 services' Fast DDS participant runs (service_bridge.h):
+// the domain, and the IPv4 addresses, peers and multicast of the Cyclone
+// configuration; nullopt when it must not run (fastDdsServicesDisabled),
+// which is logged.
+std::optional<dds::FastDdsServiceOptions> fastDdsOptions(const DdsConfig& config) {
+  dds::DdsRequirements cyclone;
+  const char* uri = std::getenv("CYCLONEDDS_URI");
+  if (uri != nullptr && *uri != '\0') {
+    try {
+      cyclone = readDdsRequirements(uri);
+    } catch (const std::exception&) {
+      // Cyclone itself refuses an unreadable configuration.
+    }
+  }
+  if (const std::optional<std::string> why = dds::fastDdsServicesDisabled(cyclone.security)) {
+    logInfo("ROS 2 services: rmw_fastrtps clients not served (" + *why + ")");
+    return std::nullopt;
+  }
+  dds::FastDdsServiceOptions options;
+  options.domain_id = static_cast<std::uint32_t>(config.domain_id);
+  options.ipv4_addresses = cyclone.interface_addresses;
+  options.ipv4_peers = cyclone.peer_addresses;
+  options.allow_multicast = cyclone.allow_multicast;
+  return options;
+}
+
 // Requests act on the scan engine.
 class EngineCommands : public CommandTarget {
  public:
@@ -240,7 +266,7 @@ struct DdsBridge::Impl {
   RequestDispatcher dispatcher{config.requests};
   RequestOrigins origins;  // the participant of each request's writer (request loop only)
   // ROS 2 services (<ns>/start, stop, ...) through the same dispatcher.
-  ServiceBridge services{participant, config.ns};
+  ServiceBridge services{participant, config.ns, fastDdsOptions(config)};
   // ROS 2's graph: /tf_static, /diagnostics (1 Hz), ros_discovery_info.
   std::optional<TfStaticPublisher> tf_static;
   DiagnosticsPublisher diagnostics{participant};

@@ -61,6 +61,25 @@ std::string withoutComments(const std::string& xml) {
   return std::regex_replace(xml, std::regex("<!--[\\s\\S]*?-->"), "");
 }
 
+// Every IPv4 address (dotted quad) given as attribute address= of <element>,
+// or as the text of <text_element>, that is not yet in `into`.
+void addIpv4(std::vector<std::string>& into, const std::string& xml, const std::string& element,
+             const std::string& text_element = "") {
+  const std::regex quad("^\\s*(\\d{1,3}(\\.\\d{1,3}){3})\\s*$");
+  auto add = [&](const std::string& value) {
+    std::smatch m;
+    if (std::regex_match(value, m, quad) && std::find(into.begin(), into.end(), m[1]) == into.end())
+      into.push_back(m[1]);
+  };
+  const std::regex tag("<" + element + "\\b[^>]*?\\baddress\\s*=\\s*\"([^\"]*)\"");
+  for (auto it = std::sregex_iterator(xml.begin(), xml.end(), tag); it != std::sregex_iterator(); ++it)
+    add((*it)[1]);
+  if (text_element.empty()) return;
+  const std::regex text("<" + text_element + ">([^<]*)</" + text_element + ">");
+  for (auto it = std::sregex_iterator(xml.begin(), xml.end(), text); it != std::sregex_iterator(); ++it)
+    add((*it)[1]);
+}
+
 std::string mib(std::int64_t bytes) {
   std::ostringstream out;
   out.precision(bytes % (1 << 20) == 0 ? 0 : 1);
@@ -110,6 +129,11 @@ DdsRequirements readDdsRequirements(const std::string& uri) {
     std::smatch m;
     const std::regex shm("<SharedMemory\\b[^>]*>[\\s\\S]*?<Enable>\\s*(true|false)\\s*</Enable>");
     if (std::regex_search(xml, m, shm) && m[1] == "true") r.shared_memory = true;
+    addIpv4(r.interface_addresses, xml, "NetworkInterface", "NetworkInterfaceAddress");
+    addIpv4(r.peer_addresses, xml, "Peer");
+    if (std::regex_search(xml, std::regex("<AllowMulticast>\\s*false\\s*</AllowMulticast>")))
+      r.allow_multicast = false;
+    if (std::regex_search(xml, std::regex("<(DDS)?Security\\b"))) r.security = true;
   }
   return r;
 }

@@ -45,7 +45,7 @@ class Registry {
       bool counted = false;
       for (MalformedSampleCounter* counter : self.counters_) {
         if (text.find(counter->needle()) == std::string_view::npos) continue;
-        const bool print_this = counter->add();
+        const bool print_this = !counter->ignores(text) && counter->add();
         print = counted ? (print || print_this) : print_this;
         counted = true;
       }
@@ -62,12 +62,18 @@ class Registry {
 }  // namespace
 
 MalformedSampleCounter::MalformedSampleCounter(const std::string& topic_name,
-                                               const std::string& type_name)
-    : needle_("deserialization " + topic_name + "/" + type_name + " failed") {
+                                               const std::string& type_name, bool ignore_fast_dds)
+    : needle_("deserialization " + topic_name + "/" + type_name + " failed"),
+      ignore_fast_dds_(ignore_fast_dds) {
   Registry::instance().add(this);
 }
 
 MalformedSampleCounter::~MalformedSampleCounter() { Registry::instance().remove(this); }
+
+bool MalformedSampleCounter::ignores(std::string_view text) const {
+  // Cyclone: "data(application, vendor 1.15): <guid> #<seq>: deserialization ..."
+  return ignore_fast_dds_ && text.find("vendor 1.15)") != std::string_view::npos;
+}
 
 bool MalformedSampleCounter::add() {
   const std::uint64_t n = ++count_;

@@ -1,5 +1,10 @@
 #include "sl/dds/ros2_service.h"
 
+#include <dds/ddsi/ddsi_cdrstream.h>
+#include <dds/ddsi/q_protocol.h>
+#include <dds/ddsrt/endian.h>
+
+#include <cstring>
 #include <memory>
 #include <vector>
 
@@ -14,6 +19,20 @@ using Endpoint = std::unique_ptr<dds_builtintopic_endpoint_t, EndpointDeleter>;
 
 // eProsima's RTPS vendor id, which Fast DDS puts first in every GUID prefix.
 constexpr unsigned char kEprosimaVendorId[2] = {0x01, 0x0f};
+
+constexpr std::size_t kEncapsulation = 4;  // representation id (2 bytes) + options (2 bytes)
+constexpr std::size_t kHeader = 16;        // rmw_cyclonedds's guid (uint64) + seq (int64)
+
+// Plain CDR: representation id 00 00 (big-endian) or 00 01 (little-endian).
+bool plainCdr(const CdrBytes& b) {
+  return b.size() >= kEncapsulation && b[0] == 0x00 && (b[1] == 0x00 || b[1] == 0x01);
+}
+bool bigEndian(const CdrBytes& b) { return b[1] == 0x00; }
+
+void putU64(CdrBytes& out, std::uint64_t v, bool big_endian) {
+  for (int i = 0; i < 8; ++i)
+    out.push_back(static_cast<unsigned char>(v >> (big_endian ? 56 - 8 * i : 8 * i)));
+}
 
 }  // namespace
 
@@ -62,6 +81,51 @@ ClientReader clientReader(dds_entity_t request_reader, dds_instance_handle_t req
     if (reader && userDataValue(reader->qos, "clientid") == client) return ClientReader::kMatched;
   }
   return ClientReader::kNotYet;
+}
+
+std::optional<CdrBytes> framedFromPlainCdr(const CdrBytes& plain, std::uint64_t guid,
+                                           std::int64_t seq) {
+  if (!plainCdr(plain) || plain.size() <= kEncapsulation) return std::nullopt;
+  CdrBytes framed(plain.begin(), plain.begin() + kEncapsulation);
+  framed.reserve(plain.size() + kHeader);
+  putU64(framed, guid, bigEndian(plain));
+  putU64(framed, static_cast<std::uint64_t>(seq), bigEndian(plain));
+  framed.insert(framed.end(), plain.begin() + kEncapsulation, plain.end());
+  return framed;
+}
+
+std::optional<CdrBytes> plainFromFramedCdr(const CdrBytes& framed) {
+  if (!plainCdr(framed) || framed.size() <= kEncapsulation + kHeader) return std::nullopt;
+  CdrBytes plain(framed.begin(), framed.begin() + kEncapsulation);
+  plain.insert(plain.end(), framed.begin() + kEncapsulation + kHeader, framed.end());
+  return plain;
+}
+
+bool sampleFromCdr(const CdrBytes& cdr, void* sample, const dds_topic_descriptor_t& type) {
+  if (!plainCdr(cdr) || cdr.size() > UINT32_MAX) return false;
+  // Normalized (validated, swapped to this host's byte order) in a copy.
+  std::vector<char> body(cdr.begin() + kEncapsulation, cdr.end());
+  const bool swap = bigEndian(cdr) != (DDSRT_ENDIAN == DDSRT_BIG_ENDIAN);
+  std::uint32_t offset = 0;
+  if (dds_stream_normalize_data(body.data(), &offset, static_cast<std::uint32_t>(body.size()), swap,
+                                CDR_ENC_VERSION_1, type.m_ops) == nullptr)
+    return false;
+  dds_istream_t in;
+  dds_istream_init(&in, static_cast<std::uint32_t>(body.size()), body.data(), CDR_ENC_VERSION_1);
+  dds_stream_read(&in, static_cast<char*>(sample), type.m_ops);
+  dds_istream_fini(&in);
+  return true;
+}
+
+CdrBytes cdrFromSample(const void* sample, const dds_topic_descriptor_t& type) {
+  dds_ostream_t out;
+  dds_ostream_init(&out, 0, CDR_ENC_VERSION_1);
+  dds_stream_write(&out, static_cast<const char*>(sample), type.m_ops);
+  CdrBytes cdr(kEncapsulation + out.m_index, 0x00);
+  cdr[1] = DDSRT_ENDIAN == DDSRT_BIG_ENDIAN ? 0x00 : 0x01;
+  if (out.m_index > 0) std::memcpy(cdr.data() + kEncapsulation, out.m_buffer, out.m_index);
+  dds_ostream_fini(&out);
+  return cdr;
 }
 
 Qos serviceRequestQos() { return Qos().reliable().keepAll().resourceLimits(256, -1, -1).xcdr1(); }

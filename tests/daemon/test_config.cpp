@@ -296,6 +296,27 @@ TEST_CASE("the DDS environment check names what the kernel or RouDi cannot give"
                     Catch::Contains("cannot read '/nonexistent/cyclone.xml'"));
 }
 
+TEST_CASE("the Cyclone config's addresses, peers, multicast and security, for the Fast DDS services") {
+  const std::string config = std::string(SL_SOURCE_DIR) + "/config/";
+  const auto loopback = sl::dds::readDdsRequirements("file://" + config + "cyclonedds-loopback.xml");
+  CHECK(loopback.interface_addresses == std::vector<std::string>{"127.0.0.1"});
+  CHECK(loopback.peer_addresses == std::vector<std::string>{"127.0.0.1"});
+  CHECK_FALSE(loopback.allow_multicast);
+  CHECK_FALSE(loopback.security);
+  // Both files of a security setup, as Cyclone takes a comma-separated URI.
+  const auto secure = sl::dds::readDdsRequirements("file://" + config + "cyclonedds-loopback.xml,file://" +
+                                                   config + "cyclonedds-security.xml");
+  CHECK(secure.security);
+  // The older element, a commented-out address, a name instead of an address.
+  const auto other = sl::dds::readDdsRequirements(
+      "<CycloneDDS><Domain><General><NetworkInterfaceAddress>192.168.1.20</NetworkInterfaceAddress>"
+      "<!-- <NetworkInterface address=\"10.0.0.1\"/> --><Interfaces><NetworkInterface name=\"eth0\"/>"
+      "</Interfaces></General></Domain></CycloneDDS>");
+  CHECK(other.interface_addresses == std::vector<std::string>{"192.168.1.20"});
+  CHECK(other.peer_addresses.empty());
+  CHECK(other.allow_multicast);
+}
+
 TEST_CASE("decoder.min_modulation takes a number or auto") {
   const auto numeric =
       sl::daemon::parseConfig(edited("min_modulation: auto", "min_modulation: 12"), "test.yaml");

@@ -88,3 +88,7 @@ target_link_libraries(forged_points PRIVATE sl_idl CycloneDDS::ddsc)
 add_test(NAME dds_security COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/daemon/security.sh
   ${PROJECT_SOURCE_DIR} ${PROJECT_BINARY_DIR})
 set_tests_properties(dds_security PROPERTIES TIMEOUT 180)
+
+# rmw_fastrtps's plain service samples <-> rmw_cyclonedds's framing (sl/dds/ros2_service.h).
+sl_add_test(test_service_framing daemon/test_service_framing.cpp)
+target_link_libraries(test_service_framing PRIVATE sl_dds sl_idl)

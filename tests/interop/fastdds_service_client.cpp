@@ -10,10 +10,13 @@
 // usage: fastdds_service_client DOMAIN NAMESPACE SERVICE TYPE HEX WAIT_S
 //   TYPE: the DDS type name without _Request_/_Response_, e.g.
 //   sl_msgs::srv::dds_::ListPatterns_
-// Prints "responses N" (responses for this client within WAIT_S) and, for
+// Prints "fast_dds_server 1" if a Fast DDS request reader and response
+// writer matched within 10 s (else 0, and the request goes to whatever
+// matched), "responses N" (responses for this client within WAIT_S) and, for
 // each, "response HEX". Exit 0 unless Fast DDS failed.
 // Fast DDS is configured from FASTRTPS_DEFAULT_PROFILES_FILE (e.g.
 // config/fastdds-loopback.xml).
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -24,8 +27,10 @@
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/publisher/DataWriterListener.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
 #include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/DataReaderListener.hpp>
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/TopicDataType.hpp>
@@ -75,6 +80,29 @@ std::string toHex(const Bytes& b) {
   }
   return hex;
 }
+
+// Whether an endpoint matched one of a Fast DDS participant (GUID prefix
+// starting with eProsima's vendor id 01.0f), as the daemon's Fast DDS
+// service endpoints are; the daemon's Cyclone endpoints match too, and
+// would answer nothing this client takes.
+bool fastDdsGuid(const fdds::InstanceHandle_t& handle) {
+  const rtps::GUID_t guid = rtps::iHandle2GUID(handle);
+  return guid.guidPrefix.value[0] == 0x01 && guid.guidPrefix.value[1] == 0x0f;
+}
+
+struct WriterMatch : fdds::DataWriterListener {
+  std::atomic<int> fast_dds{0};
+  void on_publication_matched(fdds::DataWriter*, const fdds::PublicationMatchedStatus& s) override {
+    if (fastDdsGuid(s.last_subscription_handle)) fast_dds += s.current_count_change;
+  }
+};
+
+struct ReaderMatch : fdds::DataReaderListener {
+  std::atomic<int> fast_dds{0};
+  void on_subscription_matched(fdds::DataReader*, const fdds::SubscriptionMatchedStatus& s) override {
+    if (fastDdsGuid(s.last_publication_handle)) fast_dds += s.current_count_change;
+  }
+};
 
 struct ParticipantGuard {
   fdds::DomainParticipant* p = nullptr;
@@ -132,20 +160,26 @@ int main(int argc, char** argv) {
   rqos.reliability().kind = fdds::RELIABLE_RELIABILITY_QOS;
   rqos.history().kind = fdds::KEEP_LAST_HISTORY_QOS;
   rqos.history().depth = 10;
-  fdds::DataWriter* writer = publisher->create_datawriter(rq, wqos);
-  fdds::DataReader* reader = subscriber->create_datareader(rr, rqos);
+  WriterMatch writer_match;
+  ReaderMatch reader_match;
+  fdds::DataWriter* writer = publisher->create_datawriter(rq, wqos, &writer_match);
+  fdds::DataReader* reader = subscriber->create_datareader(rr, rqos, &reader_match);
   if (!writer || !reader) return fail("create_datawriter/datareader");
 
-  // Wait until the daemon's request reader and response writer are matched.
+  // Wait until a Fast DDS request reader and response writer are matched
+  // (rcl's service_server_is_available asks the same of the graph). None
+  // within 10 s: "fast_dds_server 0", and the request is sent anyway.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  for (;;) {
-    fdds::PublicationMatchedStatus pm;
-    fdds::SubscriptionMatchedStatus sm;
-    writer->get_publication_matched_status(pm);
-    reader->get_subscription_matched_status(sm);
-    if (pm.current_count > 0 && sm.current_count > 0) break;
-    if (std::chrono::steady_clock::now() > deadline) return fail("matching the daemon's service");
+  while ((writer_match.fast_dds <= 0 || reader_match.fast_dds <= 0) &&
+         std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const bool server = writer_match.fast_dds > 0 && reader_match.fast_dds > 0;
+  std::printf("fast_dds_server %d\n", server ? 1 : 0);
+  if (!server) {
+    // Something to send to: the daemon's Cyclone endpoints at least.
+    fdds::PublicationMatchedStatus pm;
+    writer->get_publication_matched_status(pm);
+    if (pm.current_count == 0) return fail("matching the daemon's service");
   }
 
   rtps::WriteParams params;

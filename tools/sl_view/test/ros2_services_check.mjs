@@ -13,10 +13,15 @@
 //     pattern name, stop while idle) get success=false, the code and a
 //     message naming the fault, and change nothing (status before == after);
 //   - the status counters count every request;
-//   - with FASTDDS_EXE (tests/interop/fastdds_service_client): requests from
-//     a Fast DDS client framed as rmw_fastrtps are not carried out (the
-//     daemon does not serve that framing, docs/ros2.md), get no response that
-//     client would take, and are counted in requests_malformed.
+//   - with FASTDDS_EXE (tests/interop/fastdds_service_client): a client on
+//     Fast DDS framed as rmw_fastrtps (plain message, ids in the RTPS sample
+//     identity) finds the daemon's Fast DDS service endpoints and gets
+//     exactly one response per request, matched by its related sample
+//     identity (list_patterns, get_config, a bad set_pattern, start, stop:
+//     the fields right, the bad one changes nothing); a truncated request
+//     gets none and is counted in requests_malformed, the good ones are not;
+//     the rmw_cyclonedds clients never take one of those responses as theirs.
+//     Fails when the daemon runs with SL_FASTDDS_SERVICES=0.
 //   node ros2_services_check.mjs SOURCE_DIR CLIENT_EXE NAMESPACE [FASTDDS_EXE]
 import { spawn, spawnSync } from 'node:child_process';
 import readline from 'node:readline';
@@ -168,32 +173,77 @@ await settle(b, 1500);
 const stopped = mine(b, 'stop', 9);
 check(stopped.length === 1 && stopped[0].response.success === true, `stop: ${JSON.stringify(stopped[0]?.response)}`);
 
-// --- rmw_fastrtps-framed requests: counted, never carried out --------------------
-let fastDdsRequests = 0;
+// --- rmw_fastrtps-framed requests: served by the daemon's Fast DDS participant ---
+let fastDdsRequests = 0;  // answered through the dispatcher
 if (fastDdsExe) {
   await new Promise((r) => setTimeout(r, 1500));
   const idle = await b.status();
-  for (const [service, type, request] of [
-    ['list_patterns', 'sl_msgs::srv::dds_::ListPatterns_', {}],
-    ['start', 'sl_msgs::srv::dds_::Start_', startRequest({ count: 0 })]]) {
-    const bytes = new MessageWriter(definitions(`${typeOf[service]}_Request`)).writeMessage(request);
-    const run = spawnSync(fastDdsExe, ['0', ns, service, type, Buffer.from(bytes).toString('hex'), '2'],
-                          { encoding: 'utf8', timeout: 30000 });
+  let fastServer = true;
+  const ownBefore = [a, b].map((c) => c.replies.filter((r) => r.guid === c.guids[r.service]).length);
+  const typeName = (service) => {
+    const [pkg, , name] = typeOf[service].split('/');
+    return `${pkg}::srv::dds_::${name}_`;
+  };
+  // One fastdds_service_client call: its responses decoded by Foxglove, or null
+  // when no Fast DDS server endpoint matched (e.g. SL_FASTDDS_SERVICES=0).
+  const fastCall = (service, bytes) => {
+    const run = spawnSync(fastDdsExe, ['0', ns, service, typeName(service), Buffer.from(bytes).toString('hex'), '2'],
+                          { encoding: 'utf8', timeout: 40000 });
     check(run.status === 0, `fastdds_service_client ${service}: exit ${run.status}: ${run.stderr}`);
-    check(/^responses 0$/m.test(run.stdout), `Fast DDS ${service}: ${run.stdout.trim()} (expected no response it takes)`);
+    fastServer = check(/^fast_dds_server 1$/m.test(run.stdout ?? ''),
+                       `Fast DDS ${service}: no Fast DDS service endpoint of the daemon matched`);
+    if (!fastServer) return null;
+    return (run.stdout.match(/^response [0-9a-f]+$/gm) ?? []).map((l) =>
+      new MessageReader(definitions(`${typeOf[service]}_Response`)).readMessage(Buffer.from(l.split(' ')[1], 'hex')));
+  };
+  const request = (service, message) => new MessageWriter(definitions(`${typeOf[service]}_Request`)).writeMessage(message);
+  const one = (service, message, what) => {
+    const got = fastCall(service, request(service, message));
+    if (got === null) return null;
     fastDdsRequests++;
+    check(got.length === 1, `Fast DDS ${what}: ${got.length} responses it takes, expected 1`);
+    return got[0] ?? null;
+  };
+  const list = one('list_patterns', {}, 'list_patterns');
+  if (fastServer) {
+    check(list && list.patterns.join(',') === idle.patterns.join(',') && list.current === idle.pattern,
+          `Fast DDS list_patterns: ${JSON.stringify(list)} (status: ${idle.patterns} / ${idle.pattern})`);
+    const config = one('get_config', {}, 'get_config');
+    check(config && config.config.includes(`namespace: ${ns}`), `Fast DDS get_config lacks 'namespace: ${ns}'`);
+    const badPattern = one('set_pattern', { pattern: 'no_such_pattern' }, 'set_pattern no_such_pattern');
+    check(badPattern && badPattern.success === false && badPattern.code === 1 && badPattern.message.includes('no_such_pattern'),
+          `Fast DDS bad set_pattern: ${JSON.stringify(badPattern)}`);
+    await new Promise((r) => setTimeout(r, 1500));
+    const unchanged = await b.status();
+    check(unchanged && unchanged.state === 0 && unchanged.pattern === idle.pattern,
+          `a bad Fast DDS request changed the state: ${unchanged?.state} '${unchanged?.pattern}'`);
+    const started = one('start', startRequest({ count: 0 }), 'start');
+    check(started && started.success === true && started.code === 0, `Fast DDS start: ${JSON.stringify(started)}`);
+    await new Promise((r) => setTimeout(r, 1500));
+    const running = await b.status();
+    check(running && running.state !== 0, `after a Fast DDS start the state is ${running?.state}`);
+    const stopped = one('stop', {}, 'stop');
+    check(stopped && stopped.success === true, `Fast DDS stop: ${JSON.stringify(stopped)}`);
+    // A request cut short: no response, counted as malformed, not dispatched.
+    const cut = Buffer.from(request('set_pattern', { pattern: 'some_long_pattern_name' })).subarray(0, 12);
+    const none = fastCall('set_pattern', cut);
+    check(none !== null && none.length === 0, `Fast DDS truncated set_pattern: ${none?.length} responses`);
+    await new Promise((r) => setTimeout(r, 1500));
+    const later = await b.status();
+    check(later && later.state === 0, `after a Fast DDS stop the state is ${later?.state}`);
+    check(later && later.requests_malformed - idle.requests_malformed === 1n,
+          `requests_malformed grew by ${later?.requests_malformed - idle?.requests_malformed}, expected 1 (the truncated request)`);
+    await Promise.all([settle(a, 500), settle(b, 500)]);
+    const ownAfter = [a, b].map((c) => c.replies.filter((r) => r.guid === c.guids[r.service]).length);
+    check(ownAfter.join() === ownBefore.join(),
+          `the rmw_cyclonedds clients took Fast DDS responses as theirs: ${ownBefore} -> ${ownAfter}`);
   }
-  await new Promise((r) => setTimeout(r, 1500));
-  const later = await b.status();
-  check(later && later.state === idle.state && later.state === 0, `a Fast DDS start changed the state to ${later?.state}`);
-  check(later && later.requests_malformed - idle.requests_malformed === BigInt(fastDdsRequests),
-        `requests_malformed grew by ${later?.requests_malformed - idle?.requests_malformed}, ${fastDdsRequests} Fast DDS requests`);
 }
 
 // --- every request counted ----------------------------------------------------------
 await new Promise((r) => setTimeout(r, 1500));
 const end = await b.status();
-const sent = 4 + 5 + 2;
+const sent = 4 + 5 + 2 + fastDdsRequests;
 check(end && end.requests_received - before.requests_received === BigInt(sent),
       `requests_received grew by ${end?.requests_received - before?.requests_received}, ${sent} sent`);
 check(end && end.requests_answered - before.requests_answered === BigInt(sent),

@@ -18,6 +18,15 @@ struct DdsRequirements {
   std::optional<std::int64_t> receive_buffer_bytes;  // Internal/SocketReceiveBufferSize max
   std::optional<std::int64_t> send_buffer_bytes;     // Internal/SocketSendBufferSize max
   bool shared_memory = false;                         // SharedMemory/Enable true
+  // What a second DDS stack in the daemon (fastdds_services.h) must bind to
+  // and talk to, to stay where Cyclone is: the IPv4 addresses of
+  // General/Interfaces/NetworkInterface address= (and the older
+  // General/NetworkInterfaceAddress), of Discovery/Peers/Peer address=, and
+  // General/AllowMulticast.
+  std::vector<std::string> interface_addresses;
+  std::vector<std::string> peer_addresses;
+  bool allow_multicast = true;                        // AllowMulticast false: false
+  bool security = false;                              // a Security / DDSSecurity section
   std::vector<std::string> sources;                   // files read ("inline XML" for text)
 };
 

@@ -18,14 +18,19 @@
 #include <atomic>
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 namespace sl::dds {
 
 class MalformedSampleCounter {
  public:
   // Counts from now on, until destroyed. Create it before the topic's reader
-  // (a sample may fail as soon as the reader is matched).
-  MalformedSampleCounter(const std::string& topic_name, const std::string& type_name);
+  // (a sample may fail as soon as the reader is matched). With
+  // `ignore_fast_dds`, samples from Fast DDS writers (Cyclone's warning says
+  // "vendor 1.15": eProsima) are neither counted nor logged: another
+  // participant serves them (fastdds_services.h).
+  MalformedSampleCounter(const std::string& topic_name, const std::string& type_name,
+                         bool ignore_fast_dds = false);
   ~MalformedSampleCounter();
   MalformedSampleCounter(const MalformedSampleCounter&) = delete;
   MalformedSampleCounter& operator=(const MalformedSampleCounter&) = delete;
@@ -36,9 +41,12 @@ class MalformedSampleCounter {
   const std::string& needle() const { return needle_; }
   // Counts one dropped sample; true if its log line should be printed.
   bool add();
+  // Whether the warning `text` is about a sample this counter leaves alone.
+  bool ignores(std::string_view text) const;
 
  private:
   const std::string needle_;  // "deserialization <topic>/<type> failed"
+  const bool ignore_fast_dds_;
   std::atomic<std::uint64_t> count_{0};
 };
 

@@ -14,7 +14,10 @@
 // rmw_fastrtps frames services differently (the ids in the RTPS sample
 // identity, the plain message as payload), which a Cyclone DDS writer cannot
 // produce: requests from Fast DDS writers are recognised by their GUID
-// (fromFastDds) so that they are counted, never carried out as garbage.
+// (fromFastDds) and left to the daemon's Fast DDS participant
+// (fastdds_services.h), whose plain samples framedFromPlainCdr /
+// plainFromFramedCdr convert to and from this framing, so that one parser
+// (sampleFromCdr) and one serializer (cdrFromSample) serve both.
 //
 // Thread-compatible, like the dds:: wrappers it holds.
 #pragma once
@@ -24,6 +27,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "sl/dds/dds.h"
 
@@ -54,6 +58,30 @@ bool fromFastDds(dds_entity_t reader, dds_instance_handle_t writer);
 enum class ClientReader { kMatched, kNotYet, kGone };
 ClientReader clientReader(dds_entity_t request_reader, dds_instance_handle_t request_writer,
                           dds_entity_t response_writer);
+
+// A serialized sample: the 4-byte encapsulation (plain CDR, XCDR1: 00 00
+// big-endian or 00 01 little-endian, then 2 option bytes) and the message.
+using CdrBytes = std::vector<unsigned char>;
+
+// rmw_fastrtps's plain request or response to rmw_cyclonedds's framing: the
+// header (guid, seq: 16 bytes in the encapsulation's byte order) inserted
+// after the encapsulation. The header keeps every later field's CDR
+// alignment (16 is a multiple of 8). nullopt if `plain` has no plain-CDR
+// encapsulation or no message byte after it.
+std::optional<CdrBytes> framedFromPlainCdr(const CdrBytes& plain, std::uint64_t guid,
+                                           std::int64_t seq);
+// The reverse: the header removed. nullopt if `framed` has no plain-CDR
+// encapsulation or is not longer than encapsulation + header.
+std::optional<CdrBytes> plainFromFramedCdr(const CdrBytes& framed);
+
+// `cdr` (plain CDR, either byte order) into `sample`, a zeroed sample of
+// `type` (free it with dds_sample_free(..., DDS_FREE_CONTENTS) whatever the
+// result). False, leaving nothing to free, if the bytes are not a valid
+// `type` (truncated, a bool or enum out of range, a bound exceeded):
+// Cyclone's own validation (dds_stream_normalize_data) runs first.
+bool sampleFromCdr(const CdrBytes& cdr, void* sample, const dds_topic_descriptor_t& type);
+// `sample` of `type` as plain CDR in this host's byte order.
+CdrBytes cdrFromSample(const void* sample, const dds_topic_descriptor_t& type);
 
 // QoS of both endpoints: reliable, XCDR1; the request reader keeps every
 // request up to a bound (a flood is held back by the reliable protocol, as on
