@@ -30,8 +30,8 @@ struct DecodeHealthLimits {
   // Fewer modulated pixels than this: too little to judge (not implausible).
   std::int64_t min_modulated_pixels = 2000;
   // Implausible above these (codes with a consistency test only).
-  double max_inconsistent_fraction = 0.15;
-  double max_median_residual = 0.10;  // periods (micro phase shift: RMS cosine)
+  double max_inconsistent_fraction = 0.20;
+  double max_median_residual = 0.17;  // periods (micro phase shift: RMS cosine)
   // Implausible above this (every code): the coordinates run past the
   // projector, which a right description only gives through noise at the
   // last pixel (another period or pitch than the one projected, or another
