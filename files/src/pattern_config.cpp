@@ -97,6 +97,7 @@ std::string keyOfField(const std::string& field, const std::string& frequency_ke
   if (field == "frequencies") return frequency_key;
   if (field == "frame_order") return order_key;
   if (field == "carrier_pitch") return "carrier_pitch_px";
+  if (field == "further_phases") return "further_phases_deg";
   return field;  // steps, shift_sign, bits, reference_frames
 }
 
@@ -199,12 +200,29 @@ PatternSpec parsePattern(const YamlMap& m, const std::string& name,
         p.steps = m.get<int>("steps", 3);
         frequency_key = frequencies(m, p);
         parseSinusoid(m, p);
+        // The shift of each further frequency's frame (degrees), default
+        // start_phase_deg.
+        for (double deg : m.get<std::vector<double>>("further_phases_deg", {}))
+          p.further_phases_rad.push_back(deg * std::numbers::pi / 180.0);
         break;
       case PatternFamily::kModulatedPhaseShift:
         p.steps = m.get<int>("steps", 3);
         frequency_key = frequencies(m, p);
         p.carrier_pitch_px = m.get<double>("carrier_pitch_px", p.carrier_pitch_px);
         parseSinusoid(m, p);
+        if (m.has("modulated_sets")) {
+          // One true/false per frequency: with the carrier or without.
+          const YAML::Node list = m.raw("modulated_sets");
+          if (!list.IsSequence())
+            m.fail("modulated_sets", "must be a list of true/false, one per frequency");
+          for (const YAML::Node& item : list) {
+            try {
+              p.modulated_sets.push_back(item.as<bool>());
+            } catch (const YAML::Exception&) {
+              m.fail("modulated_sets", "must be a list of true/false, one per frequency");
+            }
+          }
+        }
         break;
     }
   }
@@ -292,8 +310,20 @@ std::vector<std::pair<std::string, std::string>> patternKeys(const PatternSpec& 
   if (sinusoid && !gray) keys.emplace_back("frequencies", numbers(p.frequencies, digits));
   if (p.family == PatternFamily::kPhaseShift)
     keys.emplace_back("unwrapping", pipeline::toString(p.unwrapping));
-  if (p.family == PatternFamily::kModulatedPhaseShift)
+  if (p.family == PatternFamily::kModulatedPhaseShift) {
     keys.emplace_back("carrier_pitch_px", number(p.carrier_pitch_px, digits));
+    if (!p.modulated_sets.empty()) {
+      std::string list = "[";
+      for (std::size_t j = 0; j < p.modulated_sets.size(); ++j)
+        list += std::string(j ? ", " : "") + boolean(p.modulated_sets[j]);
+      keys.emplace_back("modulated_sets", list + "]");
+    }
+  }
+  if (p.family == PatternFamily::kMicroPhaseShift && !p.further_phases_rad.empty()) {
+    std::vector<double> deg;
+    for (double rad : p.further_phases_rad) deg.push_back(rad * 180.0 / std::numbers::pi);
+    keys.emplace_back("further_phases_deg", numbers(deg, digits));
+  }
   if (gray) {
     if (p.gray_pitch_px > 0) keys.emplace_back("pitch_px", number(p.gray_pitch_px, digits));
     else keys.emplace_back("bits", std::to_string(p.gray_bits));

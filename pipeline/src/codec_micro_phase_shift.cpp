@@ -5,7 +5,7 @@
 //
 // Per pixel: the 3-step set gives the offset O, amplitude A and wrapped phase
 // phi_0 of the first frequency; each further frame gives c_j = (I_j - O) / A
-// = cos(2 pi f_j p / L - delta_0) at the same amplitude (the band is narrow).
+// = cos(2 pi f_j p / L - delta_j) at the same amplitude (the band is narrow).
 // The coordinate is the candidate p_k = (phi_0 / 2 pi + k) L / f_0 whose
 // predicted cosines match the c_j best (least squares over j); the cosines of
 // consecutive candidates follow by rotation (angle step 2 pi f_j / f_0), so a
@@ -38,9 +38,9 @@ class MicroPhaseShiftCodec final : public RowTemplateCodec<MicroPhaseShiftCodec>
       ws_[n] = static_cast<float>(std::sin(frames[n].delta));
       wc_[n] = static_cast<float>(std::cos(frames[n].delta));
     }
-    delta0_ = frames[0].delta;
     f0_ = spec.frequencies[0];
     for (std::size_t j = 1; j < spec.frequencies.size(); ++j) {
+      delta_.push_back(static_cast<float>(frames[2 + j].delta));
       const double step = 2.0 * std::numbers::pi * spec.frequencies[j] / f0_;
       ratio_.push_back(static_cast<float>(spec.frequencies[j] / f0_));
       step_cos_.push_back(static_cast<float>(std::cos(step)));
@@ -90,7 +90,7 @@ class MicroPhaseShiftCodec final : public RowTemplateCodec<MicroPhaseShiftCodec>
       // Rotating (cos, sin) of 2 pi f_j p_k / L - delta_0 per frequency.
       float cr[16], sr[16];
       for (int j = 0; j < others; ++j) {
-        const float angle = kTwoPi * ratio_[j] * (phi * (1.0f / kTwoPi)) - static_cast<float>(delta0_);
+        const float angle = kTwoPi * ratio_[j] * (phi * (1.0f / kTwoPi)) - delta_[j];
         cr[j] = std::cos(angle);
         sr[j] = std::sin(angle);
       }
@@ -121,8 +121,8 @@ class MicroPhaseShiftCodec final : public RowTemplateCodec<MicroPhaseShiftCodec>
   }
 
   float ws_[3]{}, wc_[3]{};
-  double delta0_ = 0, f0_ = 1;
-  std::vector<float> ratio_, step_cos_, step_sin_;
+  double f0_ = 1;
+  std::vector<float> delta_, ratio_, step_cos_, step_sin_;
   int candidates_ = 1;
 };
 

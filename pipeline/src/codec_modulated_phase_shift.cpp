@@ -10,7 +10,9 @@
 //
 // Frames per direction: for each frequency (listed order), for each step n,
 // the three carrier shifts m = 0, 1, 2 (carrier 0.5 + 0.5 cos(2 pi q /
-// carrier_pitch - 2 pi m / 3), q the other axis' coordinate).
+// carrier_pitch - 2 pi m / 3), q the other axis' coordinate); a set without
+// carrier (PatternSpec::modulated_sets) has one frame per step, whose
+// intensity (direct and global light) stands for the direct part.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -43,18 +45,23 @@ class ModulatedPhaseShiftCodec final : public RowTemplateCodec<ModulatedPhaseShi
     const auto frames = canonicalFrames(spec);
     const int sets = static_cast<int>(spec.frequencies.size());
     const int steps = spec.steps;
+    int first = 0, modulated_first = -1;
     for (int j = 0; j < sets; ++j) {
       Set s;
       s.frequency = spec.frequencies[j];
+      s.first = first;
+      s.carriers = spec.setModulated(static_cast<std::size_t>(j)) ? 3 : 1;
+      if (s.carriers == 3 && modulated_first < 0) modulated_first = first;
       for (int n = 0; n < steps; ++n) {
-        const FrameInfo& f = frames[(j * steps + n) * 3];
+        const FrameInfo& f = frames[static_cast<std::size_t>(first + n * s.carriers)];
         s.ws.push_back(static_cast<float>(std::sin(f.delta)));
         s.wc.push_back(static_cast<float>(std::cos(f.delta)));
       }
+      first += steps * s.carriers;
       sets_.push_back(s);
     }
     for (int m = 0; m < 3; ++m) {
-      const double shift = frames[m].carrier_shift;
+      const double shift = frames[static_cast<std::size_t>(modulated_first + m)].carrier_shift;
       carrier_ws_[m] = static_cast<float>(std::sin(shift));
       carrier_wc_[m] = static_cast<float>(std::cos(shift));
     }
@@ -71,6 +78,8 @@ class ModulatedPhaseShiftCodec final : public RowTemplateCodec<ModulatedPhaseShi
 
   struct Set {
     double frequency = 0;
+    int first = 0;     // frame of step 0 within the direction
+    int carriers = 3;  // frames per step: 3 carrier shifts, or 1 without carrier
     std::vector<float> ws, wc;
   };
 
@@ -95,15 +104,18 @@ class ModulatedPhaseShiftCodec final : public RowTemplateCodec<ModulatedPhaseShi
         const Set& s = sets_[j];
         float ps = 0, pc = 0, sum = 0;
         for (int n = 0; n < steps; ++n) {
-          const int first = (j * steps + n) * 3;
-          float cs = 0, cc = 0;
-          for (int m = 0; m < 3; ++m) {
-            const float v = frames[first + m][x];
-            cs += carrier_ws_[m] * v;
-            cc += carrier_wc_[m] * v;
+          const int first = s.first + n * s.carriers;
+          float d = frames[first][x];
+          if (s.carriers == 3) {
+            float cs = 0, cc = 0;
+            for (int m = 0; m < 3; ++m) {
+              const float v = frames[first + m][x];
+              cs += carrier_ws_[m] * v;
+              cc += carrier_wc_[m] * v;
+            }
+            // Carrier amplitude: (2/3) |(cs, cc)| = half the direct intensity.
+            d = (4.0f / 3.0f) * std::sqrt(cs * cs + cc * cc);
           }
-          // Carrier amplitude: (2/3) |(cs, cc)| = half the direct intensity.
-          const float d = (4.0f / 3.0f) * std::sqrt(cs * cs + cc * cc);
           ps += s.ws[n] * d;
           pc += s.wc[n] * d;
           sum += d;

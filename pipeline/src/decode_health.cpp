@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include <Eigen/LU>
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -355,6 +357,61 @@ DecodeHealth measureDecodeHealth(const PatternSpec& spec, const DecoderOptions& 
   return h;
 }
 
+void addEpipolarCheck(DecodeHealth& health, const ProjectorMaps& maps,
+                      const CameraProjectorCalibration& calibration, bool undistort_projector,
+                      const DecodeHealthLimits& limits) {
+  if (maps.up.empty() || maps.vp.empty() || maps.status.empty()) return;
+  // Essential matrix of X_p = R X_c + t: a camera ray x_c (normalized) meets
+  // the projector's normalized image on the line E x_c; in projector pixels
+  // the line is K_p^-T E x_c.
+  Eigen::Matrix3d tx;
+  const Eigen::Vector3d& t = calibration.t;
+  tx << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
+  const Eigen::Matrix3d F = calibration.projector.K().inverse().transpose() * tx * calibration.R;
+  const PinholeModel& camera = calibration.camera;
+  const PinholeModel& projector = calibration.projector;
+  const bool camera_distorted = camera.hasDistortion();
+  const bool projector_distorted = undistort_projector && projector.hasDistortion();
+  const Eigen::Matrix3d Kp = projector.K();
+  std::vector<float> distance;
+  for (int v = 0; v < maps.status.rows; ++v) {
+    const auto* st = maps.status.ptr<std::uint8_t>(v);
+    const float* up = maps.up.ptr<float>(v);
+    const float* vp = maps.vp.ptr<float>(v);
+    for (int u = 0; u < maps.status.cols; ++u) {
+      if (st[u] != 0 || !std::isfinite(up[u]) || !std::isfinite(vp[u])) continue;
+      const Eigen::Vector2d xn =
+          camera_distorted ? camera.pixelToNormalized(Eigen::Vector2d(u, v))
+                           : Eigen::Vector2d((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy);
+      const Eigen::Vector3d line = F * Eigen::Vector3d(xn.x(), xn.y(), 1.0);
+      Eigen::Vector3d q(up[u], vp[u], 1.0);
+      if (projector_distorted) {
+        const Eigen::Vector2d pn = projector.pixelToNormalized(Eigen::Vector2d(up[u], vp[u]));
+        q = Kp * Eigen::Vector3d(pn.x(), pn.y(), 1.0);
+      }
+      const double norm = std::hypot(line.x(), line.y());
+      if (!(norm > 0)) continue;
+      distance.push_back(static_cast<float>(std::abs(line.dot(q)) / norm));
+    }
+  }
+  if (distance.empty()) return;
+  health.has_epipolar = true;
+  health.epipolar_pixels = static_cast<std::int64_t>(distance.size());
+  std::sort(distance.begin(), distance.end());
+  health.epipolar_median_px = quantile(distance, 0.5);
+  health.epipolar_p90_px = quantile(distance, 0.9);
+  if (health.epipolar_pixels >= limits.min_epipolar_pixels &&
+      health.epipolar_median_px > limits.max_epipolar_median_px) {
+    health.problems.push_back(
+        "decoded projector coordinates lie a median " + fixed(health.epipolar_median_px, 1) +
+        " px off the epipolar lines of the calibration (limit " +
+        fixed(limits.max_epipolar_median_px, 1) +
+        " px): is the fringe pitch or period of the pattern file the projected one, and is the "
+        "calibration the rig's?");
+    health.implausible = true;
+  }
+}
+
 std::string describeDecodeHealth(const DecodeHealth& h, const std::string& prefix) {
   std::ostringstream o;
   o << prefix << "pixels " << h.pixels << ": " << h.valid << " valid, " << h.low_modulation
@@ -370,6 +427,9 @@ std::string describeDecodeHealth(const DecodeHealth& h, const std::string& prefi
     for (double b : h.residual_histogram) o << " " << fixed(100.0 * b, 1);
     o << " %\n";
   }
+  if (h.has_epipolar)
+    o << prefix << "epipolar distance of (up, vp), " << h.epipolar_pixels << " pixels: median "
+      << fixed(h.epipolar_median_px, 2) << " px, p90 " << fixed(h.epipolar_p90_px, 2) << " px\n";
   if (!h.modulation.empty()) {
     o << prefix << "modulation B (8-bit DN, median):";
     for (const FrequencyModulation& m : h.modulation)

@@ -127,7 +127,8 @@ double PatternSpec::microSeparation() const {
         double d = 0;
         for (std::size_t j = 1; j < frequencies.size(); ++j) {
           const double w = 2.0 * kPi * frequencies[j] / axis;
-          const double e = std::cos(w * p - start_phase_rad) - std::cos(w * q - start_phase_rad);
+          const double delta = furtherPhase(j);
+          const double e = std::cos(w * p - delta) - std::cos(w * q - delta);
           d += e * e;
         }
         worst = std::min(worst, d);
@@ -151,8 +152,12 @@ int PatternSpec::framesPerDirection() const {
     case PatternFamily::kGrayCode: return bits_frames;
     case PatternFamily::kGrayPhaseShift: return bits_frames + steps;
     case PatternFamily::kMicroPhaseShift: return static_cast<int>(frequencies.size()) + 2;
-    case PatternFamily::kModulatedPhaseShift:
-      return 3 * steps * static_cast<int>(frequencies.size());
+    case PatternFamily::kModulatedPhaseShift: {
+      int frames = 0;
+      for (std::size_t j = 0; j < frequencies.size(); ++j)
+        frames += (j < modulated_sets.size() && !modulated_sets[j] ? 1 : 3) * steps;
+      return frames;
+    }
   }
   return 0;
 }
@@ -193,6 +198,26 @@ void PatternSpec::validate() const {
     const int other = direction == Direction::kVertical ? projector_width : projector_height;
     if (!(carrier_pitch_px >= 3.0 && carrier_pitch_px <= other))
       fail("carrier_pitch", "must be in 3.." + std::to_string(other) + " px");
+    if (!modulated_sets.empty()) {
+      if (modulated_sets.size() != frequencies.size())
+        fail("modulated_sets", "must give one entry per frequency (" +
+                                   std::to_string(modulated_sets.size()) + " for " +
+                                   std::to_string(frequencies.size()) + " frequencies)");
+      if (std::find(modulated_sets.begin(), modulated_sets.end(), true) == modulated_sets.end())
+        fail("modulated_sets", "must modulate at least one set (else describe it as phase_shift)");
+    }
+  } else if (!modulated_sets.empty()) {
+    fail("modulated_sets", "is for modulated_phase_shift only");
+  }
+  if (family == PatternFamily::kMicroPhaseShift) {
+    if (!further_phases_rad.empty() && further_phases_rad.size() + 1 != frequencies.size())
+      fail("further_phases", "must give one shift per frequency after the first (" +
+                                 std::to_string(further_phases_rad.size()) + " for " +
+                                 std::to_string(frequencies.size()) + " frequencies)");
+    for (double d : further_phases_rad)
+      if (!std::isfinite(d)) fail("further_phases", "must be finite");
+  } else if (!further_phases_rad.empty()) {
+    fail("further_phases", "is for micro_phase_shift only");
   }
   if (family == PatternFamily::kMicroPhaseShift) {
     if (steps != 3) fail("steps", "must be 3 for micro_phase_shift (its first frequency has 3 shifts)");
@@ -379,13 +404,14 @@ std::vector<FrameInfo> canonicalFrames(const PatternSpec& s) {
         for (int n = 0; n < 3; ++n)
           sinusoid(s.frequencies[0], 0.0, s.start_phase_rad + sign * 2.0 * kPi * n / 3);
         for (std::size_t j = 1; j < s.frequencies.size(); ++j)
-          sinusoid(s.frequencies[j], 0.0, s.start_phase_rad);
+          sinusoid(s.frequencies[j], 0.0, s.furtherPhase(j));
         break;
       case PatternFamily::kModulatedPhaseShift:
-        for (double fr : s.frequencies)
+        for (std::size_t j = 0; j < s.frequencies.size(); ++j)
           for (int n = 0; n < s.steps; ++n)
-            for (int m = 0; m < 3; ++m) {
-              sinusoid(fr, 0.0, s.start_phase_rad + sign * 2.0 * kPi * n / s.steps);
+            for (int m = 0; m < (s.setModulated(j) ? 3 : 1); ++m) {
+              sinusoid(s.frequencies[j], 0.0, s.start_phase_rad + sign * 2.0 * kPi * n / s.steps);
+              if (!s.setModulated(j)) continue;
               frames.back().carrier_pitch = s.carrier_pitch_px;
               frames.back().carrier_shift = 2.0 * kPi * m / 3;
             }

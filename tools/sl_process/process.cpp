@@ -177,6 +177,8 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
     r.maps = codec->decode(ideal, frames.bit_depth);
     r.health =
         pipeline::measureDecodeHealth(pattern, codec->options(), r.maps, ideal, frames.bit_depth);
+    pipeline::addEpipolarCheck(r.health, r.maps, pinhole,
+                               triangulator.projector_distortion_iterations > 0);
     smoothProjectorCoordinates(r.maps, smooth_sigma_px);
     r.cloud = pipeline::Triangulator(pinhole, triangulator).triangulate(r.maps);
     return r;
@@ -184,6 +186,8 @@ ProcessResult processCapture(const pipeline::PatternSpec& pattern,
   r.maps = codec->decode(frames.frames, frames.bit_depth);
   r.health = pipeline::measureDecodeHealth(pattern, codec->options(), r.maps, frames.frames,
                                            frames.bit_depth);
+  pipeline::addEpipolarCheck(r.health, r.maps, calibration,
+                             triangulator.projector_distortion_iterations > 0);
   smoothProjectorCoordinates(r.maps, smooth_sigma_px);
   r.cloud = pipeline::Triangulator(calibration, triangulator).triangulate(r.maps);
   return r;

@@ -93,7 +93,8 @@ struct PhaseMaps {
 PhaseMaps phaseMaps(const pipeline::PatternSpec& pattern, const cv::Mat& coordinate,
                     bool columns);
 
-// Decodes and triangulates one capture. The camera size of the calibration
+// Decodes and triangulates one capture; the health includes the epipolar
+// check (pipeline::addEpipolarCheck) when both axes are decoded. The camera size of the calibration
 // must equal the frames' size, and its projector size the pattern's
 // (std::invalid_argument otherwise).
 //

@@ -16,6 +16,7 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "sl/pipeline/camera_model.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/types.h"
@@ -29,8 +30,8 @@ struct DecodeHealthLimits {
   // Fewer modulated pixels than this: too little to judge (not implausible).
   std::int64_t min_modulated_pixels = 2000;
   // Implausible above these (codes with a consistency test only).
-  double max_inconsistent_fraction = 0.15;
-  double max_median_residual = 0.10;  // periods (micro phase shift: RMS cosine)
+  double max_inconsistent_fraction = 0.20;
+  double max_median_residual = 0.17;  // periods (micro phase shift: RMS cosine)
   // Implausible above this (every code): the coordinates run past the
   // projector, which a right description only gives through noise at the
   // last pixel (another period or pitch than the one projected, or another
@@ -38,6 +39,13 @@ struct DecodeHealthLimits {
   double max_out_of_range_fraction = 0.02;
   // A warning above this fraction of all pixels.
   double max_saturated_fraction = 0.05;
+  // Epipolar consistency (addEpipolarCheck, both projector axes decoded and
+  // a calibration): implausible when the median distance of the decoded
+  // projector coordinate (up, vp) to the epipolar line of its camera pixel
+  // exceeds this (projector px).
+  double max_epipolar_median_px = 5.0;
+  // Fewer valid pixels with both coordinates than this: not judged.
+  std::int64_t min_epipolar_pixels = 2000;
 };
 
 // Median modulation B (8-bit DN, i.e. camera DN / 2^(bit_depth - 8)) of one
@@ -73,6 +81,15 @@ struct DecodeHealth {
   double max_unwrap_error = 0;  // the decoder's bound, for the reader
 
   std::vector<FrequencyModulation> modulation;
+
+  // Epipolar consistency (addEpipolarCheck): distance (projector px) of the
+  // decoded (up, vp) of each valid pixel to the epipolar line the
+  // calibration gives its camera pixel. A right description leaves the
+  // calibration's error; another pitch or period scales a coordinate away
+  // from the line. Only with both axes decoded and a calibration.
+  bool has_epipolar = false;
+  std::int64_t epipolar_pixels = 0;
+  double epipolar_median_px = 0, epipolar_p90_px = 0;
 
   // Judgement against DecodeHealthLimits: `implausible` with one sentence per
   // failed limit in `problems`; `warnings` for what deserves a look.
@@ -123,6 +140,19 @@ DecodeHealth judgeDecodeTally(const PatternSpec& spec, const DecoderOptions& opt
 DecodeHealth measureDecodeHealth(const PatternSpec& spec, const DecoderOptions& options,
                                  const ProjectorMaps& maps, const std::vector<cv::Mat>& frames,
                                  int bit_depth, const DecodeHealthLimits& limits = {});
+
+// Adds the epipolar consistency of `maps` (both axes decoded: up and vp
+// finite at valid pixels) to `health` and judges it against
+// limits.max_epipolar_median_px (a problem, implausible, above it). Camera
+// pixels are undistorted with calibration.camera's model (give a
+// distortion-free camera when the maps are of undistorted images); the
+// projector's coordinates with calibration.projector's when
+// `undistort_projector` (as the triangulator does with distortion
+// iterations), else taken as pinhole pixels. Maps of one axis leave
+// `health` as it is (has_epipolar false).
+void addEpipolarCheck(DecodeHealth& health, const ProjectorMaps& maps,
+                      const CameraProjectorCalibration& calibration, bool undistort_projector,
+                      const DecodeHealthLimits& limits = {});
 
 // Multi-line text (each line starting with `prefix`): counts, fractions,
 // residual quantiles and histogram, modulation per frequency, problems and

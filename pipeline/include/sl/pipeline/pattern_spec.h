@@ -58,8 +58,10 @@ enum class PatternFamily {
   // Micro phase shifting (Gupta and Nayar 2012): F >= 2 high frequencies in a
   // narrow band; per direction F + 2 frames: the first listed frequency at
   // the three shifts delta_0, delta_1, delta_2 (steps is 3), then each
-  // further frequency once at delta_0. No unit cue: the coordinate is the
-  // candidate period of the first frequency whose cosines match the others'.
+  // further frequency once at delta_0, or at its own shift
+  // (further_phases_rad; SLStudio puts every other one at pi). No unit cue:
+  // the coordinate is the candidate period of the first frequency whose
+  // cosines match the others'.
   kMicroPhaseShift,
   // Modulated phase shifting (Chen, Stewart, Yang 2008): the N-step sets of
   // kPhaseShift (hierarchical unwrapping) with every frame multiplied by a
@@ -67,6 +69,8 @@ enum class PatternFamily {
   // other projector axis q, at m = 0, 1, 2: per direction, for each
   // frequency, for each step, the three carrier shifts (3 N F frames). The
   // carrier separates direct light from interreflections and scattering.
+  // A set marked unmodulated (modulated_sets) is projected as phase_shift's
+  // N frames without carrier (SLStudio's unit-frequency cue).
   kModulatedPhaseShift,
 };
 
@@ -114,6 +118,15 @@ struct PatternSpec {
   double offset = 0.5;           // mean relative intensity
   double amplitude = 0.5;        // offset +- amplitude must stay in [0, 1]
   double carrier_pitch_px = 8.0; // kModulatedPhaseShift: carrier period along the other axis
+  // kModulatedPhaseShift: per frequency (listed order) whether its set is
+  // multiplied by the carrier (3 frames per step) or projected without it
+  // (1 frame per step). Empty = every set modulated; else one entry per
+  // frequency, at least one true.
+  std::vector<bool> modulated_sets;
+  // kMicroPhaseShift: the shift delta (rad) of the frame of each further
+  // frequency (frequencies[1..]), in place of delta_0: I = offset + amplitude
+  // cos(2 pi f_j p / L - further_phases_rad[j - 1]). Empty = all at delta_0.
+  std::vector<double> further_phases_rad;
 
   // --- Gray code (kGrayCode, kGrayPhaseShift) ---
   // Projected bits, MSB first, of the ceil(log2(L))-bit code of the
@@ -144,6 +157,12 @@ struct PatternSpec {
   int codeFrameCount() const;
   // Frames of one direction.
   int framesPerDirection() const;
+  // kModulatedPhaseShift: whether set j (listed order) carries the carrier.
+  bool setModulated(std::size_t j) const { return modulated_sets.empty() || modulated_sets.at(j); }
+  // kMicroPhaseShift: the shift (rad) of further frequency j >= 1.
+  double furtherPhase(std::size_t j) const {
+    return further_phases_rad.empty() ? start_phase_rad : further_phases_rad.at(j - 1);
+  }
   // Extent (px) of the encoded axis: width for columns, height for rows.
   int axisLength(bool columns) const { return columns ? projector_width : projector_height; }
   // Gray code: bits of the full code of an axis of L px, and the bits used.
