@@ -66,6 +66,7 @@ double EngineStatistics::frameRateHz() {
 void EngineStatistics::fillStatus(EngineStatus& s) {
   s.sets_incomplete = setsIncomplete();
   s.frame_rate_hz = frameRateHz();
+  s.frames_received = frames_received_.load();
   const StageSummary stages = stageSummary();
   s.latency_ms = stages.total_median_ms;
   s.latency_max_ms = stages.total_max_ms;

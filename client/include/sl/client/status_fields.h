@@ -29,6 +29,7 @@
   X(std::uint64_t, scans_requested, "scans requested (0: continuous)")                          \
   X(double, scan_rate_hz, "scan rate [Hz]")     /* clouds per second, smoothed */               \
   X(double, frame_rate_hz, "frame rate [Hz]")   /* camera frames per second, all cameras */     \
+  X(std::uint64_t, frames_received, "frames received") /* since start-up, all cameras */         \
   /* Drops since start-up (frames_dropped = frames_overflow + frames_unmatched). */             \
   X(std::uint64_t, frames_dropped, "frames dropped")                                            \
   X(std::uint64_t, sets_incomplete, "sets incomplete") /* purged or abandoned, frames missing */ \
