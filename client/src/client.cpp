@@ -242,19 +242,12 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
                    : s.state == sl_msgs_msg_dds__Status_Constants_STATE_DEGRADED ? ScanState::kDegraded
                                                          : ScanState::kError;
       info.pattern = s.pattern ? s.pattern : "";
-      info.scans_done = s.scans_done;
-      info.scans_requested = s.scans_requested;
-      info.scan_rate_hz = s.scan_rate_hz;
-      info.frames_dropped = s.frames_dropped;
+#define SL_COPY_FIELD(type, name, label) info.name = s.name;
+      SL_STATUS_ENGINE_FIELDS(SL_COPY_FIELD)
+#undef SL_COPY_FIELD
       info.sets_dropped = s.sets_dropped;
-      info.sets_incomplete = s.sets_incomplete;
-      info.frame_rate_hz = s.frame_rate_hz;
-      info.frames_overflow = s.frames_overflow;
-      info.frames_unmatched = s.frames_unmatched;
-      info.sets_overflow = s.sets_overflow;
       info.writes_timed_out = s.writes_timed_out;
       info.images_not_compressed = s.images_not_compressed;
-      info.sets_not_recorded = s.sets_not_recorded;
       info.trigger = s.trigger == sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE ? TriggerMode::kSoftware
                                                              : TriggerMode::kHardware;
       info.cameras = toStrings(s.cameras);
@@ -262,7 +255,6 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.start_at_ns = fromTime(s.start_at);
       info.last_error = s.last_error ? s.last_error : "";
       info.recording = s.recording ? s.recording : "";
-      info.sets_recorded = s.sets_recorded;
       info.patterns = toStrings(s.patterns);
       info.stamp_ns = fromTime(s.stamp);
       info.requests_received = s.requests_received;
@@ -272,20 +264,9 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.replies_timed_out = s.replies_timed_out;
       info.degraded_reason = s.degraded_reason ? s.degraded_reason : "";
       info.last_error_ns = fromTime(s.last_error_stamp);
-      info.errors_reported = s.errors_reported;
       info.requests_malformed = s.requests_malformed;
-      info.sets_over_quota = s.sets_over_quota;
-      info.latency_ms = s.latency_ms;
-      info.latency_max_ms = s.latency_max_ms;
-      info.wait_ms = s.wait_ms;
-      info.processing_ms = s.processing_ms;
-      info.publish_ms = s.publish_ms;
       info.requests_rejected = s.requests_rejected;
       info.clouds_lost_to_readers = s.clouds_lost_to_readers;
-      info.decode_modulated_fraction = s.decode_modulated_fraction;
-      info.decode_consistent_fraction = s.decode_consistent_fraction;
-      info.decode_residual_median = s.decode_residual_median;
-      info.clouds_implausible = s.clouds_implausible;
       for (std::uint32_t k = 0; k < s.points_readers._length; ++k) {
         const auto& r = s.points_readers._buffer[k];
         info.points_readers.push_back(

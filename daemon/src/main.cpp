@@ -23,6 +23,7 @@
 #include "sl/daemon/systemd_notify.h"
 #include "instance_lock.h"
 #include "other_daemon.h"
+#include "config_reload.h"
 #include "reload_worker.h"
 
 namespace {
@@ -108,8 +109,7 @@ void finishReload(sl::daemon::ReloadWorker::Outcome outcome, const sl::daemon::D
         engine.applyRuntimeSettings(loaded);
         engine.clearError("reload");  // an earlier reload's error no longer holds
         bridge.setStatusPeriod(loaded.dds.status_period_s);
-        logInfo("config reloaded from " + path +
-                " (decoder, triangulator, motion_compensation, dds.status_period_s)");
+        logInfo("config reloaded from " + path + " (" + reloadableKeysText() + ")");
       }
     } catch (const std::exception& e) {
       logWarning(std::string("config reload failed, keeping the running config: ") + e.what());

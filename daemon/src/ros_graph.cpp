@@ -32,6 +32,7 @@ std::string number(double v) {
   std::snprintf(text, sizeof text, "%.3g", v);
   return text;
 }
+std::string number(std::uint64_t v) { return std::to_string(v); }
 
 // The parts of a degraded cause ("a; b; c").
 std::vector<std::string> causeParts(const std::string& cause) {
@@ -128,33 +129,22 @@ std::vector<Diagnostic> diagnosticsOf(const EngineStatus& s, const DiagnosticInp
   auto add = [&p](const std::string& key, const std::string& value) { p.values.emplace_back(key, value); };
   add("state", toString(s.state));
   add("pattern", s.pattern);
-  add("scan_rate_hz", number(s.scan_rate_hz));
-  add("frame_rate_hz", number(s.frame_rate_hz));
-  add("scans_done", std::to_string(s.scans_done));
-  add("frames_dropped", std::to_string(s.frames_dropped));
+  // Every engine counter (sl/client/status_fields.h), keyed by its name.
+#define SL_ADD_FIELD(type, name, label) add(#name, number(s.name));
+  SL_STATUS_ENGINE_FIELDS(SL_ADD_FIELD)
+#undef SL_ADD_FIELD
   add("sets_dropped", std::to_string(s.sets_dropped));
-  add("sets_incomplete", std::to_string(s.sets_incomplete));
-  add("latency_ms", number(s.latency_ms));
-  add("latency_max_ms", number(s.latency_max_ms));
-  add("wait_ms", number(s.wait_ms));
-  add("processing_ms", number(s.processing_ms));
-  add("publish_ms", number(s.publish_ms));
   add("writes_timed_out", std::to_string(in.writes_timed_out));
   add("images_not_compressed", std::to_string(in.images_not_compressed));
   add("clouds_lost_to_readers", std::to_string(in.clouds_lost_to_readers));
   for (const auto& r : in.points_readers)
     add("clouds lost by points reader " + r.guid,
         r.reliable ? std::to_string(r.lost) : std::string("best effort (not seen)"));
-  add("decode_modulated_fraction", number(s.decode_modulated_fraction));
-  add("decode_consistent_fraction", number(s.decode_consistent_fraction));
-  add("decode_residual_median", number(s.decode_residual_median));
-  add("clouds_implausible", std::to_string(s.clouds_implausible));
   add("requests_received", std::to_string(in.requests.received));
   add("requests_answered", std::to_string(in.requests.answered));
   add("requests_rate_limited", std::to_string(in.requests.rate_limited));
   add("degraded_reason", s.degraded_reason);
   add("last_error", s.last_error);
-  add("errors_reported", std::to_string(s.errors_reported));
   add("recording", s.recording);
   out.push_back(std::move(p));
   return out;

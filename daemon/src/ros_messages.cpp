@@ -292,27 +292,19 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.stamp = toTime(stamp_ns);
   msg.state = toState(s.state);
   msg.pattern = pattern_.data();
-  msg.scans_done = s.scans_done;
-  msg.scans_requested = s.scans_requested;
-  msg.scan_rate_hz = s.scan_rate_hz;
-  msg.frames_dropped = s.frames_dropped;
+#define SL_COPY_FIELD(type, name, label) msg.name = s.name;
+  SL_STATUS_ENGINE_FIELDS(SL_COPY_FIELD)
+#undef SL_COPY_FIELD
   msg.sets_dropped = s.sets_dropped + edge.writes_timed_out;
-  msg.sets_incomplete = s.sets_incomplete;
-  msg.frames_overflow = s.frames_overflow;
-  msg.frames_unmatched = s.frames_unmatched;
-  msg.sets_overflow = s.sets_overflow;
   msg.writes_timed_out = edge.writes_timed_out;
   msg.images_not_compressed = edge.images_not_compressed;
-  msg.sets_not_recorded = s.sets_not_recorded;
   msg.trigger = s.trigger == TriggerMode::kSoftware ? sl_msgs_msg_dds__Status_Constants_TRIGGER_SOFTWARE
                                                     : sl_msgs_msg_dds__Status_Constants_TRIGGER_HARDWARE;
   borrow(msg.cameras, camera_pointers_.data(), camera_pointers_.size());
   msg.motion_compensation = s.motion_compensation;
   msg.start_at = toTime(s.start_at_ns);
-  msg.frame_rate_hz = s.frame_rate_hz;
   msg.last_error = last_error_.data();
   msg.recording = recording_.data();
-  msg.sets_recorded = s.sets_recorded;
   borrow(msg.patterns, pattern_pointers_.data(), pattern_pointers_.size());
   msg.requests_received = edge.requests.received;
   msg.requests_answered = edge.requests.answered;
@@ -321,20 +313,9 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.replies_timed_out = edge.replies_timed_out;
   msg.degraded_reason = degraded_.data();
   msg.last_error_stamp = toTime(s.last_error_ns);
-  msg.errors_reported = s.errors_reported;
   msg.requests_malformed = edge.requests_malformed;
-  msg.sets_over_quota = s.sets_over_quota;
-  msg.latency_ms = s.latency_ms;
-  msg.latency_max_ms = s.latency_max_ms;
-  msg.wait_ms = s.wait_ms;
-  msg.processing_ms = s.processing_ms;
-  msg.publish_ms = s.publish_ms;
   msg.requests_rejected = edge.requests_rejected;
   msg.clouds_lost_to_readers = edge.clouds_lost_to_readers;
-  msg.decode_modulated_fraction = s.decode_modulated_fraction;
-  msg.decode_consistent_fraction = s.decode_consistent_fraction;
-  msg.decode_residual_median = s.decode_residual_median;
-  msg.clouds_implausible = s.clouds_implausible;
   for (const MatchedReaderState& r : edge.points_readers) reader_guids_.push_back(r.guid);
   points_readers_.resize(edge.points_readers.size());
   for (std::size_t i = 0; i < points_readers_.size(); ++i) {

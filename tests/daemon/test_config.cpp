@@ -496,3 +496,13 @@ TEST_CASE("config files that are not regular, bounded, single YAML documents are
   refusedWith(dir + "/comments.yaml", "more than the limit");
   std::filesystem::remove_all(dir);
 }
+
+TEST_CASE("a reload may change the decoder and dds.status_period_s; another dds key needs a restart") {
+  const auto running = sl::daemon::parseConfig(shippedConfig(), "running.yaml");
+  auto changed = [&](const std::string& from, const std::string& to) {
+    return sl::daemon::keysNeedingRestart(running, sl::daemon::parseConfig(edited(from, to), "loaded.yaml"));
+  };
+  CHECK(changed("status_period_s: 1.0", "status_period_s: 2.0").empty());
+  CHECK(changed("max_unwrap_error: 0.3", "max_unwrap_error: 0.4").empty());
+  CHECK(changed("domain_id: 0", "domain_id: 3") == std::vector<std::string>{"dds.domain_id"});
+}

@@ -288,6 +288,7 @@ TEST_CASE("software trigger: a switch waits for the sequence in progress, never 
   CHECK(status.sets_dropped == 0);
 
   std::lock_guard lock(mutex);
+  CHECK(status.frames_received >= 6 * seen.size());  // phase_shift_3+3: 6 frames a scan
   std::vector<std::string> runs;
   for (const auto& s : seen) {
     if (runs.empty() || runs.back() != s.pattern) runs.push_back(s.pattern);

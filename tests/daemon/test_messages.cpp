@@ -6,6 +6,10 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+#include <type_traits>
 #include <string>
 #include <vector>
 
@@ -18,6 +22,7 @@
 #include "sl/daemon/dds_bridge.h"
 #include "sl/drivers/sim.h"
 #include "sl/pipeline/point_quality.h"
+#include "sl_msgs/ros2_definitions.h"
 
 using namespace sl::daemon;
 using ::sl::dds::CloudLayout;
@@ -537,6 +542,74 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK(m.last_error_stamp.sec == 1'700'000'001);
   CHECK(msg::toState(ScanState::kIdle) == sl_msgs_msg_dds__Status_Constants_STATE_IDLE);
   CHECK(msg::toState(ScanState::kWaiting) == sl_msgs_msg_dds__Status_Constants_STATE_WAITING);
+}
+
+// Status.msg's fields (not its constants): name -> type.
+std::map<std::string, std::string> statusMsgFields() {
+  for (const auto& d : sl_msgs_definitions::kMessages) {
+    if (std::string(d.type) != "sl_msgs/Status") continue;
+    std::map<std::string, std::string> fields;
+    std::istringstream lines(d.fields);
+    for (std::string line; std::getline(lines, line);) {
+      if (line.find('=') != std::string::npos) continue;  // a constant
+      const auto space = line.find(' ');
+      fields[line.substr(space + 1)] = line.substr(0, space);
+    }
+    return fields;
+  }
+  return {};
+}
+
+template <typename T>
+std::string msgType() {
+  if (std::is_same_v<T, std::uint64_t>) return "uint64";
+  if (std::is_same_v<T, double>) return "float64";
+  return "(no Status.msg type)";
+}
+
+TEST_CASE("status fields: SL_STATUS_ENGINE_FIELDS and the hand-written fields are Status.msg's") {
+  // Status.msg fields that status_fields.h leaves to hand-written code.
+  const std::set<std::string> by_hand = {
+      "stamp", "state", "pattern", "sets_dropped", "writes_timed_out", "recording", "last_error",
+      "patterns", "trigger", "cameras", "motion_compensation", "start_at", "requests_received",
+      "requests_answered", "requests_rate_limited", "requests_invalid", "replies_timed_out",
+      "degraded_reason", "last_error_stamp", "requests_malformed", "requests_rejected",
+      "clouds_lost_to_readers", "points_readers", "images_not_compressed"};
+  auto fields = statusMsgFields();
+  REQUIRE(fields.size() > by_hand.size());
+  std::map<std::string, std::string> listed;
+#define SL_LIST_FIELD(type, name, label) listed[#name] = msgType<type>();
+  SL_STATUS_ENGINE_FIELDS(SL_LIST_FIELD)
+#undef SL_LIST_FIELD
+  for (const auto& [name, type] : listed) {
+    INFO("SL_STATUS_ENGINE_FIELDS has " << name << ": it must be a Status.msg field of that type");
+    CHECK(fields.count(name) == 1);
+    CHECK(fields[name] == type);
+    CHECK(by_hand.count(name) == 0);
+  }
+  for (const auto& [name, type] : fields) {
+    INFO("Status.msg field " << name
+                             << ": add it to SL_STATUS_ENGINE_FIELDS (sl/client/status_fields.h), or, "
+                                "if it is not the engine's, to the hand-written ones (and this list)");
+    CHECK(listed.count(name) + by_hand.count(name) == 1);
+  }
+}
+
+TEST_CASE("status fields: each of SL_STATUS_ENGINE_FIELDS goes from EngineStatus into the sample") {
+  EngineStatus s;
+  double next = 1;
+#define SL_SET_FIELD(type, name, label) s.name = static_cast<type>(next++);
+  SL_STATUS_ENGINE_FIELDS(SL_SET_FIELD)
+#undef SL_SET_FIELD
+  const msg::StatusMessage message(s, {}, msg::EdgeCounters{}, kStamp);
+  const msg::Status& m = message.sample();
+  next = 1;
+#define SL_CHECK_FIELD(type, name, label) \
+  CHECK(m.name == static_cast<type>(next)); \
+  ++next;
+  SL_STATUS_ENGINE_FIELDS(SL_CHECK_FIELD)
+#undef SL_CHECK_FIELD
+  CHECK(next > 10);
 }
 
 TEST_CASE("reply: every result code has its wire value and comes back as itself") {

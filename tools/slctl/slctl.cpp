@@ -366,6 +366,22 @@ int scan(SensorClient& client, const Args& args) {
   return 0;
 }
 
+// The engine fields (sl/client/status_fields.h) printStatus formats in
+// lines of its own; every other one gets a "label: value" line.
+const std::set<std::string> kStatusFieldsFormatted = {
+    "scans_done", "scans_requested", "scan_rate_hz", "frame_rate_hz", "frames_dropped",
+    "sets_incomplete", "frames_overflow", "frames_unmatched", "sets_overflow",
+    "sets_not_recorded", "sets_recorded", "sets_over_quota", "errors_reported", "latency_ms",
+    "latency_max_ms", "wait_ms", "processing_ms", "publish_ms", "decode_modulated_fraction",
+    "decode_consistent_fraction", "decode_residual_median", "clouds_implausible"};
+
+void printStatusLine(const char* label, std::uint64_t v) {
+  std::printf("%-18s%llu\n", (std::string(label) + ":").c_str(), static_cast<unsigned long long>(v));
+}
+void printStatusLine(const char* label, double v) {
+  std::printf("%-18s%.3g\n", (std::string(label) + ":").c_str(), v);
+}
+
 int printStatus(SensorClient& client, const Args& args) {
   const auto s = client.status(toMs(args.timeout_s));
   if (!s) return noDaemon(args);
@@ -412,6 +428,10 @@ int printStatus(SensorClient& client, const Args& args) {
                 (sl::pipeline::systemClockNs() - s->last_error_ns) * 1e-9);
   }
   std::printf("errors reported:  %llu\n", u(s->errors_reported));
+#define SL_PRINT_FIELD(type, name, label) \
+  if (!kStatusFieldsFormatted.count(#name)) printStatusLine(label, s->name);
+  SL_STATUS_ENGINE_FIELDS(SL_PRINT_FIELD)
+#undef SL_PRINT_FIELD
   std::printf("requests:         %llu (answered %llu, rate-limited %llu, invalid %llu, reply timed out %llu)\n",
               u(s->requests_received), u(s->requests_answered), u(s->requests_rate_limited),
               u(s->requests_invalid), u(s->replies_timed_out));

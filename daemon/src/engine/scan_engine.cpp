@@ -498,16 +498,9 @@ EngineStatus ScanEngine::status() const {
   s.frames_dropped = s.frames_overflow + s.frames_unmatched;
   s.sets_overflow = d.sets.dropped() + d.results.dropped();
   s.sets_dropped = s.sets_overflow;  // + sets_not_recorded below
-  s.sets_incomplete = d.statistics.setsIncomplete();
   addRecorderStatus(s, d.recorder, d.config.runtime.last_error_hold_s, pipeline::systemClockNs());
   s.motion_compensation = d.control.options()->motion_compensation.value_or(d.motion_enabled.load());
-  s.frame_rate_hz = d.statistics.frameRateHz();
-  const StageSummary stages = d.statistics.stageSummary();
-  s.latency_ms = stages.total_median_ms;
-  s.latency_max_ms = stages.total_max_ms;
-  s.wait_ms = stages.median.wait_ms;
-  s.processing_ms = stages.median.processing_ms;
-  s.publish_ms = stages.median.publish_ms;
+  d.statistics.fillStatus(s);
   d.decode_watch.fill(s);
   return s;
 }

@@ -63,6 +63,18 @@ double EngineStatistics::frameRateHz() {
   return frame_rate_hz_;
 }
 
+void EngineStatistics::fillStatus(EngineStatus& s) {
+  s.sets_incomplete = setsIncomplete();
+  s.frame_rate_hz = frameRateHz();
+  s.frames_received = frames_received_.load();
+  const StageSummary stages = stageSummary();
+  s.latency_ms = stages.total_median_ms;
+  s.latency_max_ms = stages.total_max_ms;
+  s.wait_ms = stages.median.wait_ms;
+  s.processing_ms = stages.median.processing_ms;
+  s.publish_ms = stages.median.publish_ms;
+}
+
 void addRecorderStatus(EngineStatus& s, const Recorder& recorder, double last_error_hold_s,
                        pipeline::TimestampNs now_ns) {
   s.sets_not_recorded = recorder.notRecorded();

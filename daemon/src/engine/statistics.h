@@ -55,6 +55,11 @@ class EngineStatistics {
   void scanStages(const StageTimes& scan) { stages_.add(scan); }
   StageSummary stageSummary() const { return stages_.summary(); }
 
+  // Its part of `status` (any thread): the counts and rates kept here
+  // (frame rate, incomplete sets, latencies); frames_unmatched is the
+  // engine's (it adds the software trigger's stale frames).
+  void fillStatus(EngineStatus& status);
+
  private:
   std::atomic<std::uint64_t> frames_received_{0};
   std::atomic<std::uint64_t> unmatched_trigger_{0}, unmatched_software_{0};

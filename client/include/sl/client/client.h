@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "sl/client/commands.h"
+#include "sl/client/status_fields.h"
 #include "sl/pipeline/types.h"
 
 namespace sl::client {
@@ -40,15 +41,11 @@ struct PointsReaderInfo {
 struct StatusInfo {
   ScanState state = ScanState::kIdle;
   std::string pattern;
-  std::uint64_t scans_done = 0, scans_requested = 0;
-  double scan_rate_hz = 0;
-  double frame_rate_hz = 0;
-  std::uint64_t frames_dropped = 0, sets_dropped = 0, sets_incomplete = 0;
-  // The drops by cause (see sl_msgs/Status.idl).
-  std::uint64_t frames_overflow = 0, frames_unmatched = 0, sets_overflow = 0,
-                writes_timed_out = 0, sets_not_recorded = 0;
+  // The engine's counters and measurements (status_fields.h).
+  SL_STATUS_ENGINE_FIELDS(SL_STATUS_DECLARE_FIELD)
+  std::uint64_t sets_dropped = 0;  // the engine's drops + writes_timed_out
+  std::uint64_t writes_timed_out = 0;
   std::string recording;
-  std::uint64_t sets_recorded = 0;
   std::string last_error;
   std::vector<std::string> patterns;
   pipeline::TimestampNs stamp_ns = 0;
@@ -56,22 +53,15 @@ struct StatusInfo {
   std::vector<std::string> cameras;
   bool motion_compensation = false;
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
-  // Requests since start-up (see sl_msgs/Status.idl).
+  // Requests since start-up (see sl_msgs/Status.msg).
   std::uint64_t requests_received = 0, requests_answered = 0, requests_rate_limited = 0,
                 requests_invalid = 0, replies_timed_out = 0, requests_malformed = 0;
   std::string degraded_reason;        // kDegraded: the cause
   pipeline::TimestampNs last_error_ns = 0;  // when last_error was reported
-  std::uint64_t errors_reported = 0;
-  std::uint64_t sets_over_quota = 0;
-  // [ms] the daemon's latency over its last scans (EngineStatus).
-  double latency_ms = 0, latency_max_ms = 0, wait_ms = 0, processing_ms = 0, publish_ms = 0;
   std::uint64_t requests_rejected = 0;  // refusals of the full request reader
   std::uint64_t clouds_lost_to_readers = 0;
   std::vector<PointsReaderInfo> points_readers;
-  // Decode health of the latest scan and implausible clouds (EngineStatus).
-  double decode_modulated_fraction = 0, decode_consistent_fraction = 0, decode_residual_median = 0;
-  std::uint64_t clouds_implausible = 0;
-  std::uint64_t images_not_compressed = 0;  // see sl_msgs/Status.msg
+  std::uint64_t images_not_compressed = 0;  // see sl_msgs/Status.msg (edge counter)
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "sl/client/commands.h"
+#include "sl/client/status_fields.h"
 #include "sl/dds/cloud_layout.h"
 #include "sl/daemon/config.h"
 #include "sl/drivers/camera.h"
@@ -48,52 +49,21 @@ struct EngineStatus {
   std::uint64_t version = 0;  // increases on every change worth publishing
   ScanState state = ScanState::kIdle;
   std::string pattern;
-  std::uint64_t scans_done = 0;       // of the current / last request
-  std::uint64_t scans_requested = 0;  // 0 = continuous
-  double scan_rate_hz = 0;            // clouds per second, smoothed
-  double frame_rate_hz = 0;           // camera frames received per second, all cameras
-  std::uint64_t frames_dropped = 0;   // frames_overflow + frames_unmatched
+  // The counters and measurements (sl/client/status_fields.h).
+  SL_STATUS_ENGINE_FIELDS(SL_STATUS_DECLARE_FIELD)
   std::uint64_t sets_dropped = 0;     // sets_overflow + sets_not_recorded
-  std::uint64_t sets_incomplete = 0;  // sequences purged or abandoned before all frames arrived
-  std::uint64_t frames_overflow = 0;  // the frame queue was full (oldest dropped)
-  std::uint64_t frames_unmatched = 0; // no trigger window took them
-  std::uint64_t sets_overflow = 0;    // a set or result queue was full
-  std::uint64_t sets_not_recorded = 0;  // the recorder fell behind
   std::string recording;              // recording in progress ("" = none)
-  std::uint64_t sets_recorded = 0;    // since start-up
-  std::uint64_t sets_over_quota = 0;  // not recorded: the recording had reached its quota
   std::string degraded_reason;        // kDegraded: what stalled, since when
   // The most recent error and when it was reported (system clock); cleared
   // when its cause recovers (a device delivers again, a reload succeeds), at
   // a new start, or runtime.last_error_hold_s after it was reported.
   std::string last_error;
   pipeline::TimestampNs last_error_ns = 0;
-  std::uint64_t errors_reported = 0;  // every error reported since start-up
   // The current (or last) request's options as applied.
   TriggerMode trigger = TriggerMode::kHardware;
   std::vector<std::string> cameras;   // triangulating the current pattern
   bool motion_compensation = false;
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
-  // Latency inside the daemon over the last (up to 64) published scans, in
-  // ms: from the trigger of a sequence's last pattern to the end of its
-  // publication (median and maximum), and the median of each stage: the
-  // wait for the last image and the grouping, processing, publishing.
-  // All 0 before the first scan.
-  double latency_ms = 0;
-  double latency_max_ms = 0;
-  double wait_ms = 0;
-  double processing_ms = 0;
-  double publish_ms = 0;
-  // Decode health (docs/decode-health.md) of the latest processed scan, of
-  // its first camera: modulated pixels / all, consistently unwrapped /
-  // modulated, median unwrapping residual (periods; 0 for a code without a
-  // consistency test). All 0 before the first scan.
-  double decode_modulated_fraction = 0;
-  double decode_consistent_fraction = 0;
-  double decode_residual_median = 0;
-  // Clouds whose decode was implausible, since start-up: not published
-  // unless runtime.publish_implausible.
-  std::uint64_t clouds_implausible = 0;
 };
 
 // One camera's result of one scan, shared with the output callback (a
