@@ -26,13 +26,18 @@
 #                 cameras divided by the number of cameras (both expose on
 #                 the one projector schedule), over the status's window
 #   p50_ms/p99_ms latency at the subscriber: take time - the trigger time of
-#                 the sequence's last pattern (header.stamp + 5 image
-#                 intervals); "nan" when no cloud came
+#                 the sequence's last pattern (header.stamp, the time of
+#                 motion_compensation.reference_frame, + 5 - that frame image
+#                 intervals), over the clouds taken from SL_BENCH_WARMUP_S
+#                 (default 2) after the first one (the first sequences pay for
+#                 the simulator's first renders of each pose and the reader's
+#                 fresh buffers); "nan" when none came
+#   first_max_ms  the largest latency of the warm-up's clouds
 #   daemon_median_ms the daemon's own median (last trigger -> published)
 #   load          the 1-minute load average at the end of the run
 # Ends with one line per run:
 #   motion: [<label>] cache_mib=<v> scans_per_s=<x> daemon_scan_hz=<x> lost=<n> incomplete=<n> sets_dropped=<n>
-#     frames_dropped=<n> camera_fps=<x> p50_ms=<x> p99_ms=<x> daemon_median_ms=<x> load=<x>
+#     frames_dropped=<n> camera_fps=<x> p50_ms=<x> p99_ms=<x> first_max_ms=<x> daemon_median_ms=<x> load=<x>
 #
 # Runs on the host's loopback (config/cyclonedds-loopback.xml) in a topic
 # namespace of its own; every wait is bounded; the daemon and the subscriber
@@ -55,7 +60,10 @@ config=$src/config/sim-motion.yaml
 fps=$(awk '$1 == "camera_fps:" { print $2; exit }' "$config")
 cameras=$(( $(grep -c '^  second_camera:' "$config") + 1 ))
 period=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 6e9 / f }')   # one 6-frame sequence, ns
-offset=$(awk -v f="$fps" 'BEGIN { printf "%.0f", 5e9 / f }')   # stamp -> last trigger, ns
+# With compensation on, a cloud is stamped with its reference frame's time.
+ref=$(awk '$1 == "reference_frame:" { print $2; exit }' "$config")
+offset=$(awk -v f="$fps" -v r="${ref:-0}" 'BEGIN { printf "%.0f", (5 - r) * 1e9 / f }')   # stamp -> last trigger, ns
+warmup_ns=$(awk -v s="${SL_BENCH_WARMUP_S:-2}" 'BEGIN { printf "%.0f", s * 1e9 }')
 
 work=$(mktemp -d)
 pids=()
@@ -104,7 +112,11 @@ for cache in $caches; do
   rate=$(awk -v n="$clouds" -v s="$secs" 'BEGIN { printf "%.2f", (n >= 2 ? n / s : 0) }')
   lost=$(awk -v p="$period" '$1 == "rx" { if (n++) { k = int(($2 - prev) / p + 0.5); if (k > 1) lost += k - 1 } prev = $2 }
     END { print lost + 0 }' "$work/$ns.listen.log")
-  percentiles=$(awk -v o="$offset" '$1 == "rx" { print ($3 - $2 - o) / 1e6 }' "$work/$ns.listen.log" |
+  first_max=$(awk -v o="$offset" -v w="$warmup_ns" '$1 == "rx" { if (!(n++)) t0 = $3
+      if ($3 - t0 < w) { l = ($3 - $2 - o) / 1e6; if (l > m) m = l; seen = 1 } }
+    END { if (seen) printf "%.1f", m; else print "nan" }' "$work/$ns.listen.log")
+  percentiles=$(awk -v o="$offset" -v w="$warmup_ns" '$1 == "rx" { if (!(n++)) t0 = $3
+      if ($3 - t0 >= w) print ($3 - $2 - o) / 1e6 }' "$work/$ns.listen.log" |
     sort -g | awk '{ v[NR] = $1 } END {
       if (!NR) { print "nan nan"; exit }
       i50 = int(0.50 * NR + 0.999); i99 = int(0.99 * NR + 0.999)
@@ -117,7 +129,7 @@ for cache in $caches; do
   line+=" incomplete=$(status_number "$st" 'sets incomplete:')"
   line+=" sets_dropped=$(status_number "$st" 'sets dropped:')"
   line+=" frames_dropped=$(status_number "$st" 'frames dropped:')"
-  line+=" camera_fps=$camera_fps p50_ms=${percentiles% *} p99_ms=${percentiles#* }"
+  line+=" camera_fps=$camera_fps p50_ms=${percentiles% *} p99_ms=${percentiles#* } first_max_ms=$first_max"
   line+=" daemon_median_ms=$(status_number "$st" 'latency:' | sed 's/^$/nan/') load=$load"
   echo "== cache_mib=$cache: $clouds clouds in $secs s; daemon status:"
   grep -E '^(scans|scan rate|frame rate|latency|frames dropped|sets dropped|sets incomplete):' "$st" || true
