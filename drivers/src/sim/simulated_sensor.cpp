@@ -451,7 +451,7 @@ class SceneRenderer {
   }
 
   // What determines a camera's noise-free signal exactly: the camera, the
-  // projector frame and the pose (camera to scene, the 4 x 4 matrix's bits;
+  // projector frame and the pose (camera to scene, the 4 x 4 matrix compared exactly;
   // all zero for the static view computed at creation).
   struct SignalKey {
     int camera = 0;
