@@ -211,6 +211,9 @@ void parseSimMotionAndCameras(const YamlMap& m, drivers::SimConfig& sim) {
 void parseSim(const YamlMap& m, const std::filesystem::path& base_dir, drivers::SimConfig& sim) {
   sim.seed = m.get<std::uint64_t>("seed", sim.seed);
   sim.camera_fps = positive(m, "camera_fps", sim.camera_fps);
+  const std::uint64_t cache_mib = m.get<std::uint64_t>("signal_cache_mib", sim.signal_cache_mib);
+  if (cache_mib > (std::uint64_t{1} << 20)) m.fail("signal_cache_mib", "must be <= 1048576 (1 TiB)");
+  sim.signal_cache_mib = static_cast<std::size_t>(cache_mib);
   sim.bit_depth = m.get<int>("bit_depth", sim.bit_depth);
   if (sim.bit_depth < 8 || sim.bit_depth > 16) m.fail("bit_depth", "must be in 8..16");
   const YamlMap radiometry = m.optionalMap("radiometry");

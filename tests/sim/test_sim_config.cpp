@@ -233,3 +233,21 @@ TEST_CASE("sim config: mesh files relative to the config, groups with one pose",
   CHECK(message.find(c.expected) != std::string::npos);
   std::filesystem::remove_all(dir);
 }
+
+TEST_CASE("sim config: signal_cache_mib", "[sim][config][cache]") {
+  auto withCache = [](const std::string& value) {
+    std::string text = shippedSimConfig();
+    const auto at = text.find("\nsim:\n");
+    REQUIRE(at != std::string::npos);
+    return text.insert(at + 6, "  signal_cache_mib: " + value + "\n");
+  };
+  CHECK(sl::daemon::parseConfig(shippedSimConfig(), "t.yaml").sim.signal_cache_mib == 256);
+  CHECK(sl::daemon::parseConfig(withCache("0"), "t.yaml").sim.signal_cache_mib == 0);
+  CHECK(sl::daemon::parseConfig(withCache("64"), "t.yaml").sim.signal_cache_mib == 64);
+  for (const std::string bad : {"-1", "lots", "2000000", "1.5"}) {
+    INFO("signal_cache_mib: " << bad);
+    const std::string message = errorOf(withCache(bad));
+    INFO("message: " << message);
+    CHECK(message.find("key 'sim.signal_cache_mib'") != std::string::npos);
+  }
+}

@@ -151,11 +151,22 @@ SetOutcome SetProcessor::process(const pipeline::ImageSet& input, const std::vec
   SetOutcome out;
   // Motion compensation aligns every frame with the reference frame of its
   // sequence; the cloud is then stamped with the reference frame's time.
+  // Only the cameras this set is processed with are compensated: those
+  // that triangulate it and the pattern's intensity camera (the images of a
+  // camera the pattern does not use are not read).
   std::shared_ptr<const pipeline::ImageSet> compensated;
   if (motion_compensation) {
     try {
+      pipeline::ImageSet used = input;
+      const auto intensity = config_.intensity_camera.find(input.pattern_name);
+      std::erase_if(used.cameras, [&](const pipeline::CameraImages& c) {
+        return std::find(cameras.begin(), cameras.end(), c.camera_id) == cameras.end() &&
+               (intensity == config_.intensity_camera.end() || intensity->second != c.camera_id);
+      });
       pipeline::MotionEstimate estimate;
-      compensated = motion_.compensate(input, &estimate, &processor_.workers());
+      // None used: the whole set, so that the errors below name the missing camera.
+      compensated = motion_.compensate(used.cameras.empty() ? input : used, &estimate,
+                                       &processor_.workers());
       if (!estimate.all_within_limit)
         out.warning = "motion compensation: a shift beyond max_shift_px was ignored";
       else if (estimate.frames_corrected > 0)

@@ -1,12 +1,14 @@
 // SimulatedSensor::create: validation of the configuration, the scene view
 // computed once, and the live camera / projector / trigger source.
 #include <Eigen/Dense>
+#include <array>
 #include <cmath>
+#include <compare>
 #include <cstring>
 #include <deque>
 #include <fstream>
 #include <limits>
-#include <mutex>
+#include <list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -25,6 +27,10 @@
 namespace sl::drivers {
 
 namespace {
+
+// 1 TiB: far beyond any machine it runs on, and small enough that the byte
+// count cannot overflow.
+constexpr std::size_t kMaxSignalCacheMib = std::size_t{1} << 20;
 
 [[noreturn]] void fail(const std::string& field, const std::string& problem) {
   throw std::invalid_argument("sim config: " + field + " " + problem);
@@ -116,6 +122,8 @@ void validateConfig(const SimConfig& c) {
   if (!(c.reference_exposure_ms > 0 && std::isfinite(c.reference_exposure_ms)))
     fail("reference_exposure_ms", "must be > 0");
   if (!(c.analog_gain > 0 && std::isfinite(c.analog_gain))) fail("analog_gain", "must be > 0");
+  if (c.signal_cache_mib > kMaxSignalCacheMib)
+    fail("signal_cache_mib", "must be <= " + std::to_string(kMaxSignalCacheMib));
   try {
     sim::makeProjectorResponse(c.projector_gamma, c.projector_response);
   } catch (const std::invalid_argument& e) {
@@ -265,8 +273,8 @@ bool sameImage(const cv::Mat& a, const cv::Mat& b) {
   return true;
 }
 
-// Immutable after construction but for the signal cache (guarded by its
-// mutex); render() is thread-safe. Owns the config the scene geometry refers
+// Immutable after construction but for the signal cache and the placement
+// (each guarded by its mutex); render() is thread-safe. Owns the config the scene geometry refers
 // to.
 class SceneRenderer {
  public:
@@ -331,21 +339,47 @@ class SceneRenderer {
     const sim::ProjectorFrame& projected = *frames[static_cast<std::size_t>(frame)];
     const Placement place = placement();
     if (!place.moving) {
-      // A static scene: the noise-free signal of each (camera, projector
-      // frame) is computed once; each image then costs only its noise.
-      if (const std::shared_ptr<const cv::Mat> signal = cachedSignal(camera, projected))
+      // A static scene: the signal of (camera, projector frame) at the
+      // configured pose, from the scene view computed once.
+      const SignalKey key{camera, &projected, false, {}};
+      if (const std::shared_ptr<const cv::Mat> signal = cachedSignal(key, [&] {
+            return sim::renderSignal(c.view.maps, projected, projector_response_,
+                                     c.camera_blur_passes);
+          }))
         return sim::renderFromSignal(*signal, response_, noise_seed);
       return sim::renderImage(c.view.maps, projected, response_, noise_seed, projector_response_,
                               c.camera_blur_passes);
     }
     // Moving sensor: ray-cast this image's pose (camera rays undistorted once),
-    // into per-thread buffers reused from image to image.
+    // into per-thread buffers reused from image to image. The pose (camera
+    // to scene) with the camera and the projector frame determines the
+    // signal exactly, so sequences that repeat their poses hit the cache.
+    const Eigen::Isometry3d to_scene = cameraToScene(c, frame, place);
     thread_local sim::SceneView moved;
-    sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, cameraToScene(c, frame, place),
-                              false, moved);
-    assignDefocus(c, moved.maps);
+    auto castMoved = [&] {
+      sim::computeSceneViewInto(config_, geometry_, c.rig, c.rays, to_scene, false, moved);
+      assignDefocus(c, moved.maps);
+    };
+    SignalKey key{camera, &projected, true, {}};
+    Eigen::Map<Eigen::Matrix4d>(key.pose.data()) = to_scene.matrix();
+    if (const std::shared_ptr<const cv::Mat> signal = cachedSignal(key, [&] {
+          castMoved();
+          return sim::renderSignal(moved.maps, projected, projector_response_,
+                                   c.camera_blur_passes);
+        }))
+      return sim::renderFromSignal(*signal, response_, noise_seed);
+    castMoved();
     return sim::renderImage(moved.maps, projected, response_, noise_seed, projector_response_,
                             c.camera_blur_passes);
+  }
+
+  SimSignalCacheStats signalCacheStats() const {
+    std::lock_guard lock(signal_mutex_);
+    SimSignalCacheStats s = signal_stats_;
+    s.entries = signals_.size();
+    s.bytes = signal_bytes_;
+    s.capacity_bytes = signalCacheCapacity();
+    return s;
   }
 
  private:
@@ -416,32 +450,60 @@ class SceneRenderer {
     }
   }
 
-  // The noise-free signal of camera `camera` under `projected`, computed on
-  // first use and kept while the cache holds less than kSignalCacheBytes
-  // (then null: the caller renders in full).
-  std::shared_ptr<const cv::Mat> cachedSignal(int camera, const sim::ProjectorFrame& projected) const {
-    const std::pair<int, const sim::ProjectorFrame*> key{camera, &projected};
+  // What determines a camera's noise-free signal exactly: the camera, the
+  // projector frame and the pose (camera to scene, the 4 x 4 matrix compared exactly;
+  // all zero for the static view computed at creation).
+  struct SignalKey {
+    int camera = 0;
+    const sim::ProjectorFrame* frame = nullptr;
+    bool moving = false;
+    std::array<double, 16> pose{};
+    auto operator<=>(const SignalKey&) const = default;
+  };
+
+  std::size_t signalCacheCapacity() const { return config_.signal_cache_mib << 20; }
+
+  // The cached signal for `key`, made by `compute` (a CV_32FC1 of the camera's
+  // size) on first use; null when the cache is off or the signal does not fit
+  // (the caller then renders in full). Least recently used signals are
+  // evicted to make room. Concurrent callers of one key wait for one compute.
+  template <typename Compute>
+  std::shared_ptr<const cv::Mat> cachedSignal(const SignalKey& key, Compute&& compute) const {
+    const CameraView& c = cameras_[static_cast<std::size_t>(key.camera)];
+    const std::size_t bytes =
+        static_cast<std::size_t>(c.view.maps.width) * c.view.maps.height * sizeof(float);
+    const std::size_t capacity = signalCacheCapacity();
     std::shared_ptr<SignalEntry> entry;
     {
       std::lock_guard lock(signal_mutex_);
-      auto& slot = signals_[key];
-      if (!slot) {
-        const std::size_t bytes = static_cast<std::size_t>(cameras_[camera].view.maps.width) *
-                                  cameras_[camera].view.maps.height * sizeof(float);
-        if (signal_bytes_ + bytes > kSignalCacheBytes) {
-          signals_.erase(key);
-          return nullptr;
-        }
-        signal_bytes_ += bytes;
-        slot = std::make_shared<SignalEntry>();
+      if (bytes > capacity) {
+        ++signal_stats_.uncached;
+        return nullptr;
       }
-      entry = slot;
+      if (const auto found = signals_.find(key); found != signals_.end()) {
+        ++signal_stats_.hits;
+        signal_lru_.splice(signal_lru_.begin(), signal_lru_, found->second->lru);
+        entry = found->second;
+      } else {
+        while (signal_bytes_ + bytes > capacity) {
+          const auto oldest = signals_.find(signal_lru_.back());
+          signal_bytes_ -= oldest->second->bytes;
+          signals_.erase(oldest);
+          signal_lru_.pop_back();
+          ++signal_stats_.evictions;
+        }
+        ++signal_stats_.misses;
+        entry = std::make_shared<SignalEntry>();
+        entry->bytes = bytes;
+        signal_lru_.push_front(key);
+        entry->lru = signal_lru_.begin();
+        signals_.emplace(key, entry);
+        signal_bytes_ += bytes;
+      }
     }
-    const CameraView& c = cameras_[static_cast<std::size_t>(camera)];
-    std::call_once(entry->once, [&] {
-      entry->signal = std::make_shared<const cv::Mat>(
-          sim::renderSignal(c.view.maps, projected, projector_response_, c.camera_blur_passes));
-    });
+    // An entry evicted meanwhile stays valid for whoever holds it.
+    std::call_once(entry->once,
+                   [&] { entry->signal = std::make_shared<const cv::Mat>(compute()); });
     return entry->signal;
   }
 
@@ -493,17 +555,19 @@ class SceneRenderer {
   std::deque<sim::ProjectorFrame> storage_;   // distinct frames (stable addresses)
   std::vector<std::vector<const sim::ProjectorFrame*>> frames_;  // per pattern, in order
 
-  // Noise-free signals of a static scene (see cachedSignal): 6.2 MB per
-  // 1440 x 1080 frame, so 256 MiB holds ~40 distinct pattern frames.
-  static constexpr std::size_t kSignalCacheBytes = std::size_t{256} << 20;
+  // Noise-free signals (see cachedSignal), most recently used first in
+  // signal_lru_.
   struct SignalEntry {
     std::once_flag once;
     std::shared_ptr<const cv::Mat> signal;
+    std::size_t bytes = 0;
+    std::list<SignalKey>::iterator lru;  // guarded by signal_mutex_
   };
   mutable std::mutex signal_mutex_;
-  mutable std::map<std::pair<int, const sim::ProjectorFrame*>, std::shared_ptr<SignalEntry>>
-      signals_;                           // guarded by signal_mutex_
-  mutable std::size_t signal_bytes_ = 0;  // guarded by signal_mutex_
+  mutable std::map<SignalKey, std::shared_ptr<SignalEntry>> signals_;  // guarded by signal_mutex_
+  mutable std::list<SignalKey> signal_lru_;                            // guarded by signal_mutex_
+  mutable std::size_t signal_bytes_ = 0;                               // guarded by signal_mutex_
+  mutable SimSignalCacheStats signal_stats_;                           // guarded by signal_mutex_
   mutable std::mutex placement_mutex_;
   mutable Placement placement_;  // guarded by placement_mutex_
 };
@@ -558,6 +622,7 @@ class SimulatedSensorImpl final : public SimulatedSensor {
   }
 
   SimCounters counters() const override { return schedule_->counters(); }
+  SimSignalCacheStats signalCacheStats() const override { return renderer_->signalCacheStats(); }
 
  private:
   const std::shared_ptr<const SceneRenderer> renderer_;

@@ -14,10 +14,14 @@
 // per scene for a static sensor; once per image when the sensor moves, from
 // camera rays undistorted once). The projector's defocus is baked into the
 // pattern images once (blurred per projector pixel for the depth it lights);
-// the camera's is a few cheap per-pixel filter passes per image.
+// the camera's is a few cheap per-pixel filter passes per image. The
+// noise-free signal of each (camera, pose, pattern frame) is cached
+// (SimConfig::signal_cache_mib): a moving sensor repeats its poses every
+// sequence, so in a live run only the noise is drawn per image.
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -302,6 +306,28 @@ struct SimConfig {
   // Noise seed. Live frame with camera frame_id f uses a seed hashed from
   // (seed, f), so a run is reproducible apart from dropped frames.
   std::uint64_t seed = 1;
+
+  // Signal cache (MiB, 1 MiB = 2^20 bytes; 0 disables it): the noise-free
+  // signal of a camera image (CV_32FC1, 4 bytes per camera pixel) is kept
+  // per (camera, sensor pose, projector frame), the three things that
+  // determine it, so that a static scene, and a moving sensor whose
+  // sequences repeat the same poses (SimMotion), ray-cast and shade each
+  // distinct image once; each image then costs only its noise. Least
+  // recently used signals are evicted first; the cached signals never exceed
+  // the bound (a signal larger than it is not cached). Images are bit for
+  // bit the same with and without the cache.
+  std::size_t signal_cache_mib = 256;
+};
+
+// The signal cache since creation (see SimConfig::signal_cache_mib).
+struct SimSignalCacheStats {
+  std::uint64_t hits = 0;       // images rendered from a cached signal
+  std::uint64_t misses = 0;     // signals computed and cached
+  std::uint64_t evictions = 0;  // signals dropped to stay within the bound
+  std::uint64_t uncached = 0;   // images rendered in full (cache off or signal too large)
+  std::size_t entries = 0;      // signals cached now
+  std::size_t bytes = 0;        // their size; <= capacity_bytes
+  std::size_t capacity_bytes = 0;
 };
 
 // Counts of the live schedule since creation.
@@ -365,6 +391,7 @@ class SimulatedSensor {
                          std::uint64_t noise_seed) const = 0;
 
   virtual SimCounters counters() const = 0;
+  virtual SimSignalCacheStats signalCacheStats() const = 0;
 };
 
 }  // namespace sl::drivers
