@@ -285,6 +285,9 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.decode_consistent_fraction = s.decode_consistent_fraction;
       info.decode_residual_median = s.decode_residual_median;
       info.clouds_implausible = s.clouds_implausible;
+      info.adaptive_mode = s.adaptive_mode ? s.adaptive_mode : "";
+      info.adaptive_reason = s.adaptive_reason ? s.adaptive_reason : "";
+      info.adaptive_switches = s.adaptive_switches;
       for (std::uint32_t k = 0; k < s.points_readers._length; ++k) {
         const auto& r = s.points_readers._buffer[k];
         info.points_readers.push_back(

@@ -274,6 +274,8 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
       last_error_(s.last_error),
       recording_(s.recording),
       degraded_(s.degraded_reason),
+      adaptive_mode_(s.adaptive_mode),
+      adaptive_reason_(s.adaptive_reason),
       cameras_(s.cameras),
       patterns_(patterns),
       camera_pointers_(pointersInto(cameras_)),
@@ -324,6 +326,9 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.decode_consistent_fraction = s.decode_consistent_fraction;
   msg.decode_residual_median = s.decode_residual_median;
   msg.clouds_implausible = s.clouds_implausible;
+  msg.adaptive_mode = adaptive_mode_.data();
+  msg.adaptive_reason = adaptive_reason_.data();
+  msg.adaptive_switches = s.adaptive_switches;
   for (const MatchedReaderState& r : edge.points_readers) reader_guids_.push_back(r.guid);
   points_readers_.resize(edge.points_readers.size());
   for (std::size_t i = 0; i < points_readers_.size(); ++i) {

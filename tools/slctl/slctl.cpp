@@ -398,6 +398,11 @@ int printStatus(SensorClient& client, const Args& args) {
               u(s->sets_dropped), u(s->sets_overflow), u(s->writes_timed_out),
               u(s->sets_not_recorded));
   std::printf("sets incomplete:  %llu\n", u(s->sets_incomplete));
+  if (!s->adaptive_mode.empty() || s->adaptive_switches > 0)
+    std::printf("adaptive:         %s%s%s (%llu switches)\n",
+                s->adaptive_mode.empty() ? "-" : s->adaptive_mode.c_str(),
+                s->adaptive_reason.empty() ? "" : ": ", s->adaptive_reason.c_str(),
+                u(s->adaptive_switches));
   std::printf("decode health:    %.1f %% modulated, %.1f %% of those consistent, residual median "
               "%.3f; %llu implausible clouds\n",
               100 * s->decode_modulated_fraction, 100 * s->decode_consistent_fraction,

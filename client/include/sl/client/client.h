@@ -71,6 +71,9 @@ struct StatusInfo {
   // Decode health of the latest scan and implausible clouds (EngineStatus).
   double decode_modulated_fraction = 0, decode_consistent_fraction = 0, decode_residual_median = 0;
   std::uint64_t clouds_implausible = 0;
+  // Adaptive scanning (EngineStatus): mode ("" = off), why, switches.
+  std::string adaptive_mode, adaptive_reason;
+  std::uint64_t adaptive_switches = 0;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

@@ -94,6 +94,12 @@ struct EngineStatus {
   // Clouds whose decode was implausible, since start-up: not published
   // unless runtime.publish_implausible.
   std::uint64_t clouds_implausible = 0;
+  // Adaptive scanning (DaemonConfig::adaptive): the mode of the running
+  // continuous scan ("" = adaptive off, or no continuous scan), why, and the
+  // mode switches since start-up.
+  std::string adaptive_mode;
+  std::string adaptive_reason;
+  std::uint64_t adaptive_switches = 0;
 };
 
 // One camera's result of one scan, shared with the output callback (a
@@ -186,6 +192,11 @@ class ScanEngine {
   // (e.g. "reload").
   void reportError(const std::string& message, const std::string& source = "");
   void clearError(const std::string& source);
+  // The robot's latest velocity (adaptive scanning; ignored unless
+  // DaemonConfig::adaptive is enabled). While a continuous scan runs, the
+  // engine switches pattern and motion compensation as the policy decides
+  // (engine/adaptive_policy.h), through selectPattern's path.
+  void setVelocity(const VelocitySample& velocity);
 
   EngineStatus status() const;
   // True while every thread has made progress within the last `max_age`
