@@ -546,3 +546,23 @@ TEST_CASE("adaptive: mistakes name the key", "[adaptive]") {
   INFO(c.yaml);
   CHECK_THAT(errorOf(c.yaml), Catch::Matchers::Contains(c.expected));
 }
+
+TEST_CASE("adaptive: the example commented in config/sim-motion.yaml parses", "[adaptive]") {
+  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/sim-motion.yaml");
+  std::string text, line;
+  bool in_example = false;
+  while (std::getline(in, line)) {
+    // The example: "# adaptive:" and the "#   ..." lines after it, uncommented.
+    if (line == "# adaptive:") in_example = true;
+    else if (in_example && line.rfind("#   ", 0) != 0) in_example = false;
+    text += (in_example ? line.substr(2) : line) + "\n";
+  }
+  const auto config = sl::daemon::parseConfig(text, "sim-motion.yaml");
+  using sl::daemon::AdaptiveMode;
+  REQUIRE(config.adaptive.enabled);
+  const auto& linear_x = config.adaptive.actions[static_cast<std::size_t>(AdaptiveMode::kLinearX)];
+  CHECK(linear_x.pattern == "3+3_vertical");
+  CHECK(linear_x.motion_compensation);
+  CHECK(config.adaptive.actions[static_cast<std::size_t>(AdaptiveMode::kMoving)].pause);
+  CHECK(config.adaptive.safe_mode == AdaptiveMode::kMoving);
+}
