@@ -9,7 +9,8 @@ namespace sl::daemon {
 
 std::optional<VelocitySample> velocityOf(const geometry_msgs_msg_dds__TwistStamped_& m,
                                          const std::string& frame_id, std::int64_t received_ns) {
-  if (!frame_id.empty() && frame_id != (m.header.frame_id ? m.header.frame_id : "")) return std::nullopt;
+  if (!frame_id.empty() && frame_id != (m.header.frame_id ? m.header.frame_id : ""))
+    return std::nullopt;
   VelocitySample v;
   v.received_ns = received_ns;
   v.linear_m_s = {m.twist.linear.x, m.twist.linear.y, m.twist.linear.z};

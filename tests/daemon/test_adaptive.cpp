@@ -1,7 +1,6 @@
 // The adaptive-scanning policy (engine/adaptive_policy.h) without threads,
 // clocks or DDS: velocities and times in, modes and reasons out.
 #include <catch2/catch.hpp>
-
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -13,8 +12,8 @@ using sl::daemon::AdaptiveConfig;
 using sl::daemon::AdaptiveDecision;
 using sl::daemon::AdaptiveMode;
 using sl::daemon::AdaptivePolicy;
-using sl::daemon::VelocitySample;
 using sl::daemon::classifyMotion;
+using sl::daemon::VelocitySample;
 
 namespace {
 
@@ -29,7 +28,8 @@ AdaptiveConfig defaults() {
   return c;
 }
 
-VelocitySample velocity(double vx, double vy, double vz = 0, double wz = 0, std::int64_t at_ns = 0) {
+VelocitySample velocity(double vx, double vy, double vz = 0, double wz = 0,
+                        std::int64_t at_ns = 0) {
   VelocitySample v;
   v.received_ns = at_ns;
   v.linear_m_s = {vx, vy, vz};
@@ -76,11 +76,13 @@ TEST_CASE("classifyMotion: the current mode's region is widened by the hysteresi
   CHECK(classifyMotion(velocity(0.09, 0), c, AdaptiveMode::kMoving) == AdaptiveMode::kMoving);
   CHECK(classifyMotion(velocity(0.08, 0), c, AdaptiveMode::kMoving) == AdaptiveMode::kLinearX);
   // The axis: y slightly faster than x keeps linear_x, clearly faster switches.
-  CHECK(classifyMotion(velocity(0.030, 0.033), c, AdaptiveMode::kLinearX, nullptr) != AdaptiveMode::kLinearY);
+  CHECK(classifyMotion(velocity(0.030, 0.033), c, AdaptiveMode::kLinearX, nullptr) !=
+        AdaptiveMode::kLinearY);
   CHECK(classifyMotion(velocity(0.001, 0.05), c, AdaptiveMode::kLinearX) == AdaptiveMode::kLinearY);
 }
 
-TEST_CASE("AdaptivePolicy: switches, dwell, and the safe mode without a fresh velocity", "[adaptive]") {
+TEST_CASE("AdaptivePolicy: switches, dwell, and the safe mode without a fresh velocity",
+          "[adaptive]") {
   AdaptiveConfig c = defaults();
   c.safe_mode = AdaptiveMode::kStatic;  // a stale velocity: this mode
   AdaptivePolicy policy(c);
@@ -137,7 +139,8 @@ TEST_CASE("AdaptivePolicy: switches, dwell, and the safe mode without a fresh ve
   CHECK(d.mode == AdaptiveMode::kLinearY);
 }
 
-TEST_CASE("AdaptivePolicy: a velocity flapping around a threshold does not flap the mode", "[adaptive]") {
+TEST_CASE("AdaptivePolicy: a velocity flapping around a threshold does not flap the mode",
+          "[adaptive]") {
   AdaptiveConfig c = defaults();
   c.hysteresis = 0;  // the dwell alone bounds the switches
   c.min_dwell_s = 1.0;

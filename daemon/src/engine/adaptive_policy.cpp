@@ -8,10 +8,14 @@ namespace sl::daemon {
 
 const char* toString(AdaptiveMode mode) {
   switch (mode) {
-    case AdaptiveMode::kStatic: return "static";
-    case AdaptiveMode::kLinearX: return "linear_x";
-    case AdaptiveMode::kLinearY: return "linear_y";
-    case AdaptiveMode::kMoving: return "moving";
+    case AdaptiveMode::kStatic:
+      return "static";
+    case AdaptiveMode::kLinearX:
+      return "linear_x";
+    case AdaptiveMode::kLinearY:
+      return "linear_y";
+    case AdaptiveMode::kMoving:
+      return "moving";
   }
   return "?";
 }
@@ -24,7 +28,9 @@ std::string format(const char* fmt, double a, double b = 0) {
   return text;
 }
 
-double norm(const std::array<double, 3>& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+double norm(const std::array<double, 3>& v) {
+  return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
 
 bool isLinear(std::optional<AdaptiveMode> m) {
   return m == AdaptiveMode::kLinearX || m == AdaptiveMode::kLinearY;
@@ -41,8 +47,12 @@ AdaptiveMode classifyMotion(const VelocitySample& velocity, const AdaptiveConfig
   const double angular = norm(velocity.angular_rad_s);
   // The current mode's region is widened: static's limits up, linear's
   // limits up (and static's down), moving's region by linear's limits down.
-  const double static_scale = current == AdaptiveMode::kStatic ? widen : isLinear(current) ? 1 / widen : 1;
-  const double limit_scale = isLinear(current) ? widen : current == AdaptiveMode::kMoving ? 1 / widen : 1;
+  const double static_scale = current == AdaptiveMode::kStatic ? widen
+                              : isLinear(current)              ? 1 / widen
+                                                               : 1;
+  const double limit_scale = isLinear(current)                  ? widen
+                             : current == AdaptiveMode::kMoving ? 1 / widen
+                                                                : 1;
 
   if (angular > c.max_angular_rad_s * limit_scale) {
     why = format("rotating at %.4f rad/s (max_angular_rad_s %.4g)", angular, c.max_angular_rad_s);
@@ -73,20 +83,22 @@ AdaptiveMode classifyMotion(const VelocitySample& velocity, const AdaptiveConfig
     why = format("not along x or y: %.4f m/s, %.2f of it off the axis", speed, off_axis);
     return AdaptiveMode::kMoving;
   }
-  why = format(along_x ? "linear along x at %.4f m/s (%.4f rad/s)" : "linear along y at %.4f m/s (%.4f rad/s)",
+  why = format(along_x ? "linear along x at %.4f m/s (%.4f rad/s)"
+                       : "linear along y at %.4f m/s (%.4f rad/s)",
                speed, angular);
   return along_x ? AdaptiveMode::kLinearX : AdaptiveMode::kLinearY;
 }
 
-AdaptiveDecision AdaptivePolicy::decide(const std::optional<VelocitySample>& latest, std::int64_t now_ns) {
+AdaptiveDecision AdaptivePolicy::decide(const std::optional<VelocitySample>& latest,
+                                        std::int64_t now_ns) {
   AdaptiveDecision d;
   const double age_s = latest ? (now_ns - latest->received_ns) * 1e-9 : 0;
   bool urgent = false;  // switches without the dwell
   if (!latest || age_s > config_.velocity_timeout_s) {
     d.stale = true;
     d.mode = config_.safe_mode;
-    d.reason = latest ? format("velocity stale: last sample %.2f s ago (velocity_timeout_s %.3g)", age_s,
-                               config_.velocity_timeout_s)
+    d.reason = latest ? format("velocity stale: last sample %.2f s ago (velocity_timeout_s %.3g)",
+                               age_s, config_.velocity_timeout_s)
                       : "no velocity received";
     urgent = true;
   } else {

@@ -51,22 +51,25 @@ void AdaptiveScan::update(RequestControl& control, std::int64_t now_ns) {
   }
   const std::string from = mode_ ? toString(*mode_) : "none";
   lock.lock();
-  if (mode_ && config_.actions[static_cast<std::size_t>(*mode_)].pause && !action.pause) resumed_ns_ = now_ns;
+  if (mode_ && config_.actions[static_cast<std::size_t>(*mode_)].pause && !action.pause)
+    resumed_ns_ = now_ns;
   mode_ = decision.mode;
   reason_ = decision.reason;
   ++switches_;
   if (!action.pause) compensation_by_pattern_[action.pattern] = action.motion_compensation;
   lock.unlock();
-  logInfo(std::string("adaptive: ") + from + " -> " + toString(decision.mode) + " (" + decision.reason +
-          "): " +
+  logInfo(std::string("adaptive: ") + from + " -> " + toString(decision.mode) + " (" +
+          decision.reason + "): " +
           (action.pause ? std::string("paused")
                         : "pattern " + action.pattern + ", motion compensation " +
                               (action.motion_compensation ? "on" : "off")));
-  if (!error.empty()) control.reportError("adaptive: switching to " + action.pattern + ": " + error, "adaptive");
+  if (!error.empty())
+    control.reportError("adaptive: switching to " + action.pattern + ": " + error, "adaptive");
   control.touch();
 }
 
-std::optional<bool> AdaptiveScan::compensationFor(std::uint64_t generation, const std::string& pattern) const {
+std::optional<bool> AdaptiveScan::compensationFor(std::uint64_t generation,
+                                                  const std::string& pattern) const {
   std::lock_guard lock(mutex_);
   if (generation != generation_ || generation_ == 0) return std::nullopt;
   const auto it = compensation_by_pattern_.find(pattern);

@@ -22,10 +22,10 @@ constexpr std::size_t kAdaptiveModes = 4;
 // As written in the config and the status: static, linear_x, linear_y, moving.
 const char* toString(AdaptiveMode mode);
 
-// What the engine does in a mode (`adaptive.<mode>`).
+// What the engine does in a mode (`adaptive.modes.<mode>`).
 struct AdaptiveAction {
-  bool pause = false;            // no clouds: sets are dropped, the status says why
-  std::string pattern;           // the pattern switched to (unless pause)
+  bool pause = false;   // no clouds: sets are dropped, the status says why
+  std::string pattern;  // the pattern switched to (unless pause)
   bool motion_compensation = false;
 };
 
