@@ -267,6 +267,8 @@ std::optional<StatusInfo> SensorClient::status(std::chrono::milliseconds timeout
       info.requests_malformed = s.requests_malformed;
       info.requests_rejected = s.requests_rejected;
       info.clouds_lost_to_readers = s.clouds_lost_to_readers;
+      info.adaptive_mode = s.adaptive_mode ? s.adaptive_mode : "";
+      info.adaptive_reason = s.adaptive_reason ? s.adaptive_reason : "";
       for (std::uint32_t k = 0; k < s.points_readers._length; ++k) {
         const auto& r = s.points_readers._buffer[k];
         info.points_readers.push_back(

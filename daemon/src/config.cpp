@@ -260,6 +260,76 @@ void parseMotion(const YamlMap& m, MotionConfig& motion) {
   m.done();
 }
 
+// `adaptive:` (issue 33 item 4, docs/formats.md "Adaptive scanning"): after
+// the patterns and motion_compensation, which its modes refer to.
+void parseAdaptive(const YamlMap& m, const DaemonConfig& config, AdaptiveConfig& a) {
+  std::string topic = m.get<std::string>("velocity_topic");
+  if (!topic.empty() && topic.front() == '/') topic.erase(0, 1);
+  if (topic.empty() || topic.size() > 128 || topic.back() == '/' ||
+      topic.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_/") !=
+          std::string::npos)
+    m.fail("velocity_topic", "must be a ROS 2 topic name: 1..128 letters, digits, '_' or inner '/'");
+  a.velocity_topic = topic;
+  a.frame_id = m.get<std::string>("frame_id", a.frame_id);
+  auto inRange = [&](const char* key, double fallback, double lo, double hi, const char* unit) {
+    const double v = m.get<double>(key, fallback);
+    if (!(v >= lo && v <= hi))
+      m.fail(key, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "] " + unit);
+    return v;
+  };
+  a.velocity_timeout_s = inRange("velocity_timeout_s", a.velocity_timeout_s, 0.01, 60, "s");
+  a.static_speed_m_s = inRange("static_speed_m_s", a.static_speed_m_s, 0, 10, "m/s");
+  a.static_angular_rad_s = inRange("static_angular_rad_s", a.static_angular_rad_s, 0, 10, "rad/s");
+  a.max_speed_m_s = inRange("max_speed_m_s", a.max_speed_m_s, 0, 10, "m/s");
+  a.max_angular_rad_s = inRange("max_angular_rad_s", a.max_angular_rad_s, 0, 10, "rad/s");
+  a.max_off_axis = inRange("max_off_axis", a.max_off_axis, 0, 1, "(fraction of the speed)");
+  a.hysteresis = inRange("hysteresis", a.hysteresis, 0, 1, "(fraction)");
+  a.min_dwell_s = inRange("min_dwell_s", a.min_dwell_s, 0, 600, "s");
+  if (!(a.static_speed_m_s < a.max_speed_m_s))
+    m.fail("max_speed_m_s", "must be above static_speed_m_s");
+  if (!(a.static_angular_rad_s <= a.max_angular_rad_s))
+    m.fail("max_angular_rad_s", "must be at least static_angular_rad_s");
+  auto modeNamed = [&](const std::string& name) -> std::optional<AdaptiveMode> {
+    for (std::size_t i = 0; i < kAdaptiveModes; ++i)
+      if (name == toString(static_cast<AdaptiveMode>(i))) return static_cast<AdaptiveMode>(i);
+    return std::nullopt;
+  };
+  const std::string safe = m.get<std::string>("safe_mode", toString(a.safe_mode));
+  const std::optional<AdaptiveMode> safe_mode = modeNamed(safe);
+  if (!safe_mode) m.fail("safe_mode", "must be static, linear_x, linear_y or moving, not '" + safe + "'");
+  a.safe_mode = *safe_mode;
+  // Every mode says what to do: a pattern (and compensation), or pause.
+  const YamlMap modes = m.map("modes");
+  for (std::size_t i = 0; i < kAdaptiveModes; ++i) {
+    const auto mode = static_cast<AdaptiveMode>(i);
+    const YamlMap entry = modes.map(toString(mode));
+    AdaptiveAction& action = a.actions[i];
+    action.pause = entry.get<bool>("pause", false);
+    if (action.pause) {
+      if (entry.has("pattern") || entry.has("motion_compensation"))
+        entry.fail("pause", "a paused mode has no pattern or motion_compensation");
+    } else {
+      action.pattern = entry.get<std::string>("pattern");
+      if (!config.findPattern(action.pattern))
+        entry.fail("pattern", "no pattern named '" + action.pattern + "'");
+      action.motion_compensation = entry.get<bool>("motion_compensation", false);
+      // The compensation axis is motion_compensation.axis for every mode.
+      using Axis = pipeline::MotionCompensationOptions::Axis;
+      const Axis axis = config.motion.options.axis;
+      if (action.motion_compensation &&
+          ((mode == AdaptiveMode::kLinearX && axis != Axis::kX) ||
+           (mode == AdaptiveMode::kLinearY && axis != Axis::kY)))
+        entry.fail("motion_compensation",
+                   std::string("compensates along motion_compensation.axis (") +
+                       (axis == Axis::kX ? "x" : "y") + "), not along this mode's motion");
+    }
+    entry.done();
+  }
+  modes.done();
+  a.enabled = true;
+  m.done();
+}
+
 void parseRuntime(const YamlMap& m, RuntimeConfig& r) {
   r.queue_depth = m.get<int>("queue_depth", r.queue_depth);
   if (r.queue_depth < 1 || r.queue_depth > 64) m.fail("queue_depth", "must be in 1..64");
@@ -505,6 +575,7 @@ DaemonConfig parseRoot(const YAML::Node& root_node, const std::string& origin,
   parseRuntime(root.optionalMap("runtime"), config.runtime);
   parseSoftwareTrigger(root.optionalMap("software_trigger"), config.software_trigger);
   parseCameraNoise(root, config);
+  if (root.has("adaptive")) parseAdaptive(root.map("adaptive"), config, config.adaptive);
   // Relative: under the service's state directory when systemd gives one
   // (StateDirectory=, $STATE_DIRECTORY), else under the user's data folder
   // ($XDG_DATA_HOME/sl-sensor, ~/.local/share/sl-sensor): never in the source

@@ -22,6 +22,7 @@
 #include "service_bridge.h"
 #include "ros_graph.h"
 #include "ros_messages.h"
+#include "velocity_input.h"
 #include "sl/dds/cloud_layout.h"
 #include "sl/dds/dds.h"
 #include "sl/dds/sensor_topics.h"
@@ -471,9 +472,17 @@ void DdsBridge::serve(ScanEngine& engine) {
   Clock::time_point next_periodic = Clock::now();
   Clock::time_point next_diagnostics = Clock::now();
   const std::vector<std::string> patterns = engine.patterns();
+  // Adaptive scanning: the robot's velocity, polled with the requests (at
+  // least every 100 ms).
+  std::optional<VelocityInput> velocity;
+  if (engine.config().adaptive.enabled) {
+    velocity.emplace(d.participant, engine.config().adaptive);
+    d.discovery.publish();  // with the new reader
+  }
   while (!d.stopping) {
     d.waitset.wait(DDS_MSECS(100));
     d.serveRequests(target);
+    if (velocity) velocity->forward(engine);
     d.services.serve(d.dispatcher, target, engine.status().pattern);
     const EngineStatus status = engine.status();
     if (status.version != published_version || Clock::now() >= next_periodic) {

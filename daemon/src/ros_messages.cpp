@@ -284,6 +284,8 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
       last_error_(s.last_error),
       recording_(s.recording),
       degraded_(s.degraded_reason),
+      adaptive_mode_(s.adaptive_mode),
+      adaptive_reason_(s.adaptive_reason),
       cameras_(s.cameras),
       patterns_(patterns),
       camera_pointers_(pointersInto(cameras_)),
@@ -316,6 +318,8 @@ StatusMessage::StatusMessage(const EngineStatus& s, const std::vector<std::strin
   msg.requests_malformed = edge.requests_malformed;
   msg.requests_rejected = edge.requests_rejected;
   msg.clouds_lost_to_readers = edge.clouds_lost_to_readers;
+  msg.adaptive_mode = adaptive_mode_.data();
+  msg.adaptive_reason = adaptive_reason_.data();
   for (const MatchedReaderState& r : edge.points_readers) reader_guids_.push_back(r.guid);
   points_readers_.resize(edge.points_readers.size());
   for (std::size_t i = 0; i < points_readers_.size(); ++i) {

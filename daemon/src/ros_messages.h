@@ -218,7 +218,7 @@ class StatusMessage : NonMovable {
   const Status& sample() const { return msg_; }
 
  private:
-  std::string pattern_, last_error_, recording_, degraded_;
+  std::string pattern_, last_error_, recording_, degraded_, adaptive_mode_, adaptive_reason_;
   std::vector<std::string> cameras_, patterns_;
   std::vector<char*> camera_pointers_, pattern_pointers_;
   std::vector<std::string> reader_guids_;

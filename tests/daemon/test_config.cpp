@@ -506,3 +506,94 @@ TEST_CASE("a reload may change the decoder and dds.status_period_s; another dds 
   CHECK(changed("max_unwrap_error: 0.3", "max_unwrap_error: 0.4").empty());
   CHECK(changed("domain_id: 0", "domain_id: 3") == std::vector<std::string>{"dds.domain_id"});
 }
+
+namespace {
+
+// An `adaptive:` section for the shipped sim config (motion compensation
+// along x), with `extra` lines added to it and `moving` as given.
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const auto at = text.find(from);
+  REQUIRE(at != std::string::npos);
+  return text.replace(at, from.size(), to);
+}
+
+std::string withAdaptive(const std::string& extra = "",
+                         const std::string& moving = "{pause: true}") {
+  return shippedConfig() +
+         "\nadaptive:\n"
+         "  velocity_topic: /robot/velocity\n" +
+         extra +
+         "  modes:\n"
+         "    static: {pattern: 3+3_both}\n"
+         "    linear_x: {pattern: 3+3_horizontal, motion_compensation: true}\n"
+         "    linear_y: {pattern: 3+3_both}\n"
+         "    moving: " +
+         moving + "\n";
+}
+
+}  // namespace
+
+TEST_CASE("adaptive: is off without the section, and parses its policy and modes", "[adaptive]") {
+  using sl::daemon::AdaptiveMode;
+  CHECK_FALSE(sl::daemon::parseConfig(shippedConfig(), "test.yaml").adaptive.enabled);
+  const auto config = sl::daemon::parseConfig(
+      withAdaptive("  velocity_timeout_s: 0.3\n  max_speed_m_s: 0.08\n  safe_mode: static\n"), "test.yaml");
+  const sl::daemon::AdaptiveConfig& a = config.adaptive;
+  CHECK(a.enabled);
+  CHECK(a.velocity_topic == "robot/velocity");  // the leading '/' of a ROS 2 name dropped
+  CHECK(a.velocity_timeout_s == 0.3);
+  CHECK(a.max_speed_m_s == 0.08);
+  CHECK(a.static_speed_m_s == 0.002);  // default
+  CHECK(a.safe_mode == AdaptiveMode::kStatic);
+  const auto& linear_x = a.actions[static_cast<std::size_t>(AdaptiveMode::kLinearX)];
+  CHECK(linear_x.pattern == "3+3_horizontal");
+  CHECK(linear_x.motion_compensation);
+  CHECK_FALSE(a.actions[static_cast<std::size_t>(AdaptiveMode::kStatic)].motion_compensation);
+  CHECK(a.actions[static_cast<std::size_t>(AdaptiveMode::kMoving)].pause);
+  const auto moving = sl::daemon::parseConfig(withAdaptive("", "{pattern: 3+3_horizontal}"), "test.yaml");
+  CHECK_FALSE(moving.adaptive.actions[static_cast<std::size_t>(AdaptiveMode::kMoving)].pause);
+}
+
+TEST_CASE("adaptive: mistakes name the key", "[adaptive]") {
+  struct Case {
+    std::string yaml, expected;
+  };
+  const auto c = GENERATE(
+      Case{withAdaptive("  speed_limit: 1\n"), "unknown key 'adaptive.speed_limit'"},
+      Case{withAdaptive("  max_speed_m_s: 0.001\n"), "key 'adaptive.max_speed_m_s': must be above static_speed_m_s"},
+      Case{withAdaptive("  velocity_timeout_s: 0\n"), "key 'adaptive.velocity_timeout_s': must be in"},
+      Case{withAdaptive("  safe_mode: stop\n"),
+           "key 'adaptive.safe_mode': must be static, linear_x, linear_y or moving, not 'stop'"},
+      Case{withAdaptive("", "{pattern: nope}"), "key 'adaptive.modes.moving.pattern': no pattern named 'nope'"},
+      Case{withAdaptive("", "{pause: true, pattern: 3+3_both}"),
+           "key 'adaptive.modes.moving.pause': a paused mode has no pattern"},
+      Case{withAdaptive("", "{motion_compensation: true}"), "key 'adaptive.modes.moving.pattern'"},
+      // linear_y cannot be compensated along motion_compensation.axis (x here).
+      Case{replaced(withAdaptive(), "linear_y: {pattern: 3+3_both}",
+                    "linear_y: {pattern: 3+3_both, motion_compensation: true}"),
+           "key 'adaptive.modes.linear_y.motion_compensation': compensates along motion_compensation.axis (x)"},
+      Case{shippedConfig() + "\nadaptive:\n  modes: {}\n", "key 'adaptive.velocity_topic'"},
+      Case{shippedConfig() + "\nadaptive:\n  velocity_topic: a b\n", "key 'adaptive.velocity_topic': must be a ROS 2 topic name"});
+  INFO(c.yaml);
+  CHECK_THAT(errorOf(c.yaml), Catch::Matchers::Contains(c.expected));
+}
+
+TEST_CASE("adaptive: the example commented in config/sim-motion.yaml parses", "[adaptive]") {
+  std::ifstream in(std::string(SL_SOURCE_DIR) + "/config/sim-motion.yaml");
+  std::string text, line;
+  bool in_example = false;
+  while (std::getline(in, line)) {
+    // The example: "# adaptive:" and the "#   ..." lines after it, uncommented.
+    if (line == "# adaptive:") in_example = true;
+    else if (in_example && line.rfind("#   ", 0) != 0) in_example = false;
+    text += (in_example ? line.substr(2) : line) + "\n";
+  }
+  const auto config = sl::daemon::parseConfig(text, "sim-motion.yaml");
+  using sl::daemon::AdaptiveMode;
+  REQUIRE(config.adaptive.enabled);
+  const auto& linear_x = config.adaptive.actions[static_cast<std::size_t>(AdaptiveMode::kLinearX)];
+  CHECK(linear_x.pattern == "3+3_vertical");
+  CHECK(linear_x.motion_compensation);
+  CHECK(config.adaptive.actions[static_cast<std::size_t>(AdaptiveMode::kMoving)].pause);
+  CHECK(config.adaptive.safe_mode == AdaptiveMode::kMoving);
+}

@@ -25,6 +25,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -36,6 +37,7 @@
 #include <future>
 #include <optional>
 #include <map>
+#include <mutex>
 #include <thread>
 
 #include <sys/socket.h>
@@ -45,6 +47,7 @@
 #include <Eigen/Geometry>
 
 #include "daemon_process.h"
+#include "geometry_msgs/msg/TwistStamped.h"
 #include "sensor_msgs/msg/CameraInfo.h"
 #include "sensor_msgs/msg/Image.h"
 #include "sensor_msgs/msg/PointCloud2.h"
@@ -1689,4 +1692,181 @@ TEST_CASE("points_confidence: camera noise from the simulator or camera_noise, p
   CHECK_NOTHROW(parse(root));  // normals and plain clouds need no noise model
   root["dds"]["points_normal_step"] = 0;
   CHECK_THROWS_WITH(parse(root), Catch::Contains("points_normal_step"));
+}
+
+// Adaptive scanning (issue 33 item 4): a robot's velocity published as
+// geometry_msgs/TwistStamped steers a continuous scan: at rest the static
+// mode's pattern, linear motion along x the compensated pattern, a rotation
+// pauses with the reason, and once the velocity stops coming the safe mode
+// (here static) takes over, each switch counted.
+TEST_CASE("adaptive scanning follows a stop-go-turn velocity and falls back when it goes stale",
+          "[adaptive]") {
+  sl::test::useLoopbackDds();
+  const std::string ns = sl::test::uniqueNamespace("adaptive");
+  YAML::Node root = sl::test::simConfig(ns);
+  YAML::Node adaptive;
+  adaptive["velocity_topic"] = "/" + ns + "/velocity";
+  adaptive["velocity_timeout_s"] = 0.5 * kTimeScale;
+  adaptive["min_dwell_s"] = 0.3;
+  adaptive["safe_mode"] = "static";
+  adaptive["modes"]["static"]["pattern"] = "3+3_both";
+  adaptive["modes"]["linear_x"]["pattern"] = "3+3_horizontal";
+  adaptive["modes"]["linear_x"]["motion_compensation"] = true;  // motion_compensation.axis: x (default)
+  adaptive["modes"]["linear_y"]["pattern"] = "3+3_both";
+  adaptive["modes"]["moving"]["pause"] = true;
+  root["adaptive"] = adaptive;
+  sl::test::DaemonProcess daemon(sl::test::writeConfigFile(root, ns));
+  REQUIRE(daemon.started());
+  const auto client_owner = connect(ns, /*points=*/false);
+  sl::client::SensorClient& client = *client_owner;
+
+  // The robot: publishes the current velocity at 20 Hz until told to stop.
+  sl::dds::Participant participant(0);
+  sl::dds::Topic<geometry_msgs_msg_dds__TwistStamped_> topic(participant, "rt/" + ns + "/velocity",
+                                                             geometry_msgs_msg_dds__TwistStamped__desc);
+  sl::dds::Writer<geometry_msgs_msg_dds__TwistStamped_> writer(participant, topic,
+                                                               sl::dds::Qos().reliable().keepLast(10));
+  std::mutex robot_mutex;
+  geometry_msgs_msg_dds__TwistStamped_ velocity{};
+  velocity.header.frame_id = const_cast<char*>("sl_camera_optical_frame");
+  std::atomic<bool> publishing{true};
+  std::thread robot([&] {
+    while (publishing) {
+      {
+        std::lock_guard lock(robot_mutex);
+        const std::int64_t now = sl::test::nowNs();
+        velocity.header.stamp.sec = static_cast<std::int32_t>(now / 1'000'000'000);
+        velocity.header.stamp.nanosec = static_cast<std::uint32_t>(now % 1'000'000'000);
+        writer.write(velocity);
+      }
+      std::this_thread::sleep_for(50ms);
+    }
+  });
+  auto setVelocity = [&](double vx, double vy, double wz) {
+    std::lock_guard lock(robot_mutex);
+    velocity.twist.linear.x = vx;
+    velocity.twist.linear.y = vy;
+    velocity.twist.angular.z = wz;
+  };
+  struct StopRobot {
+    std::atomic<bool>& publishing;
+    std::thread& robot;
+    ~StopRobot() {
+      publishing = false;
+      if (robot.joinable()) robot.join();
+    }
+  } stop_robot{publishing, robot};
+  REQUIRE(writer.waitForReaders(1, DDS_SECS(10) * kTimeScale));
+
+  // Every status seen, for the order of the modes.
+  std::vector<std::string> modes;
+  auto waitFor = [&](auto done) {
+    return sl::test::statusWhen(
+        client,
+        [&](const sl::client::StatusInfo& s) {
+          if (modes.empty() || modes.back() != s.adaptive_mode) modes.push_back(s.adaptive_mode);
+          return done(s);
+        },
+        scaledBound(20s));
+  };
+
+  setVelocity(0, 0, 0);
+  auto reply = client.request(Command::kStart, "3+3_horizontal", 0, scaledBound(5s));
+  REQUIRE(reply);
+  REQUIRE(reply->accepted);
+
+  // At rest: static's pattern, no compensation, scans published.
+  auto s = waitFor([](const auto& s) {
+    return s.adaptive_mode == "static" && s.pattern == "3+3_both" && s.scans_done >= 2;
+  });
+  REQUIRE(s);
+  INFO("mode " << s->adaptive_mode << " (" << s->adaptive_reason << "), pattern " << s->pattern);
+  CHECK(s->adaptive_mode == "static");
+  CHECK(s->pattern == "3+3_both");
+  CHECK_FALSE(s->motion_compensation);
+  const std::uint64_t switches_static = s->adaptive_switches;
+  CHECK(switches_static >= 1);
+
+  // Linear motion along x at 50 mm/s: the compensated pattern.
+  setVelocity(0.05, 0.002, 0);
+  s = waitFor([](const auto& s) {
+    return s.adaptive_mode == "linear_x" && s.pattern == "3+3_horizontal" && s.motion_compensation;
+  });
+  REQUIRE(s);
+  INFO("mode " << s->adaptive_mode << " (" << s->adaptive_reason << "), pattern " << s->pattern);
+  CHECK(s->adaptive_mode == "linear_x");
+  CHECK(s->adaptive_reason.find("linear along x") != std::string::npos);
+  CHECK(s->pattern == "3+3_horizontal");
+  CHECK(s->motion_compensation);
+  CHECK(s->adaptive_switches > switches_static);
+  const std::uint64_t scans_linear = s->scans_done;
+  s = waitFor([&](const auto& s) { return s.scans_done >= scans_linear + 2; });
+  REQUIRE(s);
+  CHECK(s->scans_done >= scans_linear + 2);  // clouds of the compensated pattern
+
+  // Turning: paused, the reason in the status.
+  setVelocity(0.02, 0, 0.3);
+  s = waitFor([](const auto& s) {
+    return s.adaptive_mode == "moving" && s.state == sl::client::ScanState::kDegraded;
+  });
+  REQUIRE(s);
+  INFO("mode " << s->adaptive_mode << " (" << s->adaptive_reason << "), degraded: " << s->degraded_reason);
+  CHECK(s->adaptive_mode == "moving");
+  CHECK(s->adaptive_reason.find("rotating") != std::string::npos);
+  CHECK(s->state == sl::client::ScanState::kDegraded);
+  CHECK(s->degraded_reason.find("paused by adaptive scanning (moving: rotating") != std::string::npos);
+  // While paused, only sets already in flight become scans.
+  const std::uint64_t scans_paused = s->scans_done;
+  std::this_thread::sleep_for(scaledBound(1500ms));
+  s = client.status(scaledBound(3s));
+  REQUIRE(s);
+  CHECK(s->adaptive_mode == "moving");
+  CHECK(s->scans_done <= scans_paused + 4);  // queue_depth sets + results + one in processing
+
+  // The robot stops publishing: after velocity_timeout_s the safe mode
+  // (static), scanning again, the staleness as the reason.
+  publishing = false;
+  robot.join();
+  s = waitFor([](const auto& s) {
+    return s.adaptive_mode == "static" && s.pattern == "3+3_both" &&
+           s.state == sl::client::ScanState::kScanning;
+  });
+  REQUIRE(s);
+  INFO("mode " << s->adaptive_mode << " (" << s->adaptive_reason << "), state "
+               << static_cast<int>(s->state) << ": " << s->degraded_reason);
+  CHECK(s->adaptive_mode == "static");
+  CHECK(s->adaptive_reason.find("velocity stale") != std::string::npos);
+  CHECK(s->pattern == "3+3_both");
+  CHECK(s->state == sl::client::ScanState::kScanning);
+  const std::uint64_t scans_stale = s->scans_done;
+  s = waitFor([&](const auto& s) { return s.scans_done >= scans_stale + 2; });
+  REQUIRE(s);
+  CHECK(s->scans_done >= scans_stale + 2);  // scanning resumed
+  // static, linear_x, moving, static (more only if the velocity went stale
+  // in between on a loaded machine).
+  CHECK(s->adaptive_switches >= 4);
+  std::vector<std::string> distinct;
+  for (const auto& m : modes)
+    if (!m.empty()) distinct.push_back(m);
+  INFO("modes seen in order: " << [&] {
+    std::string text;
+    for (const auto& m : distinct) text += m + " ";
+    return text;
+  }());
+  auto at = distinct.begin();
+  for (const char* expected : {"static", "linear_x", "moving", "static"}) {
+    at = std::find(at, distinct.end(), expected);
+    CHECK(at != distinct.end());
+    if (at != distinct.end()) ++at;
+  }
+
+  reply = client.request(Command::kStop, "", 0, scaledBound(5s));
+  REQUIRE(reply);
+  CHECK(reply->accepted);
+  s = waitFor([](const auto& s) { return s.adaptive_mode.empty(); });
+  REQUIRE(s);
+  CHECK(s->adaptive_mode.empty());  // no continuous scan: no mode
+  const auto exit_status = daemon.terminate(5s);
+  REQUIRE(exit_status);
+  CHECK(*exit_status == 0);
 }

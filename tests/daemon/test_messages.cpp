@@ -18,6 +18,7 @@
 #include "engine/set_processor.h"
 #include "request_dispatch.h"
 #include "ros_messages.h"
+#include "velocity_input.h"
 #include "sl/daemon/config.h"
 #include "sl/daemon/dds_bridge.h"
 #include "sl/drivers/sim.h"
@@ -496,6 +497,9 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   s.decode_consistent_fraction = 0.58;
   s.decode_residual_median = 0.25;
   s.clouds_implausible = 11;
+  s.adaptive_mode = "linear_x";
+  s.adaptive_reason = "linear along x at 0.0600 m/s";
+  s.adaptive_switches = 12;
   msg::EdgeCounters edge;
   edge.requests.received = 9;
   edge.requests.answered = 8;
@@ -531,6 +535,9 @@ TEST_CASE("status: the engine's values and the edge's counters; timed-out writes
   CHECK(m.decode_residual_median == 0.25);
   CHECK(m.clouds_implausible == 11);
   CHECK(m.images_not_compressed == 12);
+  CHECK(str(m.adaptive_mode) == "linear_x");
+  CHECK(str(m.adaptive_reason) == "linear along x at 0.0600 m/s");
+  CHECK(m.adaptive_switches == 12);
   REQUIRE(m.points_readers._length == 2);
   CHECK(str(m.points_readers._buffer[0].guid) == "1:2:3:4");
   CHECK(m.points_readers._buffer[0].reliable);
@@ -574,7 +581,8 @@ TEST_CASE("status fields: SL_STATUS_ENGINE_FIELDS and the hand-written fields ar
       "patterns", "trigger", "cameras", "motion_compensation", "start_at", "requests_received",
       "requests_answered", "requests_rate_limited", "requests_invalid", "replies_timed_out",
       "degraded_reason", "last_error_stamp", "requests_malformed", "requests_rejected",
-      "clouds_lost_to_readers", "points_readers", "images_not_compressed"};
+      "clouds_lost_to_readers", "points_readers", "images_not_compressed", "adaptive_mode",
+      "adaptive_reason"};
   auto fields = statusMsgFields();
   REQUIRE(fields.size() > by_hand.size());
   std::map<std::string, std::string> listed;
@@ -852,4 +860,25 @@ TEST_CASE("dispatch: an oversized camera list is refused without reading its ent
   CHECK(reply->result.code == Code::kInvalidOption);
   CHECK_THAT(reply->result.reason, Catch::Contains("cameras has 100000 entries, more than 16"));
   CHECK(sensor.starts.empty());
+}
+
+TEST_CASE("velocityOf: a TwistStamped as the adaptive policy takes it", "[adaptive]") {
+  geometry_msgs_msg_dds__TwistStamped_ m{};
+  m.header.frame_id = const_cast<char*>("sl_camera_optical_frame");
+  m.twist.linear = {0.06, -0.01, 0.002};
+  m.twist.angular = {0.0, 0.1, -0.2};
+  const auto v = sl::daemon::velocityOf(m, "", 42);
+  REQUIRE(v);
+  CHECK(v->received_ns == 42);
+  CHECK(v->linear_m_s == std::array<double, 3>{0.06, -0.01, 0.002});
+  CHECK(v->angular_rad_s == std::array<double, 3>{0.0, 0.1, -0.2});
+  // adaptive.frame_id: another frame is ignored, the same one taken.
+  CHECK(sl::daemon::velocityOf(m, "sl_camera_optical_frame", 1));
+  CHECK_FALSE(sl::daemon::velocityOf(m, "base_link", 1));
+  m.header.frame_id = nullptr;
+  CHECK_FALSE(sl::daemon::velocityOf(m, "base_link", 1));
+  CHECK(sl::daemon::velocityOf(m, "", 1));
+  // Not finite: ignored.
+  m.twist.angular.z = std::numeric_limits<double>::quiet_NaN();
+  CHECK_FALSE(sl::daemon::velocityOf(m, "", 1));
 }

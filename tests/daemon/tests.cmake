@@ -33,9 +33,9 @@ target_link_libraries(points_subscriber PRIVATE sl_idl CycloneDDS::ddsc)
 
 # ScanEngine without DDS: health (feeds the systemd watchdog), requests,
 # software trigger; its stages without threads (start validation, set
-# processing); BoundedQueue's overflow policies.
+# processing, the adaptive-scanning policy); BoundedQueue's overflow policies.
 sl_add_test(test_engine daemon/test_engine.cpp daemon/test_engine_stages.cpp
-  daemon/test_bounded_queue.cpp)
+  daemon/test_bounded_queue.cpp daemon/test_adaptive.cpp)
 target_link_libraries(test_engine PRIVATE sl_daemon sl_drivers)
 # The engine's stages are private to the daemon (daemon/src/engine/).
 target_include_directories(test_engine PRIVATE ${PROJECT_SOURCE_DIR}/daemon/src)

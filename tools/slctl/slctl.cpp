@@ -373,7 +373,7 @@ const std::set<std::string> kStatusFieldsFormatted = {
     "sets_incomplete", "frames_overflow", "frames_unmatched", "sets_overflow",
     "sets_not_recorded", "sets_recorded", "sets_over_quota", "errors_reported", "latency_ms",
     "latency_max_ms", "wait_ms", "processing_ms", "publish_ms", "decode_modulated_fraction",
-    "decode_consistent_fraction", "decode_residual_median", "clouds_implausible"};
+    "decode_consistent_fraction", "decode_residual_median", "clouds_implausible", "adaptive_switches"};
 
 void printStatusLine(const char* label, std::uint64_t v) {
   std::printf("%-18s%llu\n", (std::string(label) + ":").c_str(), static_cast<unsigned long long>(v));
@@ -414,6 +414,11 @@ int printStatus(SensorClient& client, const Args& args) {
               u(s->sets_dropped), u(s->sets_overflow), u(s->writes_timed_out),
               u(s->sets_not_recorded));
   std::printf("sets incomplete:  %llu\n", u(s->sets_incomplete));
+  if (!s->adaptive_mode.empty() || s->adaptive_switches > 0)
+    std::printf("adaptive:         %s%s%s (%llu switches)\n",
+                s->adaptive_mode.empty() ? "-" : s->adaptive_mode.c_str(),
+                s->adaptive_reason.empty() ? "" : ": ", s->adaptive_reason.c_str(),
+                u(s->adaptive_switches));
   std::printf("decode health:    %.1f %% modulated, %.1f %% of those consistent, residual median "
               "%.3f; %llu implausible clouds\n",
               100 * s->decode_modulated_fraction, 100 * s->decode_consistent_fraction,

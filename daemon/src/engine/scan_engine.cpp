@@ -13,6 +13,7 @@
 #include <utility>
 #include <variant>
 
+#include "engine/adaptive_scan.h"
 #include "engine/control_loop.h"
 #include "engine/decode_watch.h"
 #include "engine/device_health.h"
@@ -206,6 +207,9 @@ struct ScanEngine::Impl {
   DeviceHealth device_health;
   DecodeWatch decode_watch;  // processing thread reports; output thread checks
   Clock::time_point next_health_check;  // output thread
+  // Adaptive scanning: velocity from the DDS edge, the policy run by the
+  // output thread, its compensation and pause read by the processing thread.
+  AdaptiveScan adaptive{config.adaptive};
 
   CameraGate gate{camera_ids.size()};  // parks the camera threads (software trigger)
   RequestControl control;  // after the members its links point at
@@ -305,10 +309,13 @@ void ScanEngine::Impl::processLoop(Heartbeat& hb) {
     if (std::optional<DaemonConfig> settings = pending_settings.take()) applySettings(*settings);
     const std::shared_ptr<const RequestOptions> options = control.options();
     const pipeline::ImageSet& set = *item->set;
+    // Adaptive scanning: a paused mode drops the set (recorded all the
+    // same); a mode's compensation overrides the request's.
+    if (adaptive.paused(item->generation)) continue;
+    const bool compensate = adaptive.compensationFor(item->generation, set.pattern_name)
+                                .value_or(options->motion_compensation.value_or(motion_enabled.load()));
     const pipeline::TimestampNs processing_ns = pipeline::systemClockNs();
-    SetOutcome outcome =
-        processor.process(set, control.camerasFor(set.pattern_name, *options),
-                          options->motion_compensation.value_or(motion_enabled.load()));
+    SetOutcome outcome = processor.process(set, control.camerasFor(set.pattern_name, *options), compensate);
     if (!outcome.warning.empty()) control.reportError(outcome.warning);
     if (!outcome.ok()) {
       control.reportError(outcome.error);
@@ -381,13 +388,22 @@ void ScanEngine::Impl::outputLoop(Heartbeat& hb) {
   }
 }
 
-// Every 100 ms (and after each scan): is the running scan degraded?
+// Every 100 ms (and after each scan): the adaptive policy, and is the
+// running scan degraded?
 void ScanEngine::Impl::checkHealth() {
   const auto now = Clock::now();
   if (now < next_health_check) return;
   next_health_check = now + 100ms;
+  adaptive.update(control, steadyNowNs());
   const std::uint64_t generation = control.generation();
-  std::string cause = degradedCause(control.health(), device_health, statistics, generation,
+  // Paused by adaptive scanning: no scan is published on purpose; that is
+  // the cause, not a stall.
+  if (const std::string paused = adaptive.pauseCause(generation); !paused.empty())
+    return control.setDegraded(paused);
+  RequestControl::Health health = control.health();
+  if (const std::int64_t resumed_ns = adaptive.resumedNs(generation); resumed_ns > 0)
+    health.since = std::max(health.since, Clock::time_point(std::chrono::nanoseconds(resumed_ns)));
+  std::string cause = degradedCause(health, device_health, statistics, generation,
                                     config.runtime.stall_timeout_s);
   // A decode that stays implausible comes first: the scans it withholds are
   // what "no scan published" would report next.
@@ -486,6 +502,8 @@ void ScanEngine::reportError(const std::string& message, const std::string& sour
 }
 void ScanEngine::clearError(const std::string& source) { impl_->control.clearError(source); }
 
+void ScanEngine::setVelocity(const VelocitySample& velocity) { impl_->adaptive.setVelocity(velocity); }
+
 EngineStatus ScanEngine::status() const {
   Impl& d = *impl_;
   EngineStatus s;
@@ -499,7 +517,9 @@ EngineStatus ScanEngine::status() const {
   s.sets_overflow = d.sets.dropped() + d.results.dropped();
   s.sets_dropped = s.sets_overflow;  // + sets_not_recorded below
   addRecorderStatus(s, d.recorder, d.config.runtime.last_error_hold_s, pipeline::systemClockNs());
-  s.motion_compensation = d.control.options()->motion_compensation.value_or(d.motion_enabled.load());
+  s.motion_compensation = d.adaptive.compensation(d.control.generation())
+                              .value_or(d.control.options()->motion_compensation.value_or(d.motion_enabled.load()));
+  d.adaptive.fill(s);
   d.statistics.fillStatus(s);
   d.decode_watch.fill(s);
   return s;

@@ -62,6 +62,8 @@ struct StatusInfo {
   std::uint64_t clouds_lost_to_readers = 0;
   std::vector<PointsReaderInfo> points_readers;
   std::uint64_t images_not_compressed = 0;  // see sl_msgs/Status.msg (edge counter)
+  // Adaptive scanning (EngineStatus): mode ("" = off) and why; switches in status_fields.h.
+  std::string adaptive_mode, adaptive_reason;
 };
 
 enum class Command { kStart, kStop, kSetPattern, kListPatterns, kGetConfig };

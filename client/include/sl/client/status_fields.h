@@ -51,7 +51,8 @@
   X(double, decode_modulated_fraction, "decode: modulated fraction")                            \
   X(double, decode_consistent_fraction, "decode: consistent fraction")                          \
   X(double, decode_residual_median, "decode: residual median [periods]")                        \
-  X(std::uint64_t, clouds_implausible, "clouds implausible") /* not published, since start-up */
+  X(std::uint64_t, clouds_implausible, "clouds implausible") /* not published, since start-up */ \
+  X(std::uint64_t, adaptive_switches, "adaptive switches")   /* adaptive mode changes, since start-up */
 
 // Declares the fields as members, each zero.
 #define SL_STATUS_DECLARE_FIELD(type, name, label) type name = 0;

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "sl/daemon/adaptive.h"
 #include "sl/daemon/aravis_config.h"
 #include "sl/dds/cloud_layout.h"
 #include "sl/client/commands.h"  // TriggerMode
@@ -170,6 +171,8 @@ struct DaemonConfig {
   pipeline::TriangulatorOptions triangulator;
   pipeline::SynchroniserOptions synchroniser;
   MotionConfig motion;
+  // Adaptive scanning (`adaptive:`): off unless the section is present.
+  AdaptiveConfig adaptive;
   SoftwareTriggerConfig software_trigger;
   DdsConfig dds;
   RuntimeConfig runtime;

@@ -19,6 +19,7 @@
 //   rt/<ns>/status          sl_msgs Status (transient-local)
 //   rq/<ns>/commandRequest  sl_msgs CommandRequest (from clients)
 //   rr/<ns>/commandReply    sl_msgs CommandReply (one per request)
+//   rt/<adaptive.velocity_topic>  geometry_msgs/TwistStamped, read (adaptive scanning)
 //   rt/tf_static            tf2_msgs/TFMessage, the sensor's frames (dds.tf)
 //   rt/diagnostics          diagnostic_msgs/DiagnosticArray, 1 Hz
 //   ros_discovery_info      rmw_dds_common/ParticipantEntitiesInfo: node /<ns>/sl_sensord

@@ -64,6 +64,11 @@ struct EngineStatus {
   std::vector<std::string> cameras;   // triangulating the current pattern
   bool motion_compensation = false;
   pipeline::TimestampNs start_at_ns = 0;  // kWaiting: when scanning starts
+  // Adaptive scanning (DaemonConfig::adaptive): the mode of the running
+  // continuous scan ("" = adaptive off, or no continuous scan) and why; the
+  // mode switches since start-up are adaptive_switches (status_fields.h).
+  std::string adaptive_mode;
+  std::string adaptive_reason;
 };
 
 // One camera's result of one scan, shared with the output callback (a
@@ -156,6 +161,11 @@ class ScanEngine {
   // (e.g. "reload").
   void reportError(const std::string& message, const std::string& source = "");
   void clearError(const std::string& source);
+  // The robot's latest velocity (adaptive scanning; ignored unless
+  // DaemonConfig::adaptive is enabled). While a continuous scan runs, the
+  // engine switches pattern and motion compensation as the policy decides
+  // (engine/adaptive_policy.h), through selectPattern's path.
+  void setVelocity(const VelocitySample& velocity);
 
   EngineStatus status() const;
   // True while every thread has made progress within the last `max_age`
