@@ -20,6 +20,7 @@
 #include "sl/drivers/sim_rig.h"
 #include "sl/pipeline/codec.h"
 #include "sl/pipeline/projector_images.h"
+#include "support/sim_rig.h"
 
 using namespace sl;
 using pipeline::Direction;
@@ -30,18 +31,7 @@ namespace {
 
 // The rig of config/sim.yaml (drivers::simRig()).
 drivers::SimConfig simConfig(std::vector<PatternSpec> patterns) {
-  drivers::SimConfig c;
-  c.rig = drivers::simRig();
-  drivers::SimPlane plane;
-  plane.point = {0, 0, 600};
-  plane.normal = {0.1, 0.2, -1};
-  plane.albedo = 0.8;
-  c.scene.planes = {plane};
-  drivers::SimSphere sphere;
-  sphere.center = {40, -20, 520};
-  sphere.radius = 60;
-  sphere.albedo = 0.7;
-  c.scene.spheres = {sphere};
+  drivers::SimConfig c = test::simPlaneAndSphere();
   // The round trip is measured without noise and with pinhole optics: defocus
   // blur (the simulator's default lenses) is a separate effect.
   c.gain_dn_per_electron = 0;

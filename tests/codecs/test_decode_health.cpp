@@ -18,6 +18,7 @@
 #include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/scan_processor.h"
 #include "sl/pipeline/triangulator.h"
+#include "support/sim_rig.h"
 
 using namespace sl;
 using pipeline::PatternFamily;
@@ -29,18 +30,7 @@ namespace {
 // The rig of config/sim.yaml with a tilted plane and a sphere, the
 // simulator's default noise and optics, 8-bit frames.
 drivers::SimConfig simConfig(std::vector<PatternSpec> patterns) {
-  drivers::SimConfig c;
-  c.rig = drivers::simRig();
-  drivers::SimPlane plane;
-  plane.point = {0, 0, 600};
-  plane.normal = {0.1, 0.2, -1};
-  plane.albedo = 0.8;
-  c.scene.planes = {plane};
-  drivers::SimSphere sphere;
-  sphere.center = {40, -20, 520};
-  sphere.radius = 60;
-  sphere.albedo = 0.7;
-  c.scene.spheres = {sphere};
+  drivers::SimConfig c = test::simPlaneAndSphere();
   c.patterns = std::move(patterns);
   return c;
 }

@@ -29,6 +29,7 @@
 #include "sl/pipeline/decode_health.h"
 #include "sl/pipeline/pattern_spec.h"
 #include "sl/pipeline/triangulator.h"
+#include "support/sim_rig.h"
 
 using namespace sl;
 using pipeline::PatternSpec;
@@ -71,18 +72,7 @@ double slstudioModulated(int frame, int row, int col) {
 }
 
 drivers::SimConfig simConfig(const PatternSpec& pattern) {
-  drivers::SimConfig c;
-  c.rig = drivers::simRig();
-  drivers::SimPlane plane;
-  plane.point = {0, 0, 600};
-  plane.normal = {0.1, 0.2, -1};
-  plane.albedo = 0.8;
-  c.scene.planes = {plane};
-  drivers::SimSphere sphere;
-  sphere.center = {40, -20, 520};
-  sphere.radius = 60;
-  sphere.albedo = 0.7;
-  c.scene.spheres = {sphere};
+  drivers::SimConfig c = test::simPlaneAndSphere();
   c.patterns = {pattern};
   return c;
 }

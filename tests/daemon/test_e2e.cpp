@@ -937,6 +937,21 @@ TEST_CASE("requests that fail to deserialize are counted, not lost without a tra
   REQUIRE(daemon.terminate(5s) == 0);
 }
 
+namespace {
+
+// The reader GUID a points_subscriber writes to `path` once matched (up to
+// 10 s x kTimeScale); empty if none came.
+std::string guidFromFile(const std::string& path) {
+  std::string guid;
+  for (int i = 0; i < 200 * kTimeScale && guid.empty(); ++i) {
+    std::ifstream(path) >> guid;
+    if (guid.empty()) std::this_thread::sleep_for(50ms);
+  }
+  return guid;
+}
+
+}  // namespace
+
 // A reader that stops acknowledging (here a keep-all reader whose history of
 // one cloud is full and that never takes: Cyclone then refuses further
 // clouds and does not acknowledge them) loses every cloud pushed out of the
@@ -962,15 +977,7 @@ TEST_CASE("a points reader that stops acknowledging is listed with its lost clou
   std::filesystem::remove(stuck_file);
   sl::test::ChildProcess reading({subscriber, ns, "read", reading_file});
   sl::test::ChildProcess stuck({subscriber, ns, "stuck", stuck_file});
-  auto guidIn = [](const std::string& path) {
-    std::string guid;
-    for (int i = 0; i < 200 * kTimeScale && guid.empty(); ++i) {
-      std::ifstream(path) >> guid;
-      if (guid.empty()) std::this_thread::sleep_for(50ms);
-    }
-    return guid;
-  };
-  const std::string reading_guid = guidIn(reading_file), stuck_guid = guidIn(stuck_file);
+  const std::string reading_guid = guidFromFile(reading_file), stuck_guid = guidFromFile(stuck_file);
   REQUIRE_FALSE(reading_guid.empty());
   REQUIRE_FALSE(stuck_guid.empty());
 
@@ -1039,11 +1046,7 @@ TEST_CASE("a points reader away longer than its lease keeps its count of lost cl
          1);
   sl::test::ChildProcess reader({subscriber, ns, "read", guid_file, taken_file});
   setenv("CYCLONEDDS_URI", dds_uri.c_str(), 1);
-  std::string guid;
-  for (int i = 0; i < 200 * kTimeScale && guid.empty(); ++i) {
-    std::ifstream(guid_file) >> guid;
-    if (guid.empty()) std::this_thread::sleep_for(50ms);
-  }
+  const std::string guid = guidFromFile(guid_file);
   REQUIRE_FALSE(guid.empty());
 
   auto listed = [&](const sl::client::StatusInfo& st) -> std::optional<sl::client::PointsReaderInfo> {

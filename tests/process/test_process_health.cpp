@@ -23,6 +23,7 @@
 #include "sl/drivers/recording.h"
 #include "sl/drivers/sim.h"
 #include "sl/drivers/sim_rig.h"
+#include "support/sim_rig.h"
 
 namespace fs = std::filesystem;
 using namespace sl;
@@ -64,18 +65,7 @@ TEST_CASE("sl_process: a recording checked against the pattern file, implausible
   fs::create_directories(dir);
   // The simulator of sim.yaml (its rig, 3+3_horizontal at 40 periods) seeing
   // a tilted plane and a sphere, 8-bit frames with its default noise.
-  drivers::SimConfig sim;
-  sim.rig = drivers::simRig();
-  drivers::SimPlane plane;
-  plane.point = {0, 0, 600};
-  plane.normal = {0.1, 0.2, -1};
-  plane.albedo = 0.8;
-  sim.scene.planes = {plane};
-  drivers::SimSphere sphere;
-  sphere.center = {40, -20, 520};
-  sphere.radius = 60;
-  sphere.albedo = 0.7;
-  sim.scene.spheres = {sphere};
+  drivers::SimConfig sim = test::simPlaneAndSphere();
   pipeline::PatternSpec recorded;
   recorded.name = "3+3_horizontal";
   recorded.steps = 3;
@@ -274,18 +264,7 @@ TEST_CASE("sl_process: the epipolar check catches a scaled coordinate that unwra
   const fs::path dir = fs::path(SL_BINARY_DIR) / "test_process_epipolar";
   fs::remove_all(dir);
   fs::create_directories(dir);
-  drivers::SimConfig sim;
-  sim.rig = drivers::simRig();
-  drivers::SimPlane plane;
-  plane.point = {0, 0, 600};
-  plane.normal = {0.1, 0.2, -1};
-  plane.albedo = 0.8;
-  sim.scene.planes = {plane};
-  drivers::SimSphere sphere;
-  sphere.center = {40, -20, 520};
-  sphere.radius = 60;
-  sphere.albedo = 0.7;
-  sim.scene.spheres = {sphere};
+  drivers::SimConfig sim = test::simPlaneAndSphere();
   const std::string projector = "projector: {width: 1824, height: 1140}\n";
   const std::string gray60 = "name: g\nfamily: gray_phase_shift\ndirection: both\n" + projector +
                              "steps: 4\npitch_px: 60\n";
