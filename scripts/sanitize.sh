@@ -38,7 +38,12 @@ run_suite() {  # name sanitizers tests
   # (SL_TEST_TIMEOUT_SCALE); --timeout bounds only the tests without one.
   local ctest_cmd="cd '$dir' && ctest --output-on-failure --timeout 1800 -R '^($tests)\$'"
   export CYCLONEDDS_URI=file://$root/config/cyclonedds-loopback.xml
-  export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:detect_stack_use_after_return=0}
+  # new_delete_type_mismatch=0: Debian's libfastrtps 2.9 (the daemon's Fast DDS
+  # participant, not instrumented) deletes an RTPSReader with a smaller size
+  # than it allocated when its participant's entities are deleted
+  # (~RTPSReader <- DomainParticipantImpl::delete_contained_entities); every
+  # daemon exit aborted on it (docs/testing.md).
+  export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:detect_stack_use_after_return=0:new_delete_type_mismatch=0}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
   export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$root/tests/lsan.supp}
   export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=0:second_deadlock_stack=1:suppressions=$root/tests/tsan.supp}
