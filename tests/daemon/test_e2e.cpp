@@ -1091,10 +1091,12 @@ TEST_CASE("a points reader away longer than its lease keeps its count of lost cl
                     << back->clouds_lost << ", total " << st->clouds_lost_to_readers);
   // Three leases at 5 Hz: clouds were missed, and every one is counted, give
   // or take the writer's history of 4 (which the reader may have got just
-  // before it stopped or been counted as losing) and one in flight.
+  // before it stopped or been counted as losing) and one in flight. In a
+  // sanitizer build the slowed reader's acknowledgements can lag by more
+  // than the history (reader_acks.h): up to a few more are counted.
   CHECK(missed >= 5);
   CHECK(back->clouds_lost + 5 >= missed);
-  CHECK(back->clouds_lost <= missed + 5);
+  CHECK(back->clouds_lost <= missed + 5 * kTimeScale);
   CHECK(st->clouds_lost_to_readers >= back->clouds_lost);
   REQUIRE(daemon.terminate(5s) == 0);
   std::filesystem::remove(guid_file);
