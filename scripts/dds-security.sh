@@ -30,6 +30,11 @@
 #                       `sensor` identity publishes them, any authenticated
 #                       participant may read them, a participant without
 #                       security neither reads nor writes them
+#   governance_origin   as governance_control, and every sample of a data
+#                       topic carries a MAC per matched reader (metadata
+#                       SIGN_WITH_ORIGIN_AUTHENTICATION): a reader, which
+#                       holds the writer's common key, cannot forge a sample
+#                       towards another reader either
 #   governance_all      every topic protected and encrypted; participants
 #                       without a valid identity are not admitted at all
 set -euo pipefail
@@ -40,7 +45,7 @@ while [ $# -gt 0 ]; do
     --ns) ns=$2; shift 2 ;;
     --days) days=$2; shift 2 ;;
     --ca-from) ca_from=$(cd "$2" && pwd) || exit 2; shift 2 ;;
-    -h|--help) sed -n 2,38p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,39p "$0"; exit 0 ;;
     -*) echo "dds-security.sh: unknown option $1" >&2; exit 2 ;;
     *) out=$1; shift ;;
   esac
@@ -109,11 +114,13 @@ graph="$graph_data ros_discovery_info"
 # authenticated reader, only permitted writers) | encrypt (both ways
 # access-controlled, encrypted)
 topic_rule() {  # expression protection
-  local discovery=false read=false write=false kind=NONE
+  local discovery=false read=false write=false kind=NONE meta=
   case $2 in
     sign) write=true kind=SIGN ;;
+    origin) write=true kind=SIGN meta=SIGN_WITH_ORIGIN_AUTHENTICATION ;;
     encrypt) discovery=true read=true write=true kind=ENCRYPT ;;
   esac
+  meta=${meta:-$kind}
   cat <<XML
         <topic_rule>
           <topic_expression>$1</topic_expression>
@@ -121,13 +128,13 @@ topic_rule() {  # expression protection
           <enable_liveliness_protection>$discovery</enable_liveliness_protection>
           <enable_read_access_control>$read</enable_read_access_control>
           <enable_write_access_control>$write</enable_write_access_control>
-          <metadata_protection_kind>$kind</metadata_protection_kind>
+          <metadata_protection_kind>$meta</metadata_protection_kind>
           <data_protection_kind>$kind</data_protection_kind>
         </topic_rule>
 XML
 }
 
-governance() {  # name data-protection(sign|encrypt)
+governance() {  # name data-protection(sign|origin|encrypt)
   local allow_unauth=true discovery=NONE rest=none
   [ "$2" = encrypt ] && { allow_unauth=false; discovery=ENCRYPT; rest=encrypt; }
   {
@@ -158,6 +165,7 @@ XML
   sign "$1.xml" "$1.p7s"
 }
 governance governance_control sign
+governance governance_origin origin
 governance governance_all encrypt
 
 permissions() {  # role publish-topics subscribe-topics [probe-topic]

@@ -104,6 +104,30 @@ echo "ok: governance_control: a plain subscriber receives no cloud"
 sl_stop_daemon "" 10
 say_how governance_control
 
+# --- governance_origin: data signed with one MAC per matched reader ---
+# Two viewers: each checks the MAC made for it (a sample that fails its own
+# receiver-specific MAC is dropped), so both must get the clouds.
+start_daemon governance_origin
+for v in 1 2; do
+  as viewer -- "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 \
+    --timeout 30 > "$work/origin_viewer$v.log" 2>&1 &
+  eval "origin_viewer$v=\$!"
+  sl_track "$!"
+done
+sleep 1
+unsecured "$bin/tests/forged_points" "rt/$ns/points" 10 200 > "$work/forged_origin.log" 2>&1 \
+  || fail "forged_points: $(cat "$work/forged_origin.log")"
+expect 0 "scan 1/1" "governance_origin: operator scans" -- \
+  as operator -- "$bin/tools/slctl" --ns "$ns" --timeout 30 scan --count 1 --out "$work/scan_origin"
+for v in 1 2; do
+  eval "pid=\$origin_viewer$v"
+  wait "$pid" || fail "governance_origin: viewer $v got no cloud: $(cat "$work/origin_viewer$v.log")"
+  grep -q "forged" "$work/origin_viewer$v.log" && fail "governance_origin: viewer $v took a forged cloud"
+done
+echo "ok: governance_origin: two viewers read the sensor's clouds, each through its own MAC; no forged cloud taken"
+sl_stop_daemon "" 10
+say_how governance_origin
+
 # --- governance_all: every topic protected ---
 start_daemon governance_all
 unsecured "$bin/tools/c_listener/sl_points_listener" --topic "rt/$ns/points" --count 1 --timeout 8 \

@@ -7,7 +7,10 @@
 #                        (governance_control before issue 36; made here from
 #                        governance_control, not shipped)
 #   governance_control   clouds signed (SIGN, AES-GMAC) with write access control
+#   governance_origin    clouds signed as above, plus one MAC per matched
+#                        reader (origin authentication)
 #   governance_all       clouds encrypted (AES-GCM)
+# SL_BENCH_MODES="..." runs a subset, in its order.
 # Each round runs every mode once, in that order; prints per run the clouds
 # received (the subscriber waits up to 30 s for a late cloud), those the
 # publisher did not send (a write blocked > 200 ms), the latency and the CPU
@@ -51,7 +54,7 @@ export SL_DDS_SECURITY_DIR=$work/sec
 echo "| security | rate | clouds received | not sent | latency median | p99 | publisher CPU / cloud | subscriber CPU / cloud received |"
 echo "|---|---|---|---|---|---|---|---|"
 for round in $(seq "$rounds"); do
-for mode in none control_only governance_control governance_all; do
+for mode in ${SL_BENCH_MODES:-none control_only governance_control governance_origin governance_all}; do
   uri=$plain
   [ "$mode" != none ] && uri=$secure
   export SL_DDS_GOVERNANCE=$mode
