@@ -38,12 +38,18 @@ using sl::drivers::ForwardingCamera;
 
 // `config` with the simulated camera at sl::test::scaledCameraFps (the
 // shipped rate outside sanitizer builds), the grouping's image interval to
-// match and its wait for late frames (max_age) stretched by the same factor.
+// match and its wait for late frames (max_age) stretched by the same factor,
+// and so the health check's stall timeout: with frames 10x slower a device
+// is silent, and a scan takes, 10x longer. (Unscaled, "no scan published"
+// came 2 s + one 2 s sequence after a start, before DecodeWatch had seen the
+// 3 implausible scans it needs, and took the place of the decode's cause.)
+// Cases that test the stall timeout set their own.
 sl::daemon::DaemonConfig atTestRate(sl::daemon::DaemonConfig config) {
   config.sim.camera_fps = sl::test::scaledCameraFps(config.sim.camera_fps);
   config.synchroniser.image_interval_ns =
       static_cast<sl::pipeline::TimestampNs>(std::llround(1e9 / config.sim.camera_fps));
   config.synchroniser.max_age_ns *= sl::test::kTimeScale;
+  config.runtime.stall_timeout_s *= sl::test::kTimeScale;
   return config;
 }
 
@@ -1073,8 +1079,7 @@ TEST_CASE("runtime.publish_implausible publishes implausible clouds, counted, th
 // but not its time, so the storm delays switches and never stops scanning.
 // The status says so in last_error, never `degraded` with a device as cause.
 TEST_CASE("a storm of pattern switches delays them and never stops scanning", "[engine][storm]") {
-  auto config = simConfig();
-  config.runtime.stall_timeout_s *= sl::test::kTimeScale;
+  auto config = simConfig();  // its stall timeout scaled
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   std::mutex mutex;
   std::map<std::string, int> clouds_of;  // pattern -> clouds, guarded by mutex
