@@ -36,15 +36,65 @@ namespace {
 // The fault-injecting test cameras below override what they break.
 using sl::drivers::ForwardingCamera;
 
+// Under ThreadSanitizer the simulated cameras (and so the engine's decoding
+// and triangulation) work at half the width and height, a quarter of the
+// pixels: a 1440 x 1080 frame takes ~130 ms to render there, and with the
+// decode of the previous set beside it on 2 cores the simulator fell behind
+// even at scaledCameraFps. The field of view and the lens stay (focal
+// length and principal point in pixels halved, pixel pitch doubled, so the
+// same focal length in mm and the same blur in mm), and so do the scene,
+// the projector and its patterns: fringes are ~25 camera pixels wide instead
+// of ~50. ASan/UBSan and release builds keep the shipped size.
+constexpr int kRigDownscale = sl::test::kThreadSanitizer ? 2 : 1;
+
+sl::pipeline::PinholeModel downscaled(sl::pipeline::PinholeModel m, int factor) {
+  m.width /= factor;
+  m.height /= factor;
+  m.fx /= factor;
+  m.fy /= factor;
+  m.cx = (m.cx + 0.5) / factor - 0.5;  // pixel centres at integers
+  m.cy = (m.cy + 0.5) / factor - 0.5;
+  return m;  // distortion acts on normalised coordinates: unchanged
+}
+
+bool sameCamera(const sl::pipeline::PinholeModel& a, const sl::pipeline::PinholeModel& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx &&
+         a.cy == b.cy && a.distortion == b.distortion;
+}
+
+// A simulated sensor's config with its cameras downscaled by `factor`; the
+// calibrations that are the simulated rig's own (`calibration: sim`) follow.
+sl::daemon::DaemonConfig withDownscaledRig(sl::daemon::DaemonConfig config, int factor) {
+  if (factor == 1 || config.sensor != sl::daemon::SensorKind::kSim) return config;
+  if (sameCamera(config.calibration.camera, config.sim.rig.camera))
+    config.calibration.camera = downscaled(config.calibration.camera, factor);
+  config.sim.rig.camera = downscaled(config.sim.rig.camera, factor);
+  if (config.sim.second_camera) {
+    auto& rig = config.sim.second_camera->rig;
+    const auto extra = config.extra_calibrations.find(config.sim.second_camera->camera_id);
+    if (extra != config.extra_calibrations.end() && sameCamera(extra->second.camera, rig.camera))
+      extra->second.camera = downscaled(extra->second.camera, factor);
+    rig.camera = downscaled(rig.camera, factor);
+  }
+  config.sim.camera_lens.pixel_pitch_um *= factor;
+  return config;
+}
+
 // `config` with the simulated camera at sl::test::scaledCameraFps (the
 // shipped rate outside sanitizer builds), the grouping's image interval to
-// match and its wait for late frames (max_age) stretched by the same factor.
+// match and its wait for late frames (max_age) stretched by the same factor,
+// and so the health check's stall timeout: with frames 10x slower a device
+// is silent, and a scan takes, 10x longer. (Unscaled, "no scan published"
+// came 2 s + one 2 s sequence after a start, before DecodeWatch had seen the
+// 3 implausible scans it needs, and took the place of the decode's cause.)
+// Cases that test the stall timeout set their own.
 sl::daemon::DaemonConfig atTestRate(sl::daemon::DaemonConfig config) {
   config.sim.camera_fps = sl::test::scaledCameraFps(config.sim.camera_fps);
   config.synchroniser.image_interval_ns =
       static_cast<sl::pipeline::TimestampNs>(std::llround(1e9 / config.sim.camera_fps));
   config.synchroniser.max_age_ns *= sl::test::kTimeScale;
-  return config;
+  config.runtime.stall_timeout_s *= sl::test::kTimeScale;
+  return withDownscaledRig(std::move(config), kRigDownscale);
 }
 
 // config/<name> at the test rate.
@@ -1073,8 +1123,7 @@ TEST_CASE("runtime.publish_implausible publishes implausible clouds, counted, th
 // but not its time, so the storm delays switches and never stops scanning.
 // The status says so in last_error, never `degraded` with a device as cause.
 TEST_CASE("a storm of pattern switches delays them and never stops scanning", "[engine][storm]") {
-  auto config = simConfig();
-  config.runtime.stall_timeout_s *= sl::test::kTimeScale;
+  auto config = simConfig();  // its stall timeout scaled
   const auto sim = sl::drivers::SimulatedSensor::create(config.sim);
   std::mutex mutex;
   std::map<std::string, int> clouds_of;  // pattern -> clouds, guarded by mutex

@@ -16,6 +16,21 @@ inline constexpr int kTimeScale = 10;
 inline constexpr int kTimeScale = 1;
 #endif
 
+// ThreadSanitizer builds (GCC's __SANITIZE_THREAD__, Clang's
+// __has_feature(thread_sanitizer)): the slowest, where a simulated rig that
+// runs in real time is also made smaller (tests/daemon/test_engine.cpp).
+#if defined(__SANITIZE_THREAD__)
+inline constexpr bool kThreadSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+inline constexpr bool kThreadSanitizer = true;
+#else
+inline constexpr bool kThreadSanitizer = false;
+#endif
+#else
+inline constexpr bool kThreadSanitizer = false;
+#endif
+
 template <typename Rep, typename Period>
 constexpr auto scaledBound(std::chrono::duration<Rep, Period> d) {
   return d * kTimeScale;
