@@ -68,11 +68,12 @@ struct EpipolarAxis {
 // for o = alpha + beta a (one division per pixel). On it the
 // distorted coordinate is a polynomial g(a) + decoded in a alone: the first
 // iteration shifts by g at the decoded coordinate (the same point and shift
-// as kAlongRay's first step), later ones are Newton steps with g's
-// derivative along the line where it is sane (0.5 .. 2), plain shifts
+// as kAlongRay's first step), later ones are
+// secant steps where the secant's slope is sane (0.5 .. 2), plain shifts
 // elsewhere. Iterations: kIterations, or `iterations` when it is -1. NaN
-// where the line is degenerate (the caller falls back to `decoded`). The
-// AVX-512 row does the same operations in the same order.
+// where the line is degenerate (parallel to the other axis: the coordinate
+// does not change along the ray, so depth is undetermined). The AVX-512 row
+// does the same operations in the same order.
 template <int kIterations>
 inline float epipolarCoordinate(const EpipolarAxis& k, float x, float y, float decoded,
                                 int iterations) {
@@ -82,7 +83,7 @@ inline float epipolarCoordinate(const EpipolarAxis& k, float x, float y, float d
   const float inv = -1.0f / lo;
   const float alpha = lc * inv, beta = la * inv;
   const float target = (decoded - k.c_along) * k.inv_f_along;
-  float a = target;
+  float a = target, a_prev = 0.0f, g_prev = 0.0f;
   const int n = kIterations >= 0 ? kIterations : iterations;
   for (int it = 0; it < n; ++it) {
     const float o = alpha + beta * a;
@@ -93,30 +94,27 @@ inline float epipolarCoordinate(const EpipolarAxis& k, float x, float y, float d
     const float g = (a - target) + shift;
     float step = g;
     if (it > 0) {
-      const float dradial = k.k1 + r2 * (k.two_k2 + r2 * k.three_k3);
-      const float dg = ((1.0f + radial) + (2.0f * a) * (dradial * (a + beta * o))) +
-                       (k.two_t1 * (o + beta * a) + k.t2 * (6.0f * a + (2.0f * beta) * o));
-      const bool sane = (dg > 0.5f) & (dg < 2.0f);
-      const float newton = g / dg;
-      step = sane ? newton : g;
+      const float dg = g - g_prev, da = a - a_prev;
+      const bool sane = (dg * da > 0.0f) & (std::abs(dg) > 0.5f * std::abs(da)) &
+                        (std::abs(dg) < 2.0f * std::abs(da));
+      const float secant = g * da / dg;
+      step = sane ? secant : g;
     }
+    a_prev = a;
+    g_prev = g;
     a = a - step;
   }
   return k.f_along * a + k.c_along;
 }
 
-// The depth of a pixel with the epipolar correction: the corrected
-// coordinate where it is finite and its point lies in front of both devices,
-// else the decoded one (as kAlongRay keeps it), then depthAlongRay().
+// The depth of a pixel with the epipolar correction: depthAlongRay() of the
+// corrected coordinate.
 // ai = M3[0:3].r, q_along = M[along][0:3].r.
 template <int kIterations>
 inline float epipolarDepth(const EpipolarAxis& k, float x, float y, float ai, float q_along,
                            float decoded, int iterations, float min_z, float max_z) {
   const float p = epipolarCoordinate<kIterations>(k, x, y, decoded, iterations);
-  const float n = k.m_along - p * k.m3;
-  const float d = p * ai - q_along;
-  const bool keep = ((p - p) == 0.0f) & (n * d > 0.0f) & ((n * ai + k.m3 * d) * d > 0.0f);
-  return depthAlongRay(keep ? p : decoded, ai, q_along, k.m_along, k.m3, min_z, max_z);
+  return depthAlongRay(p, ai, q_along, k.m_along, k.m3, min_z, max_z);
 }
 
 // The row loops read and write distinct buffers (maps, rays, scratch, cloud);
@@ -259,9 +257,9 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
   const __m512 c_along = _mm512_set1_ps(k.c_along), f_along = _mm512_set1_ps(k.f_along);
   const __m512 k1 = _mm512_set1_ps(k.k1), k2 = _mm512_set1_ps(k.k2), k3 = _mm512_set1_ps(k.k3);
   const __m512 two_t1 = _mm512_set1_ps(k.two_t1), t2 = _mm512_set1_ps(k.t2);
-  const __m512 zero = _mm512_setzero_ps(), one = _mm512_set1_ps(1.0f);
+  const __m512 zero = _mm512_setzero_ps();
   const __m512 two = _mm512_set1_ps(2.0f);
-  __m512 alpha[N], beta[N], target[N], a[N];
+  __m512 alpha[N], beta[N], target[N], a[N], a_prev[N], g_prev[N];
   SL_LANES {
     const __m512 la = linear16(k.la, x[j], y[j]);
     const __m512 lo = linear16(k.lo, x[j], y[j]);
@@ -285,36 +283,21 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
       const __m512 g = _mm512_add_ps(_mm512_sub_ps(a[j], target[j]), shift);
       __m512 step = g;
       if (it > 0) {
-        const __m512 dradial = _mm512_add_ps(
-            k1, _mm512_mul_ps(r2, _mm512_add_ps(_mm512_set1_ps(k.two_k2),
-                                                _mm512_mul_ps(r2, _mm512_set1_ps(k.three_k3)))));
-        const __m512 along = _mm512_add_ps(
-            _mm512_add_ps(one, radial),
-            _mm512_mul_ps(_mm512_mul_ps(two, a[j]),
-                          _mm512_mul_ps(dradial, _mm512_add_ps(a[j], _mm512_mul_ps(beta[j], o)))));
-        const __m512 across = _mm512_add_ps(
-            _mm512_mul_ps(two_t1, _mm512_add_ps(o, _mm512_mul_ps(beta[j], a[j]))),
-            _mm512_mul_ps(t2, _mm512_add_ps(_mm512_mul_ps(_mm512_set1_ps(6.0f), a[j]),
-                                            _mm512_mul_ps(_mm512_mul_ps(two, beta[j]), o))));
-        const __m512 dg = _mm512_add_ps(along, across);
-        const __mmask16 sane = _mm512_cmp_ps_mask(dg, _mm512_set1_ps(0.5f), _CMP_GT_OQ) &
-                               _mm512_cmp_ps_mask(dg, two, _CMP_LT_OQ);
-        step = _mm512_mask_div_ps(g, sane, g, dg);
+        const __m512 dg = _mm512_sub_ps(g, g_prev[j]), da = _mm512_sub_ps(a[j], a_prev[j]);
+        const __m512 abs_dg = _mm512_abs_ps(dg), abs_da = _mm512_abs_ps(da);
+        const __mmask16 sane =
+            _mm512_cmp_ps_mask(_mm512_mul_ps(dg, da), zero, _CMP_GT_OQ) &
+            _mm512_cmp_ps_mask(abs_dg, _mm512_mul_ps(_mm512_set1_ps(0.5f), abs_da), _CMP_GT_OQ) &
+            _mm512_cmp_ps_mask(abs_dg, _mm512_mul_ps(two, abs_da), _CMP_LT_OQ);
+        step = _mm512_mask_div_ps(g, sane, _mm512_mul_ps(g, da), dg);
       }
+      a_prev[j] = a[j];
+      g_prev[j] = g;
       a[j] = _mm512_sub_ps(a[j], step);
     }
   }
   SL_LANES {
-    const __m512 corrected = _mm512_add_ps(_mm512_mul_ps(f_along, a[j]), c_along);
-    const __m512 n = _mm512_sub_ps(m_along, _mm512_mul_ps(corrected, m3));
-    const __m512 d = _mm512_sub_ps(_mm512_mul_ps(corrected, ai[j]), q_along[j]);
-    const __mmask16 keep =
-        _mm512_cmp_ps_mask(_mm512_sub_ps(corrected, corrected), zero, _CMP_EQ_OQ) &
-        _mm512_cmp_ps_mask(_mm512_mul_ps(n, d), zero, _CMP_GT_OQ) &
-        _mm512_cmp_ps_mask(
-            _mm512_mul_ps(_mm512_add_ps(_mm512_mul_ps(n, ai[j]), _mm512_mul_ps(m3, d)), d), zero,
-            _CMP_GT_OQ);
-    const __m512 p = _mm512_mask_blend_ps(keep, decoded[j], corrected);
+    const __m512 p = _mm512_add_ps(_mm512_mul_ps(f_along, a[j]), c_along);
     // depthAlongRay().
     const __m512 den = _mm512_sub_ps(_mm512_mul_ps(p, ai[j]), q_along[j]);
     const __m512 z_all = _mm512_div_ps(_mm512_sub_ps(m_along, _mm512_mul_ps(p, m3)), den);
