@@ -69,7 +69,7 @@ struct EpipolarAxis {
 // distorted coordinate is a polynomial g(a) + decoded in a alone: the first
 // iteration shifts by g at the decoded coordinate (the same point and shift
 // as kAlongRay's first step), later ones are
-// secant steps where the secant's slope is sane (0.5 .. 2), plain shifts
+// secant steps where the secant's slope is sane (0.5 .. 1.5), plain shifts
 // elsewhere. Iterations: kIterations, or `iterations` when it is -1. NaN
 // where the line is degenerate (parallel to the other axis: the coordinate
 // does not change along the ray, so depth is undetermined). The AVX-512 row
@@ -91,12 +91,13 @@ inline float epipolarCoordinate(const EpipolarAxis& k, float x, float y, float d
     const float r2 = aa + o * o;
     const float radial = r2 * (k.k1 + r2 * (k.k2 + r2 * k.k3));
     const float shift = (a * radial + k.two_t1 * (a * o)) + k.t2 * (r2 + 2.0f * aa);
-    const float g = (a - target) + shift;
+    // a = target at the first iteration: g = shift (the same bits).
+    const float g = it == 0 ? shift : (a - target) + shift;
     float step = g;
     if (it > 0) {
+      // Slope dg / da within 0.5 of 1 (false for da = 0 or NaN).
       const float dg = g - g_prev, da = a - a_prev;
-      const bool sane = (dg * da > 0.0f) & (std::abs(dg) > 0.5f * std::abs(da)) &
-                        (std::abs(dg) < 2.0f * std::abs(da));
+      const bool sane = std::abs(dg - da) < 0.5f * std::abs(da);
       const float secant = g * da / dg;
       step = sane ? secant : g;
     }
@@ -257,7 +258,6 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
   const __m512 c_along = _mm512_set1_ps(k.c_along), f_along = _mm512_set1_ps(k.f_along);
   const __m512 k1 = _mm512_set1_ps(k.k1), k2 = _mm512_set1_ps(k.k2), k3 = _mm512_set1_ps(k.k3);
   const __m512 two_t1 = _mm512_set1_ps(k.two_t1), t2 = _mm512_set1_ps(k.t2);
-  const __m512 zero = _mm512_setzero_ps();
   const __m512 two = _mm512_set1_ps(2.0f);
   __m512 alpha[N], beta[N], target[N], a[N], a_prev[N], g_prev[N];
   SL_LANES {
@@ -280,15 +280,13 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
       const __m512 shift = _mm512_add_ps(
           _mm512_add_ps(_mm512_mul_ps(a[j], radial), _mm512_mul_ps(two_t1, _mm512_mul_ps(a[j], o))),
           _mm512_mul_ps(t2, _mm512_add_ps(r2, _mm512_mul_ps(two, aa))));
-      const __m512 g = _mm512_add_ps(_mm512_sub_ps(a[j], target[j]), shift);
+      const __m512 g = it == 0 ? shift : _mm512_add_ps(_mm512_sub_ps(a[j], target[j]), shift);
       __m512 step = g;
       if (it > 0) {
         const __m512 dg = _mm512_sub_ps(g, g_prev[j]), da = _mm512_sub_ps(a[j], a_prev[j]);
-        const __m512 abs_dg = _mm512_abs_ps(dg), abs_da = _mm512_abs_ps(da);
-        const __mmask16 sane =
-            _mm512_cmp_ps_mask(_mm512_mul_ps(dg, da), zero, _CMP_GT_OQ) &
-            _mm512_cmp_ps_mask(abs_dg, _mm512_mul_ps(_mm512_set1_ps(0.5f), abs_da), _CMP_GT_OQ) &
-            _mm512_cmp_ps_mask(abs_dg, _mm512_mul_ps(two, abs_da), _CMP_LT_OQ);
+        const __mmask16 sane = _mm512_cmp_ps_mask(
+            _mm512_abs_ps(_mm512_sub_ps(dg, da)),
+            _mm512_mul_ps(_mm512_set1_ps(0.5f), _mm512_abs_ps(da)), _CMP_LT_OQ);
         step = _mm512_mask_div_ps(g, sane, _mm512_mul_ps(g, da), dg);
       }
       a_prev[j] = a[j];
