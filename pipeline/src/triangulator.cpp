@@ -411,8 +411,9 @@ struct Triangulator::Impl {
   double proj_f[2] = {0, 0}, inv_proj_f[2] = {0, 0}, proj_c[2] = {0, 0};
   double proj_dist[5] = {0, 0, 0, 0, 0};
 
-  // The projector distortion correction for one row of pixels, in place on
-  // p (decoded, distorted projector px -> undistorted projector px).
+  // The along-ray projector distortion correction (ProjectorCorrection::
+  // kAlongRay, the reference) for one row of pixels, in place on p (decoded,
+  // distorted projector px -> undistorted projector px).
   //
   // For pixel i and coordinate p along `axis`, with n = M[axis][3] - p M3[3]
   // and d = p a - b[axis], the depth is z = n / d, and
@@ -992,8 +993,9 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
     }
 #endif
     const auto [rx, ry] = rowRays(v, rx_row, ry_row);
-    // The fused loop wins without correction; with it, its register pressure
-    // makes row passes faster (bench_codecs with correction iterations).
+    // The fused loop wins without correction; with the along-ray correction
+    // its register pressure makes row passes faster (bench_codecs,
+    // BM_DecodeTriangulateAlongRay).
     if (iterations == 0) {
       depthRow<0>(first_row, second_row, first_is_column, second_is_column, rx, ry, nullptr, z_row);
     } else if (epipolar) {

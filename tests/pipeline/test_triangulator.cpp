@@ -231,10 +231,12 @@ TEST_CASE("projector distortion correction", "[triangulator]") {
   CHECK(two.spurious == 0);
   // Measured max (rms) in mm, plane / sphere, columns (horizontal rig):
   //   0 iterations 8.5 (2.4) / 8.8 (2.4); 1 iteration 0.27 (0.056) / 0.19 (0.046);
-  //   2 iterations 3.2e-4 / 4.4e-4 (single precision; 2.2e-4 / 2.9e-4 in double).
-  // Rows (vertical rig): 0 it. 5.3 / 4.5; 1 it. 0.084 / 0.060; 2 it. 3.7e-4 / 4.1e-4.
-  // Two iterations reach the float floor of the undistorted case. (Plain
-  // shifting without the secant step left 8e-3 mm after 2 iterations.)
+  //   2 iterations 4.2e-4 / 6.4e-4 (the epipolar form, single precision;
+  //   3.2e-4 / 4.4e-4 along the ray; 2.2e-4 / 2.9e-4 in double).
+  // Rows (vertical rig): 0 it. 5.3 / 4.5; 1 it. 0.084 / 0.060; 2 it. 4.6e-4 / 5.3e-4
+  // (3.7e-4 / 4.1e-4 along the ray).
+  // Two iterations reach about the float floor of the undistorted case.
+  // (Plain shifting without the secant step left 8e-3 mm after 2 iterations.)
   CHECK(two.max_mm < 1e-3);
   CHECK(one.max_mm > two.max_mm);
   // Ignoring the projector's distortion is clearly worse: the correction is
