@@ -32,13 +32,15 @@ struct TriangulatorOptions {
   int projector_distortion_iterations = 2;
   // How the iterations solve for the undistorted coordinate.
   // kEpipolar: along the camera ray's epipolar line in the projector's
-  // normalized image, a line per pixel formed once; each iteration evaluates
-  // the Brown-Conrady polynomial on it, later ones as Newton steps (with its
-  // derivative along the line). kAlongRay: the point is triangulated and
-  // projected into the projector each iteration, later ones secant steps; the
-  // reference kEpipolar is tested against (same fixed point, more work per
-  // pixel: test_triangulator.cpp bounds the difference, bench_codecs times
-  // both).
+  // normalized image, a line per pixel formed once (one division); each
+  // iteration evaluates the Brown-Conrady polynomial on it, later ones as
+  // secant steps. NaN where that line is degenerate (the coordinate does not
+  // change along the ray). kAlongRay: the point is triangulated and
+  // projected into the projector each iteration (a division each), later
+  // ones secant steps, and a pixel whose point is behind either device keeps
+  // its decoded coordinate; the reference kEpipolar is tested against (same
+  // fixed point, more work per pixel: test_triangulator.cpp bounds the
+  // difference, bench_codecs times both).
   enum class ProjectorCorrection { kEpipolar, kAlongRay };
   ProjectorCorrection projector_correction = ProjectorCorrection::kEpipolar;
 };
