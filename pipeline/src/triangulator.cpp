@@ -247,7 +247,9 @@ __attribute__((target("avx512f"))) inline __m512 linear16(const float* c, __m512
 }
 
 // epipolarDepth() of N x 16 pixels: the same operations in the same order.
-template <int N, int kIterations>
+// kK3: false when k3 = 0, then r2 (k1 + r2 k2) for r2 (k1 + r2 (k2 + r2 k3)),
+// the same value for finite r2 (r2 0 = 0, k2 + 0 = k2).
+template <int N, int kIterations, bool kK3>
 __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis& k,
                                                              const __m512* x, const __m512* y,
                                                              const __m512* ai, const __m512* q_along,
@@ -275,8 +277,10 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
       const __m512 o = _mm512_add_ps(alpha[j], _mm512_mul_ps(beta[j], a[j]));
       const __m512 aa = _mm512_mul_ps(a[j], a[j]);
       const __m512 r2 = _mm512_add_ps(aa, _mm512_mul_ps(o, o));
-      const __m512 radial = _mm512_mul_ps(
-          r2, _mm512_add_ps(k1, _mm512_mul_ps(r2, _mm512_add_ps(k2, _mm512_mul_ps(r2, k3)))));
+      const __m512 radial =
+          kK3 ? _mm512_mul_ps(r2, _mm512_add_ps(
+                                      k1, _mm512_mul_ps(r2, _mm512_add_ps(k2, _mm512_mul_ps(r2, k3)))))
+              : _mm512_mul_ps(r2, _mm512_add_ps(k1, _mm512_mul_ps(r2, k2)));
       const __m512 shift = _mm512_add_ps(
           _mm512_add_ps(_mm512_mul_ps(a[j], radial), _mm512_mul_ps(two_t1, _mm512_mul_ps(a[j], o))),
           _mm512_mul_ps(t2, _mm512_add_ps(r2, _mm512_mul_ps(two, aa))));
@@ -309,7 +313,7 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
 // fusedRowAvx512() with the epipolar projector correction (kIterations
 // iterations), N vectors of 16 pixels at a time, then single vectors:
 // bit for bit the general path's results (test_triangulator).
-template <int N, bool kInterpolate, int kIterations>
+template <int N, bool kInterpolate, int kIterations, bool kK3>
 __attribute__((target("avx512f"))) int fusedEpipolarRowAvx512(
     int n, const AxisTerms& k, const EpipolarAxis& e, const float* p_row, const float* x0,
     const float* x1, const float* y0, const float* y1, float t, const float* intensity,
@@ -333,7 +337,7 @@ __attribute__((target("avx512f"))) int fusedEpipolarRowAvx512(
       b[j] = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(b0, rx[j]), _mm512_mul_ps(b1, ry[j])), b2);
       p[j] = _mm512_loadu_ps(p_row + v);
     }
-    epipolarDepthN<N, kIterations>(e, rx, ry, ai, b, p, min_z, max_z, z);
+    epipolarDepthN<N, kIterations, kK3>(e, rx, ry, ai, b, p, min_z, max_z, z);
     SL_LANES {
       const int v = u + 16 * j;
       const __m512 i = intensity ? _mm512_loadu_ps(intensity + v) : _mm512_setzero_ps();
@@ -341,7 +345,7 @@ __attribute__((target("avx512f"))) int fusedEpipolarRowAvx512(
     }
   }
   if constexpr (N > 1) {
-    u += fusedEpipolarRowAvx512<1, kInterpolate, kIterations>(n - u, k, e, p_row + u, x0 + u, x1 + u,
+    u += fusedEpipolarRowAvx512<1, kInterpolate, kIterations, kK3>(n - u, k, e, p_row + u, x0 + u, x1 + u,
                                                               y0 + u, y1 + u, t,
                                                               intensity ? intensity + u : nullptr,
                                                               out + u);
@@ -977,16 +981,21 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
       if (iterations == 0) {
         u += r.interpolate ? fusedRowAvx512<true>(n, terms, p, x0, x1, y0, y1, r.t, intensity, o)
                            : fusedRowAvx512<false>(n, terms, p, x0, x1, y0, y1, r.t, intensity, o);
-      } else if (iterations == 1) {
-        u += r.interpolate ? fusedEpipolarRowAvx512<kEpipolarLanes, true, 1>(n, terms, epipolar_terms, p, x0, x1,
-                                                             y0, y1, r.t, intensity, o)
-                           : fusedEpipolarRowAvx512<kEpipolarLanes, false, 1>(n, terms, epipolar_terms, p, x0, x1,
-                                                              y0, y1, r.t, intensity, o);
       } else {
-        u += r.interpolate ? fusedEpipolarRowAvx512<kEpipolarLanes, true, 2>(n, terms, epipolar_terms, p, x0, x1,
-                                                             y0, y1, r.t, intensity, o)
-                           : fusedEpipolarRowAvx512<kEpipolarLanes, false, 2>(n, terms, epipolar_terms, p, x0, x1,
-                                                              y0, y1, r.t, intensity, o);
+        auto row = [&]<bool kInterpolate, int kIterations>() {
+          return epipolar_terms.k3 != 0.0f
+                     ? fusedEpipolarRowAvx512<kEpipolarLanes, kInterpolate, kIterations, true>(
+                           n, terms, epipolar_terms, p, x0, x1, y0, y1, r.t, intensity, o)
+                     : fusedEpipolarRowAvx512<kEpipolarLanes, kInterpolate, kIterations, false>(
+                           n, terms, epipolar_terms, p, x0, x1, y0, y1, r.t, intensity, o);
+        };
+        if (iterations == 1) {
+          u += r.interpolate ? row.template operator()<true, 1>()
+                             : row.template operator()<false, 1>();
+        } else {
+          u += r.interpolate ? row.template operator()<true, 2>()
+                             : row.template operator()<false, 2>();
+        }
       }
       for (; u < width; ++u) scalar(u);
       continue;
