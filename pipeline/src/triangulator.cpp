@@ -250,11 +250,9 @@ __attribute__((target("avx512f"))) inline __m512 linear16(const float* c, __m512
 // kK3: false when k3 = 0, then r2 (k1 + r2 k2) for r2 (k1 + r2 (k2 + r2 k3)),
 // the same value for finite r2 (r2 0 = 0, k2 + 0 = k2).
 template <int N, int kIterations, bool kK3>
-__attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis& k,
-                                                             const __m512* x, const __m512* y,
-                                                             const __m512* ai, const __m512* q_along,
-                                                             const __m512* decoded, __m512 min_z,
-                                                             __m512 max_z, __m512* z) {
+__attribute__((target("avx512f"))) inline void epipolarDepthN(
+    const EpipolarAxis& k, const __m512* x, const __m512* y, const __m512* ai,
+    const __m512* q_along, const __m512* decoded, __m512 min_z, __m512 max_z, __m512* z) {
   const __m512 m_along = _mm512_set1_ps(k.m_along);
   const __m512 m3 = _mm512_set1_ps(k.m3);
   const __m512 c_along = _mm512_set1_ps(k.c_along), f_along = _mm512_set1_ps(k.f_along);
@@ -278,8 +276,9 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
       const __m512 aa = _mm512_mul_ps(a[j], a[j]);
       const __m512 r2 = _mm512_add_ps(aa, _mm512_mul_ps(o, o));
       const __m512 radial =
-          kK3 ? _mm512_mul_ps(r2, _mm512_add_ps(
-                                      k1, _mm512_mul_ps(r2, _mm512_add_ps(k2, _mm512_mul_ps(r2, k3)))))
+          kK3 ? _mm512_mul_ps(
+                    r2,
+                    _mm512_add_ps(k1, _mm512_mul_ps(r2, _mm512_add_ps(k2, _mm512_mul_ps(r2, k3)))))
               : _mm512_mul_ps(r2, _mm512_add_ps(k1, _mm512_mul_ps(r2, k2)));
       const __m512 shift = _mm512_add_ps(
           _mm512_add_ps(_mm512_mul_ps(a[j], radial), _mm512_mul_ps(two_t1, _mm512_mul_ps(a[j], o))),
@@ -288,9 +287,9 @@ __attribute__((target("avx512f"))) inline void epipolarDepthN(const EpipolarAxis
       __m512 step = g;
       if (it > 0) {
         const __m512 dg = _mm512_sub_ps(g, g_prev[j]), da = _mm512_sub_ps(a[j], a_prev[j]);
-        const __mmask16 sane = _mm512_cmp_ps_mask(
-            _mm512_abs_ps(_mm512_sub_ps(dg, da)),
-            _mm512_mul_ps(_mm512_set1_ps(0.5f), _mm512_abs_ps(da)), _CMP_LT_OQ);
+        const __mmask16 sane =
+            _mm512_cmp_ps_mask(_mm512_abs_ps(_mm512_sub_ps(dg, da)),
+                               _mm512_mul_ps(_mm512_set1_ps(0.5f), _mm512_abs_ps(da)), _CMP_LT_OQ);
         step = _mm512_mask_div_ps(g, sane, _mm512_mul_ps(g, da), dg);
       }
       a_prev[j] = a[j];
@@ -330,8 +329,10 @@ __attribute__((target("avx512f"))) int fusedEpipolarRowAvx512(
       rx[j] = _mm512_loadu_ps(x0 + v);
       ry[j] = _mm512_loadu_ps(y0 + v);
       if constexpr (kInterpolate) {
-        rx[j] = _mm512_add_ps(rx[j], _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(x1 + v), rx[j])));
-        ry[j] = _mm512_add_ps(ry[j], _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(y1 + v), ry[j])));
+        rx[j] =
+            _mm512_add_ps(rx[j], _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(x1 + v), rx[j])));
+        ry[j] =
+            _mm512_add_ps(ry[j], _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(y1 + v), ry[j])));
       }
       ai[j] = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(a0, rx[j]), _mm512_mul_ps(a1, ry[j])), a2);
       b[j] = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(b0, rx[j]), _mm512_mul_ps(b1, ry[j])), b2);
@@ -345,10 +346,9 @@ __attribute__((target("avx512f"))) int fusedEpipolarRowAvx512(
     }
   }
   if constexpr (N > 1) {
-    u += fusedEpipolarRowAvx512<1, kInterpolate, kIterations, kK3>(n - u, k, e, p_row + u, x0 + u, x1 + u,
-                                                              y0 + u, y1 + u, t,
-                                                              intensity ? intensity + u : nullptr,
-                                                              out + u);
+    u += fusedEpipolarRowAvx512<1, kInterpolate, kIterations, kK3>(
+        n - u, k, e, p_row + u, x0 + u, x1 + u, y0 + u, y1 + u, t,
+        intensity ? intensity + u : nullptr, out + u);
   }
   return u;
 }
@@ -862,9 +862,9 @@ EpipolarAxis Triangulator::Impl::epipolarAxis(int axis) const {
 
 template <int kIterations, int kAxis>
 void Triangulator::Impl::epipolarDepthRow(const float* __restrict first_row,
-                                          const float* __restrict second_row,
-                                          float first_is_column, float second_is_column,
-                                          const float* __restrict rx, const float* __restrict ry,
+                                          const float* __restrict second_row, float first_is_column,
+                                          float second_is_column, const float* __restrict rx,
+                                          const float* __restrict ry,
                                           float* __restrict z_row) const {
   const EpipolarAxis kc = epipolarAxis(kColumn), kr = epipolarAxis(kRow);
   const int iterations = options.projector_distortion_iterations;
@@ -908,8 +908,8 @@ void Triangulator::Impl::epipolarDepthRow(const float* __restrict first_row,
     } else {
       k = kAxis == kColumn ? kc : kr;
     }
-    z_row[u] = epipolarDepth<kIterations>(k, x, y, ai, col ? bc : br, decoded, iterations, min_z,
-                                          max_z);
+    z_row[u] =
+        epipolarDepth<kIterations>(k, x, y, ai, col ? bc : br, decoded, iterations, min_z, max_z);
   }
 }
 
@@ -1010,8 +1010,8 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
     } else if (epipolar) {
       auto row = [&]<int kIterations>() {
         if (second >= 0) {
-          epipolarDepthRow<kIterations, 2>(first_row, second_row, first_is_column,
-                                           second_is_column, rx, ry, z_row);
+          epipolarDepthRow<kIterations, 2>(first_row, second_row, first_is_column, second_is_column,
+                                           rx, ry, z_row);
         } else if (first == kColumn) {
           epipolarDepthRow<kIterations, kColumn>(first_row, second_row, first_is_column,
                                                  second_is_column, rx, ry, z_row);

@@ -37,8 +37,8 @@
 // - BM_DecodeBands: the decode half of the cloud-only case (blocks of rows
 //   decoded into bands, not triangulated), to split BM_DecodeTriangulate.
 #include <benchmark/benchmark.h>
-#include <sys/resource.h>
 #include <emmintrin.h>
+#include <sys/resource.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -198,10 +198,11 @@ void BM_DecodeBands(benchmark::State& state) {
   RowWorkers workers(int(state.range(1)));
   std::vector<ProjectorMaps> bands(workers.threads());
   for (auto _ : state) {
-    workers.run(in.frames.front().rows, ScanProcessor::kBlockRows, [&](int begin, int end, int thread) {
-      codec(pattern).decodeBand(in.frames, in.bit_depth, begin, end, bands[thread]);
-      benchmark::DoNotOptimize(bands[thread].up.data);
-    });
+    workers.run(in.frames.front().rows, ScanProcessor::kBlockRows,
+                [&](int begin, int end, int thread) {
+                  codec(pattern).decodeBand(in.frames, in.bit_depth, begin, end, bands[thread]);
+                  benchmark::DoNotOptimize(bands[thread].up.data);
+                });
   }
   reportScans(state);
 }
@@ -234,7 +235,8 @@ void BM_DecodeTriangulateAlongRay(benchmark::State& state) {
   const Triangulator& t = triangulator(int(state.range(0)), ProjectorCorrection::kAlongRay);
   ScanProcessor processor(int(state.range(1)));
   for (auto _ : state) {
-    const ScanOutput out = processor.process(codec(0), t, in, 0, "cam", ScanProcessor::Keep::kCloud);
+    const ScanOutput out =
+        processor.process(codec(0), t, in, 0, "cam", ScanProcessor::Keep::kCloud);
     benchmark::DoNotOptimize(out.cloud->points.data());
   }
   reportScans(state);

@@ -245,8 +245,7 @@ TEST_CASE("projector distortion correction", "[triangulator]") {
   CHECK(none.max_mm > 100 * two.max_mm);
 }
 
-TEST_CASE("the epipolar projector correction matches the along-ray reference",
-          "[triangulator]") {
+TEST_CASE("the epipolar projector correction matches the along-ray reference", "[triangulator]") {
   // Both forms solve for the same undistorted coordinate; the epipolar one
   // (the default) forms the ray's epipolar line once per pixel instead of
   // triangulating and projecting the point every iteration. With the
@@ -272,8 +271,8 @@ TEST_CASE("the epipolar projector correction matches the along-ray reference",
     if (std::isfinite(p.z) != std::isfinite(q.z)) ++mismatched;
     if (!std::isfinite(p.z) || !std::isfinite(q.z)) continue;
     ++compared;
-    max_mm = std::max(max_mm, double((Eigen::Vector3f(p.x, p.y, p.z) -
-                                      Eigen::Vector3f(q.x, q.y, q.z)).norm()));
+    max_mm = std::max(
+        max_mm, double((Eigen::Vector3f(p.x, p.y, p.z) - Eigen::Vector3f(q.x, q.y, q.z)).norm()));
   }
   const Errors e = compare(epipolar, truth);
   CAPTURE(int(scene), int(axis.use), iterations, max_mm, compared, mismatched, e.max_mm);
