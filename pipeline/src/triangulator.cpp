@@ -18,6 +18,9 @@
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 #include <immintrin.h>
 #define SL_HAVE_AVX512_POINTS 1
+#ifndef SL_EPIPOLAR_LANES
+#define SL_EPIPOLAR_LANES 4
+#endif
 #endif
 
 namespace sl::pipeline {
@@ -36,6 +39,83 @@ inline float depthAlongRay(float p, float a, float b, float m_axis, float m3, fl
   const float z = (m_axis - p * m3) / den;
   const bool valid = (std::abs(den) > 1e-12f) & (z >= min_z) & (z <= max_z);
   return valid ? z : kNaN;
+}
+
+// Constants of the epipolar projector-distortion correction for one decoded
+// axis ("along"; "other" is the projector's other axis), in single
+// precision. M = K_p [R | t] (projector px), distortion coefficients k1, k2,
+// k3 (radial) and the tangential pair in the order that makes the distorted
+// normalized coordinate along the axis
+//   a (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 t1 a o + t2 (r^2 + 2 a^2),
+// (a, o) the undistorted normalized coordinates along and across the axis
+// (columns: t1 = p1, t2 = p2; rows: t1 = p2, t2 = p1).
+//
+// The epipolar line of the ray r = (x, y, 1) in the projector's normalized
+// image is la a + lo o + lc = 0 with la, lo, lc linear in r: the line
+// through the camera centre's image M[0:3][3] and the ray's vanishing point
+// M[0:3][0:3] r (their cross product, taken to normalized coordinates),
+// its coefficients formed in double from M and K_p.
+struct EpipolarAxis {
+  float m_along, m3;  // M[along][3], M[2][3]
+  float la[3], lo[3], lc[3];
+  float f_along, c_along, inv_f_along;
+  float k1, k2, k3, two_k2, three_k3;
+  float two_t1, t2;
+};
+
+// The undistorted projector coordinate (px along the axis) whose distorted
+// position is `decoded`, on the epipolar line of the ray (x, y, 1), solved
+// for o = alpha + beta a (one division per pixel). On it the
+// distorted coordinate is a polynomial g(a) + decoded in a alone: the first
+// iteration shifts by g at the decoded coordinate (the same point and shift
+// as kAlongRay's first step), later ones are
+// secant steps where the secant's slope is sane (0.5 .. 1.5), plain shifts
+// elsewhere. Iterations: kIterations, or `iterations` when it is -1. NaN
+// where the line is degenerate (parallel to the other axis: the coordinate
+// does not change along the ray, so depth is undetermined). The AVX-512 row
+// does the same operations in the same order.
+template <int kIterations>
+inline float epipolarCoordinate(const EpipolarAxis& k, float x, float y, float decoded,
+                                int iterations) {
+  const float la = k.la[0] * x + k.la[1] * y + k.la[2];
+  const float lo = k.lo[0] * x + k.lo[1] * y + k.lo[2];
+  const float lc = k.lc[0] * x + k.lc[1] * y + k.lc[2];
+  const float inv = -1.0f / lo;
+  const float alpha = lc * inv, beta = la * inv;
+  const float target = (decoded - k.c_along) * k.inv_f_along;
+  float a = target, a_prev = 0.0f, g_prev = 0.0f;
+  const int n = kIterations >= 0 ? kIterations : iterations;
+  for (int it = 0; it < n; ++it) {
+    const float o = alpha + beta * a;
+    const float aa = a * a;
+    const float r2 = aa + o * o;
+    const float radial = r2 * (k.k1 + r2 * (k.k2 + r2 * k.k3));
+    const float shift = (a * radial + k.two_t1 * (a * o)) + k.t2 * (r2 + 2.0f * aa);
+    // a = target at the first iteration: g = shift (the same bits).
+    const float g = it == 0 ? shift : (a - target) + shift;
+    float step = g;
+    if (it > 0) {
+      // Slope dg / da within 0.5 of 1 (false for da = 0 or NaN).
+      const float dg = g - g_prev, da = a - a_prev;
+      const bool sane = std::abs(dg - da) < 0.5f * std::abs(da);
+      const float secant = g * da / dg;
+      step = sane ? secant : g;
+    }
+    a_prev = a;
+    g_prev = g;
+    a = a - step;
+  }
+  return k.f_along * a + k.c_along;
+}
+
+// The depth of a pixel with the epipolar correction: depthAlongRay() of the
+// corrected coordinate.
+// ai = M3[0:3].r, q_along = M[along][0:3].r.
+template <int kIterations>
+inline float epipolarDepth(const EpipolarAxis& k, float x, float y, float ai, float q_along,
+                           float decoded, int iterations, float min_z, float max_z) {
+  const float p = epipolarCoordinate<kIterations>(k, x, y, decoded, iterations);
+  return depthAlongRay(p, ai, q_along, k.m_along, k.m3, min_z, max_z);
 }
 
 // The row loops read and write distinct buffers (maps, rays, scratch, cloud);
@@ -154,9 +234,131 @@ __attribute__((target("avx512f"))) int fusedRowAvx512(int n, const AxisTerms& k,
   }
   return u;
 }
+// Each statement below over the N vectors of 16 pixels in flight: one
+// vector's correction is a long dependent chain (three divisions), so
+// independent vectors are interleaved for the out-of-order core.
+#define SL_LANES _Pragma("GCC unroll 8") for (int j = 0; j < N; ++j)
+
+// c[0] x + c[1] y + c[2].
+__attribute__((target("avx512f"))) inline __m512 linear16(const float* c, __m512 x, __m512 y) {
+  return _mm512_add_ps(
+      _mm512_add_ps(_mm512_mul_ps(_mm512_set1_ps(c[0]), x), _mm512_mul_ps(_mm512_set1_ps(c[1]), y)),
+      _mm512_set1_ps(c[2]));
+}
+
+// epipolarDepth() of N x 16 pixels: the same operations in the same order.
+// kK3: false when k3 = 0, then r2 (k1 + r2 k2) for r2 (k1 + r2 (k2 + r2 k3)),
+// the same value for finite r2 (r2 0 = 0, k2 + 0 = k2).
+template <int N, int kIterations, bool kK3>
+__attribute__((target("avx512f"))) inline void epipolarDepthN(
+    const EpipolarAxis& k, const __m512* x, const __m512* y, const __m512* ai,
+    const __m512* q_along, const __m512* decoded, __m512 min_z, __m512 max_z, __m512* z) {
+  const __m512 m_along = _mm512_set1_ps(k.m_along);
+  const __m512 m3 = _mm512_set1_ps(k.m3);
+  const __m512 c_along = _mm512_set1_ps(k.c_along), f_along = _mm512_set1_ps(k.f_along);
+  const __m512 k1 = _mm512_set1_ps(k.k1), k2 = _mm512_set1_ps(k.k2), k3 = _mm512_set1_ps(k.k3);
+  const __m512 two_t1 = _mm512_set1_ps(k.two_t1), t2 = _mm512_set1_ps(k.t2);
+  const __m512 two = _mm512_set1_ps(2.0f);
+  __m512 alpha[N], beta[N], target[N], a[N], a_prev[N], g_prev[N];
+  SL_LANES {
+    const __m512 la = linear16(k.la, x[j], y[j]);
+    const __m512 lo = linear16(k.lo, x[j], y[j]);
+    const __m512 lc = linear16(k.lc, x[j], y[j]);
+    const __m512 inv = _mm512_div_ps(_mm512_set1_ps(-1.0f), lo);
+    alpha[j] = _mm512_mul_ps(lc, inv);
+    beta[j] = _mm512_mul_ps(la, inv);
+    target[j] = _mm512_mul_ps(_mm512_sub_ps(decoded[j], c_along), _mm512_set1_ps(k.inv_f_along));
+    a[j] = target[j];
+  }
+  for (int it = 0; it < kIterations; ++it) {
+    SL_LANES {
+      const __m512 o = _mm512_add_ps(alpha[j], _mm512_mul_ps(beta[j], a[j]));
+      const __m512 aa = _mm512_mul_ps(a[j], a[j]);
+      const __m512 r2 = _mm512_add_ps(aa, _mm512_mul_ps(o, o));
+      const __m512 radial =
+          kK3 ? _mm512_mul_ps(
+                    r2,
+                    _mm512_add_ps(k1, _mm512_mul_ps(r2, _mm512_add_ps(k2, _mm512_mul_ps(r2, k3)))))
+              : _mm512_mul_ps(r2, _mm512_add_ps(k1, _mm512_mul_ps(r2, k2)));
+      const __m512 shift = _mm512_add_ps(
+          _mm512_add_ps(_mm512_mul_ps(a[j], radial), _mm512_mul_ps(two_t1, _mm512_mul_ps(a[j], o))),
+          _mm512_mul_ps(t2, _mm512_add_ps(r2, _mm512_mul_ps(two, aa))));
+      const __m512 g = it == 0 ? shift : _mm512_add_ps(_mm512_sub_ps(a[j], target[j]), shift);
+      __m512 step = g;
+      if (it > 0) {
+        const __m512 dg = _mm512_sub_ps(g, g_prev[j]), da = _mm512_sub_ps(a[j], a_prev[j]);
+        const __mmask16 sane =
+            _mm512_cmp_ps_mask(_mm512_abs_ps(_mm512_sub_ps(dg, da)),
+                               _mm512_mul_ps(_mm512_set1_ps(0.5f), _mm512_abs_ps(da)), _CMP_LT_OQ);
+        step = _mm512_mask_div_ps(g, sane, _mm512_mul_ps(g, da), dg);
+      }
+      a_prev[j] = a[j];
+      g_prev[j] = g;
+      a[j] = _mm512_sub_ps(a[j], step);
+    }
+  }
+  SL_LANES {
+    const __m512 p = _mm512_add_ps(_mm512_mul_ps(f_along, a[j]), c_along);
+    // depthAlongRay().
+    const __m512 den = _mm512_sub_ps(_mm512_mul_ps(p, ai[j]), q_along[j]);
+    const __m512 z_all = _mm512_div_ps(_mm512_sub_ps(m_along, _mm512_mul_ps(p, m3)), den);
+    const __mmask16 valid =
+        _mm512_cmp_ps_mask(_mm512_abs_ps(den), _mm512_set1_ps(1e-12f), _CMP_GT_OQ) &
+        _mm512_cmp_ps_mask(z_all, min_z, _CMP_GE_OQ) & _mm512_cmp_ps_mask(z_all, max_z, _CMP_LE_OQ);
+    z[j] = _mm512_mask_blend_ps(valid, _mm512_set1_ps(kNaN), z_all);
+  }
+}
+
+// fusedRowAvx512() with the epipolar projector correction (kIterations
+// iterations), N vectors of 16 pixels at a time, then single vectors:
+// bit for bit the general path's results (test_triangulator).
+template <int N, bool kInterpolate, int kIterations, bool kK3>
+__attribute__((target("avx512f"))) int fusedEpipolarRowAvx512(
+    int n, const AxisTerms& k, const EpipolarAxis& e, const float* p_row, const float* x0,
+    const float* x1, const float* y0, const float* y1, float t, const float* intensity,
+    PointXYZI* out) {
+  const __m512 a0 = _mm512_set1_ps(k.a0), a1 = _mm512_set1_ps(k.a1), a2 = _mm512_set1_ps(k.a2);
+  const __m512 b0 = _mm512_set1_ps(k.b0), b1 = _mm512_set1_ps(k.b1), b2 = _mm512_set1_ps(k.b2);
+  const __m512 min_z = _mm512_set1_ps(k.min_z), max_z = _mm512_set1_ps(k.max_z);
+  const __m512 tv = _mm512_set1_ps(t);
+  int u = 0;
+  for (; u + 16 * N <= n; u += 16 * N) {
+    __m512 rx[N], ry[N], ai[N], b[N], p[N], z[N];
+    SL_LANES {
+      const int v = u + 16 * j;
+      rx[j] = _mm512_loadu_ps(x0 + v);
+      ry[j] = _mm512_loadu_ps(y0 + v);
+      if constexpr (kInterpolate) {
+        rx[j] =
+            _mm512_add_ps(rx[j], _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(x1 + v), rx[j])));
+        ry[j] =
+            _mm512_add_ps(ry[j], _mm512_mul_ps(tv, _mm512_sub_ps(_mm512_loadu_ps(y1 + v), ry[j])));
+      }
+      ai[j] = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(a0, rx[j]), _mm512_mul_ps(a1, ry[j])), a2);
+      b[j] = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(b0, rx[j]), _mm512_mul_ps(b1, ry[j])), b2);
+      p[j] = _mm512_loadu_ps(p_row + v);
+    }
+    epipolarDepthN<N, kIterations, kK3>(e, rx, ry, ai, b, p, min_z, max_z, z);
+    SL_LANES {
+      const int v = u + 16 * j;
+      const __m512 i = intensity ? _mm512_loadu_ps(intensity + v) : _mm512_setzero_ps();
+      streamPoints16(_mm512_mul_ps(z[j], rx[j]), _mm512_mul_ps(z[j], ry[j]), z[j], i, &out[v].x);
+    }
+  }
+  if constexpr (N > 1) {
+    u += fusedEpipolarRowAvx512<1, kInterpolate, kIterations, kK3>(
+        n - u, k, e, p_row + u, x0 + u, x1 + u, y0 + u, y1 + u, t,
+        intensity ? intensity + u : nullptr, out + u);
+  }
+  return u;
+}
+#undef SL_LANES
 #pragma GCC diagnostic pop
 
 bool cpuHasAvx512() { return __builtin_cpu_supports("avx512f"); }
+
+// Vectors of 16 pixels in flight in the corrected fused row.
+constexpr int kEpipolarLanes = SL_EPIPOLAR_LANES;
 #else
 bool cpuHasAvx512() { return false; }
 #endif
@@ -204,6 +406,7 @@ struct Triangulator::Impl {
   // Floats of row scratch rowRays() needs.
   int rayScratch() const { return ray_step == 0 ? 0 : 2 * width; }
   float m_rows[3][3] = {};  // M[0:3][0:3]
+  double m_full[3][3] = {};  // the same in double
   double m_t[2] = {0, 0};   // M1[3], M2[3]
   double m3_t = 0;          // M3[3] = t.z (mm)
 
@@ -212,8 +415,9 @@ struct Triangulator::Impl {
   double proj_f[2] = {0, 0}, inv_proj_f[2] = {0, 0}, proj_c[2] = {0, 0};
   double proj_dist[5] = {0, 0, 0, 0, 0};
 
-  // The projector distortion correction for one row of pixels, in place on
-  // p (decoded, distorted projector px -> undistorted projector px).
+  // The along-ray projector distortion correction (ProjectorCorrection::
+  // kAlongRay, the reference) for one row of pixels, in place on p (decoded,
+  // distorted projector px -> undistorted projector px).
   //
   // For pixel i and coordinate p along `axis`, with n = M[axis][3] - p M3[3]
   // and d = p a - b[axis], the depth is z = n / d, and
@@ -283,6 +487,19 @@ struct Triangulator::Impl {
     p = in_front ? pi - delta_p : pi;
   }
 
+  // Constants of the epipolar correction for pixels decoded along `axis`.
+  EpipolarAxis epipolarAxis(int axis) const;
+
+  // Depth of one row into z_row with the epipolar correction:
+  // options.projector_distortion_iterations iterations (kIterations 1 or 2,
+  // or -1 for any count, a loop that does not vectorize). kAxis: kColumn or
+  // kRow when every pixel of the row uses that axis (no second map), 2 to
+  // pick per pixel as depthRow() does.
+  template <int kIterations, int kAxis>
+  SL_MULTIVERSION void epipolarDepthRow(const float* first_row, const float* second_row,
+                                        float first_is_column, float second_is_column,
+                                        const float* rx, const float* ry, float* z_row) const;
+
   // Rows [map_begin, map_end) of the maps into cloud rows from cloud_begin.
   void triangulate(const ProjectorMaps& maps, int first, int second, int map_begin, int map_end,
                    int cloud_begin, PointCloud& cloud) const;
@@ -329,7 +546,10 @@ Triangulator::Triangulator(const CameraProjectorCalibration& calibration,
   impl->m3_t = m(2, 3);
 
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) impl->m_rows[r][c] = static_cast<float>(m(r, c));
+    for (int c = 0; c < 3; ++c) {
+      impl->m_rows[r][c] = static_cast<float>(m(r, c));
+      impl->m_full[r][c] = m(r, c);
+    }
   impl->buildRays(cam);
 
   impl->correct_projector = proj.hasDistortion() && options.projector_distortion_iterations > 0;
@@ -606,13 +826,103 @@ void Triangulator::Impl::depthRow(const float* __restrict first_row,
   }
 }
 
+EpipolarAxis Triangulator::Impl::epipolarAxis(int axis) const {
+  const int other = 1 - axis;
+  // Rows of M (double) and the line's coefficients on r in (along, other, 1)
+  // projector px: l_along = M[other][3] M3 - M3[3] M[other], l_other =
+  // M3[3] M[along] - M[along][3] M3, l_const = M[along][3] M[other] -
+  // M[other][3] M[along]; in normalized coordinates (a = (u - c) / f)
+  // la = f_along l_along, lo = f_other l_other, lc = c_along l_along +
+  // c_other l_other + l_const.
+  EpipolarAxis k{};
+  for (int i = 0; i < 3; ++i) {
+    const double along = m_full[axis][i], across = m_full[other][i], third = m_full[2][i];
+    const double l_along = m_t[other] * third - m3_t * across;
+    const double l_other = m3_t * along - m_t[axis] * third;
+    const double l_const = m_t[axis] * across - m_t[other] * along;
+    k.la[i] = float(proj_f[axis] * l_along);
+    k.lo[i] = float(proj_f[other] * l_other);
+    k.lc[i] = float(proj_c[axis] * l_along + proj_c[other] * l_other + l_const);
+  }
+  const bool col = axis == kColumn;
+  k.m_along = float(m_t[axis]);
+  k.m3 = float(m3_t);
+  k.f_along = float(proj_f[axis]);
+  k.c_along = float(proj_c[axis]);
+  k.inv_f_along = float(inv_proj_f[axis]);
+  k.k1 = float(proj_dist[0]);
+  k.k2 = float(proj_dist[1]);
+  k.k3 = float(proj_dist[4]);
+  k.two_k2 = float(2.0 * proj_dist[1]);
+  k.three_k3 = float(3.0 * proj_dist[4]);
+  k.two_t1 = float(2.0 * proj_dist[col ? 2 : 3]);
+  k.t2 = float(proj_dist[col ? 3 : 2]);
+  return k;
+}
+
+template <int kIterations, int kAxis>
+void Triangulator::Impl::epipolarDepthRow(const float* __restrict first_row,
+                                          const float* __restrict second_row, float first_is_column,
+                                          float second_is_column, const float* __restrict rx,
+                                          const float* __restrict ry,
+                                          float* __restrict z_row) const {
+  const EpipolarAxis kc = epipolarAxis(kColumn), kr = epipolarAxis(kRow);
+  const int iterations = options.projector_distortion_iterations;
+  const float min_z = options.min_depth_mm;
+  const float max_z = options.max_depth_mm;
+  const float a0 = m_rows[2][0], a1 = m_rows[2][1], a2 = m_rows[2][2];
+  const float bc0 = m_rows[0][0], bc1 = m_rows[0][1], bc2 = m_rows[0][2];
+  const float br0 = m_rows[1][0], br1 = m_rows[1][1], br2 = m_rows[1][2];
+  SL_ROW_LOOP
+  for (int u = 0; u < width; ++u) {
+    // As depthRow(): the first map where finite, else the second.
+    const float f = first_row[u], s = second_row[u];
+    const float use_first = (f - f) == 0.0f ? 1.0f : 0.0f;
+    const float decoded = use_first != 0.0f ? f : s;
+    const float col_flag = second_is_column + use_first * (first_is_column - second_is_column);
+    const bool col = kAxis == 2 ? col_flag != 0.0f : kAxis == kColumn;
+    const float x = rx[u], y = ry[u];
+    const float ai = a0 * x + a1 * y + a2;
+    const float bc = bc0 * x + bc1 * y + bc2;
+    const float br = br0 * x + br1 * y + br2;
+    EpipolarAxis k;
+    if constexpr (kAxis == 2) {
+      // Field by field, so that the loop vectorizes with blends.
+      k.m_along = col ? kc.m_along : kr.m_along;
+      k.m3 = kc.m3;
+      for (int i = 0; i < 3; ++i) {
+        k.la[i] = col ? kc.la[i] : kr.la[i];
+        k.lo[i] = col ? kc.lo[i] : kr.lo[i];
+        k.lc[i] = col ? kc.lc[i] : kr.lc[i];
+      }
+      k.f_along = col ? kc.f_along : kr.f_along;
+      k.c_along = col ? kc.c_along : kr.c_along;
+      k.inv_f_along = col ? kc.inv_f_along : kr.inv_f_along;
+      k.k1 = kc.k1;
+      k.k2 = kc.k2;
+      k.k3 = kc.k3;
+      k.two_k2 = kc.two_k2;
+      k.three_k3 = kc.three_k3;
+      k.two_t1 = col ? kc.two_t1 : kr.two_t1;
+      k.t2 = col ? kc.t2 : kr.t2;
+    } else {
+      k = kAxis == kColumn ? kc : kr;
+    }
+    z_row[u] =
+        epipolarDepth<kIterations>(k, x, y, ai, col ? bc : br, decoded, iterations, min_z, max_z);
+  }
+}
+
 void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int second,
                                      int map_begin, int map_end, int cloud_begin,
                                      PointCloud& cloud) const {
   const cv::Mat* coord_maps[2] = {&maps.up, &maps.vp};
   const int iterations = correct_projector ? options.projector_distortion_iterations : 0;
+  const bool epipolar =
+      options.projector_correction == TriangulatorOptions::ProjectorCorrection::kEpipolar;
   // Row scratch: the depth row, the pass-wise correction's state, the rays.
-  const std::size_t depth_floats = (iterations > 0 ? 9 : 1) * static_cast<std::size_t>(width);
+  const std::size_t depth_floats =
+      (iterations > 0 && !epipolar ? 9 : 1) * static_cast<std::size_t>(width);
   const auto scratch = std::make_unique_for_overwrite<float[]>(depth_floats + rayScratch());
   float* z_row = scratch.get();
   float* rx_row = z_row + depth_floats;
@@ -620,12 +930,15 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
   const float first_is_column = first == kColumn ? 1.0f : 0.0f;
   const float second_is_column = second == kColumn ? 1.0f : 0.0f;
 #if defined(SL_HAVE_AVX512_POINTS)
-  // One map, no projector correction (the common case): the fused row.
-  const bool fused = avx512_points && iterations == 0 && second < 0;
+  // One map, no projector correction or the epipolar one with up to 2
+  // iterations (the common cases): the fused row.
+  const bool fused =
+      avx512_points && second < 0 && (iterations == 0 || (epipolar && iterations <= 2));
   const AxisTerms terms{m_rows[2][0],        m_rows[2][1],     m_rows[2][2],
                         m_rows[first][0],    m_rows[first][1], m_rows[first][2],
                         float(m_t[first]),   float(m3_t),      options.min_depth_mm,
                         options.max_depth_mm};
+  const EpipolarAxis epipolar_terms = epipolarAxis(first);
 #endif
   for (int row = map_begin; row < map_end; ++row) {
     const int v = row - map_begin + cloud_begin;
@@ -645,27 +958,75 @@ void Triangulator::Impl::triangulate(const ProjectorMaps& maps, int first, int s
       auto scalar = [&](int u) {
         const float rx = r.interpolate ? r.x0[u] + r.t * (r.x1[u] - r.x0[u]) : r.x0[u];
         const float ry = r.interpolate ? r.y0[u] + r.t * (r.y1[u] - r.y0[u]) : r.y0[u];
-        out[u] = fusedPoint(terms, first_row[u], rx, ry, offset_row ? offset_row[u] : 0.0f);
+        const float intensity = offset_row ? offset_row[u] : 0.0f;
+        if (iterations == 0) {
+          out[u] = fusedPoint(terms, first_row[u], rx, ry, intensity);
+          return;
+        }
+        const float ai = terms.a0 * rx + terms.a1 * ry + terms.a2;
+        const float b = terms.b0 * rx + terms.b1 * ry + terms.b2;
+        const float z = epipolarDepth<-1>(epipolar_terms, rx, ry, ai, b, first_row[u], iterations,
+                                          terms.min_z, terms.max_z);
+        out[u] = PointXYZI{z * rx, z * ry, z, intensity};
       };
       // Up to 3 points to reach a cache-line boundary, whole lines, the rest.
       const int lead = std::min(width, static_cast<int>(((64 - misalignment) & 63) / 16));
       int u = 0;
       for (; u < lead; ++u) scalar(u);
       const float* intensity = offset_row ? offset_row + u : nullptr;
-      u += r.interpolate
-               ? fusedRowAvx512<true>(width - u, terms, first_row + u, r.x0 + u, r.x1 + u, r.y0 + u,
-                                      r.y1 + u, r.t, intensity, out + u)
-               : fusedRowAvx512<false>(width - u, terms, first_row + u, r.x0 + u, r.x1 + u,
-                                       r.y0 + u, r.y1 + u, r.t, intensity, out + u);
+      const int n = width - u;
+      const float *p = first_row + u, *x0 = r.x0 + u, *x1 = r.x1 + u, *y0 = r.y0 + u,
+                  *y1 = r.y1 + u;
+      PointXYZI* o = out + u;
+      if (iterations == 0) {
+        u += r.interpolate ? fusedRowAvx512<true>(n, terms, p, x0, x1, y0, y1, r.t, intensity, o)
+                           : fusedRowAvx512<false>(n, terms, p, x0, x1, y0, y1, r.t, intensity, o);
+      } else {
+        auto row = [&]<bool kInterpolate, int kIterations>() {
+          return epipolar_terms.k3 != 0.0f
+                     ? fusedEpipolarRowAvx512<kEpipolarLanes, kInterpolate, kIterations, true>(
+                           n, terms, epipolar_terms, p, x0, x1, y0, y1, r.t, intensity, o)
+                     : fusedEpipolarRowAvx512<kEpipolarLanes, kInterpolate, kIterations, false>(
+                           n, terms, epipolar_terms, p, x0, x1, y0, y1, r.t, intensity, o);
+        };
+        if (iterations == 1) {
+          u += r.interpolate ? row.template operator()<true, 1>()
+                             : row.template operator()<false, 1>();
+        } else {
+          u += r.interpolate ? row.template operator()<true, 2>()
+                             : row.template operator()<false, 2>();
+        }
+      }
       for (; u < width; ++u) scalar(u);
       continue;
     }
 #endif
     const auto [rx, ry] = rowRays(v, rx_row, ry_row);
-    // The fused loop wins without correction; with it, its register pressure
-    // makes row passes faster (bench_codecs with correction iterations).
+    // The fused loop wins without correction; with the along-ray correction
+    // its register pressure makes row passes faster (bench_codecs,
+    // BM_DecodeTriangulateAlongRay).
     if (iterations == 0) {
       depthRow<0>(first_row, second_row, first_is_column, second_is_column, rx, ry, nullptr, z_row);
+    } else if (epipolar) {
+      auto row = [&]<int kIterations>() {
+        if (second >= 0) {
+          epipolarDepthRow<kIterations, 2>(first_row, second_row, first_is_column, second_is_column,
+                                           rx, ry, z_row);
+        } else if (first == kColumn) {
+          epipolarDepthRow<kIterations, kColumn>(first_row, second_row, first_is_column,
+                                                 second_is_column, rx, ry, z_row);
+        } else {
+          epipolarDepthRow<kIterations, kRow>(first_row, second_row, first_is_column,
+                                              second_is_column, rx, ry, z_row);
+        }
+      };
+      if (iterations == 1) {
+        row.template operator()<1>();
+      } else if (iterations == 2) {
+        row.template operator()<2>();
+      } else {
+        row.template operator()<-1>();
+      }
     } else {
       depthRow<-1>(first_row, second_row, first_is_column, second_is_column, rx, ry, z_row + width,
                    z_row);

@@ -31,10 +31,14 @@
 // Patterns: 0 = 3+3 horizontal, 1 = 3+3 both, 2 = 12 steps at each of 4
 // frequencies (64, 16, 4, 1 periods; 48 frames, hierarchical unwrapping).
 // proj_iter: projector distortion iterations of the triangulator (0 = the
-// baseline's model, which ignores projector distortion).
+// baseline's model, which ignores projector distortion), in the epipolar
+// form; BM_DecodeTriangulateAlongRay runs the reference form.
+//
+// - BM_DecodeBands: the decode half of the cloud-only case (blocks of rows
+//   decoded into bands, not triangulated), to split BM_DecodeTriangulate.
 #include <benchmark/benchmark.h>
-#include <sys/resource.h>
 #include <emmintrin.h>
+#include <sys/resource.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -48,6 +52,7 @@
 #include <opencv2/core.hpp>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "sl/pipeline/codec.h"
@@ -140,13 +145,18 @@ const Codec& codec(int pattern) {
   return *cache[pattern];
 }
 
-const Triangulator& triangulator(int iterations) {
-  static std::map<int, Triangulator> cache;
-  auto it = cache.find(iterations);
+using ProjectorCorrection = TriangulatorOptions::ProjectorCorrection;
+
+const Triangulator& triangulator(int iterations,
+                                 ProjectorCorrection method = ProjectorCorrection::kEpipolar) {
+  static std::map<std::pair<int, ProjectorCorrection>, Triangulator> cache;
+  const auto key = std::make_pair(iterations, method);
+  auto it = cache.find(key);
   if (it == cache.end()) {
     TriangulatorOptions o;
     o.projector_distortion_iterations = iterations;
-    it = cache.emplace(iterations, Triangulator(scene().calibration, o)).first;
+    o.projector_correction = method;
+    it = cache.emplace(key, Triangulator(scene().calibration, o)).first;
   }
   return it->second;
 }
@@ -179,6 +189,24 @@ void BM_Decode(benchmark::State& state) {
   reportScans(state);
 }
 
+// The decode half of BM_DecodeTriangulate's cloud-only case: the same
+// blocks of rows decoded into per-thread bands (Codec::decodeBand()), not
+// triangulated. Args: pattern, threads.
+void BM_DecodeBands(benchmark::State& state) {
+  const int pattern = int(state.range(0));
+  const CameraImages in = images(pattern);
+  RowWorkers workers(int(state.range(1)));
+  std::vector<ProjectorMaps> bands(workers.threads());
+  for (auto _ : state) {
+    workers.run(in.frames.front().rows, ScanProcessor::kBlockRows,
+                [&](int begin, int end, int thread) {
+                  codec(pattern).decodeBand(in.frames, in.bit_depth, begin, end, bands[thread]);
+                  benchmark::DoNotOptimize(bands[thread].up.data);
+                });
+  }
+  reportScans(state);
+}
+
 // Args: pattern, projector distortion iterations, threads, maps kept (1) or
 // cloud only (0).
 void BM_DecodeTriangulate(benchmark::State& state) {
@@ -195,6 +223,22 @@ void BM_DecodeTriangulate(benchmark::State& state) {
     if (valid == 0) valid = out.cloud->validCount();
   }
   state.counters["valid_points"] = double(valid);
+  reportScans(state);
+}
+
+// BM_DecodeTriangulate's cloud-only case with the projector correction of
+// the reference form (ProjectorCorrection::kAlongRay, the one shipped
+// before the epipolar form): the same frames and iterations, for a
+// before / after comparison in one run. Args: proj_iter, threads.
+void BM_DecodeTriangulateAlongRay(benchmark::State& state) {
+  const CameraImages in = images(0);
+  const Triangulator& t = triangulator(int(state.range(0)), ProjectorCorrection::kAlongRay);
+  ScanProcessor processor(int(state.range(1)));
+  for (auto _ : state) {
+    const ScanOutput out =
+        processor.process(codec(0), t, in, 0, "cam", ScanProcessor::Keep::kCloud);
+    benchmark::DoNotOptimize(out.cloud->points.data());
+  }
   reportScans(state);
 }
 
@@ -371,6 +415,13 @@ BENCHMARK(BM_Decode)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()
     ->UseRealTime();
+BENCHMARK(BM_DecodeBands)
+    ->ArgsProduct({{0, 1}, {1, 2}})
+    ->ArgNames({"pattern", "threads"})
+    ->Unit(benchmark::kMillisecond)
+    ->MinWarmUpTime(0.3)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
 BENCHMARK(BM_DecodeGammaCompensation)
     ->ArgsProduct({{0, 1}, {1, 2}})
     ->ArgNames({"gamma", "threads"})
@@ -381,6 +432,13 @@ BENCHMARK(BM_DecodeGammaCompensation)
 BENCHMARK(BM_DecodeTriangulate)
     ->ArgsProduct({{0, 1, 2}, {0, 2}, {1, 2}, {1, 0}})
     ->ArgNames({"pattern", "proj_iter", "threads", "maps"})
+    ->Unit(benchmark::kMillisecond)
+    ->MinWarmUpTime(0.3)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
+BENCHMARK(BM_DecodeTriangulateAlongRay)
+    ->ArgsProduct({{2}, {1, 2}})
+    ->ArgNames({"proj_iter", "threads"})
     ->Unit(benchmark::kMillisecond)
     ->MinWarmUpTime(0.3)
     ->MeasureProcessCPUTime()

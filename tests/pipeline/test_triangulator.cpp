@@ -231,16 +231,60 @@ TEST_CASE("projector distortion correction", "[triangulator]") {
   CHECK(two.spurious == 0);
   // Measured max (rms) in mm, plane / sphere, columns (horizontal rig):
   //   0 iterations 8.5 (2.4) / 8.8 (2.4); 1 iteration 0.27 (0.056) / 0.19 (0.046);
-  //   2 iterations 3.2e-4 / 4.4e-4 (single precision; 2.2e-4 / 2.9e-4 in double).
-  // Rows (vertical rig): 0 it. 5.3 / 4.5; 1 it. 0.084 / 0.060; 2 it. 3.7e-4 / 4.1e-4.
-  // Two iterations reach the float floor of the undistorted case. (Plain
-  // shifting without the secant step left 8e-3 mm after 2 iterations.)
+  //   2 iterations 4.2e-4 / 6.4e-4 (the epipolar form, single precision;
+  //   3.2e-4 / 4.4e-4 along the ray; 2.2e-4 / 2.9e-4 in double).
+  // Rows (vertical rig): 0 it. 5.3 / 4.5; 1 it. 0.084 / 0.060; 2 it. 4.6e-4 / 5.3e-4
+  // (3.7e-4 / 4.1e-4 along the ray).
+  // Two iterations reach about the float floor of the undistorted case.
+  // (Plain shifting without the secant step left 8e-3 mm after 2 iterations.)
   CHECK(two.max_mm < 1e-3);
   CHECK(one.max_mm > two.max_mm);
   // Ignoring the projector's distortion is clearly worse: the correction is
   // doing the work.
   CHECK(none.max_mm > 0.5);
   CHECK(none.max_mm > 100 * two.max_mm);
+}
+
+TEST_CASE("the epipolar projector correction matches the along-ray reference", "[triangulator]") {
+  // Both forms solve for the same undistorted coordinate; the epipolar one
+  // (the default) forms the ray's epipolar line once per pixel instead of
+  // triangulating and projecting the point every iteration. With the
+  // shipped 2 iterations their clouds must agree within float noise, and
+  // the epipolar form must stay as close to the truth. 1 iteration is the
+  // same plain shift in both.
+  const Scene scene = GENERATE(Scene::kTiltedPlane, Scene::kSphere);
+  const AxisCase axis = GENERATE(AxisCase{Use::kColumns, Baseline::kHorizontal},
+                                 AxisCase{Use::kRows, Baseline::kVertical});
+  const int iterations = GENERATE(1, 2);
+  const CameraProjectorCalibration rig = makeRig(true, axis.baseline);
+  const Truth truth = makeTruth(rig, scene);
+  TriangulatorOptions o = optionsFor(axis.use, iterations);
+  CHECK(o.projector_correction == TriangulatorOptions::ProjectorCorrection::kEpipolar);
+  const PointCloud epipolar = Triangulator(rig, o).triangulate(truth.maps);
+  o.projector_correction = TriangulatorOptions::ProjectorCorrection::kAlongRay;
+  const PointCloud reference = Triangulator(rig, o).triangulate(truth.maps);
+  std::size_t compared = 0, mismatched = 0;
+  double max_mm = 0;
+  for (std::size_t i = 0; i < epipolar.points.size(); ++i) {
+    const PointXYZI& p = epipolar.points[i];
+    const PointXYZI& q = reference.points[i];
+    if (std::isfinite(p.z) != std::isfinite(q.z)) ++mismatched;
+    if (!std::isfinite(p.z) || !std::isfinite(q.z)) continue;
+    ++compared;
+    max_mm = std::max(
+        max_mm, double((Eigen::Vector3f(p.x, p.y, p.z) - Eigen::Vector3f(q.x, q.y, q.z)).norm()));
+  }
+  const Errors e = compare(epipolar, truth);
+  CAPTURE(int(scene), int(axis.use), iterations, max_mm, compared, mismatched, e.max_mm);
+  CHECK(compared > 400000);
+  CHECK(mismatched == 0);
+  // Measured max difference, plane / sphere: columns 2.6e-4 / 3.9e-4 mm
+  // (1 iteration), 3.5e-4 / 4.6e-4 (2); rows 3.2e-4 / 3.8e-4 (1), 4.5e-4 /
+  // 5.2e-4 (2); against the truth with 2 iterations 3.9e-4 .. 6.4e-4 mm.
+  // One iteration less (or plain shifts for the Newton step, 8e-3 mm) is
+  // far outside the bound.
+  CHECK(max_mm < 1e-3);
+  if (iterations == 2) CHECK(e.max_mm < 1e-3);
 }
 
 TEST_CASE("camera rays from the grid or per pixel", "[triangulator]") {
@@ -272,23 +316,27 @@ TEST_CASE("camera rays from the grid or per pixel", "[triangulator]") {
   CHECK(e.max_mm < 1e-3);
 }
 
-TEST_CASE("one map without projector correction: the fused row equals the general one",
-          "[triangulator]") {
-  // With one map and no projector correction, AVX-512 CPUs take a fused row
-  // (rays, depth and points in one pass); a second map that is all NaN sends
-  // the same pixels through the general row passes, which must give the same
-  // bits. Grid rays (moderate distortion) and per-pixel rays (wide lens),
-  // both axes, with and without intensity; a column offset of the cloud
-  // start is covered by the scalar lead of the rows.
+TEST_CASE("one map: the fused row equals the general one", "[triangulator]") {
+  // With one map and no projector correction or the epipolar one with up to
+  // 2 iterations, AVX-512 CPUs take a fused row (rays, depth and points in
+  // one pass); a second map that is all NaN sends the same pixels through
+  // the general row passes, which must give the same bits. Grid rays
+  // (moderate distortion) and per-pixel rays (wide lens, with a projector
+  // k3), both axes, with and without intensity, 0, 1, 2 and 3 (not fused)
+  // iterations; a column
+  // offset of the cloud start is covered by the scalar lead of the rows.
   const bool wide = GENERATE(false, true);
   const Baseline baseline = GENERATE(Baseline::kHorizontal, Baseline::kVertical);
   const bool with_offset = GENERATE(true, false);
+  const int iterations = GENERATE(0, 1, 2, 3);
   CameraProjectorCalibration rig = makeRig(true, baseline);
   if (wide) {
     rig.camera.fx = rig.camera.fy = 1200;
     rig.camera.distortion = {-0.35, 0.15, 0, 0, 0};
+    // A projector k3 as well (the fused row has a variant without it).
+    rig.projector.distortion[4] = 0.02;
   }
-  const Triangulator triangulator(rig, optionsFor(Use::kBest, 0));
+  const Triangulator triangulator(rig, optionsFor(Use::kBest, iterations));
   CHECK(triangulator.rayGridStep() == (wide ? 0 : 4));
   Truth truth = makeTruth(rig, Scene::kSphere);
   if (!with_offset) truth.maps.offset = cv::Mat();
@@ -299,7 +347,7 @@ TEST_CASE("one map without projector correction: the fused row equals the genera
   (columns ? general.vp : general.up).setTo(kNaN);
   const PointCloud fused_cloud = triangulator.triangulate(one);
   const PointCloud general_cloud = triangulator.triangulate(general);
-  CAPTURE(wide, columns, with_offset);
+  CAPTURE(wide, columns, with_offset, iterations);
   CHECK(fused_cloud.validCount() > 100000);
   REQUIRE(fused_cloud.points.size() == general_cloud.points.size());
   CHECK(std::memcmp(fused_cloud.points.data(), general_cloud.points.data(),

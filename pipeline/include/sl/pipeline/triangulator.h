@@ -25,11 +25,24 @@ struct TriangulatorOptions {
   float min_depth_mm = 100.0f;  // points outside [min, max] depth are NaN
   float max_depth_mm = 3000.0f;
   // Iterations that correct the decoded projector coordinate for projector
-  // lens distortion (0 = ignore projector distortion). Each costs one
-  // projection per point; the first is a plain shift by the distortion at the
-  // current point, later ones secant steps. With ~15 px of projector
-  // distortion, 2 iterations leave < 1e-3 mm (see test_triangulator.cpp).
+  // lens distortion (0 = ignore projector distortion). The first is a plain
+  // shift by the distortion at the decoded coordinate, later ones refine it.
+  // With ~15 px of projector distortion, 2 iterations leave < 1e-3 mm (see
+  // test_triangulator.cpp).
   int projector_distortion_iterations = 2;
+  // How the iterations solve for the undistorted coordinate.
+  // kEpipolar: along the camera ray's epipolar line in the projector's
+  // normalized image, a line per pixel formed once (one division); each
+  // iteration evaluates the Brown-Conrady polynomial on it, later ones as
+  // secant steps. NaN where that line is degenerate (the coordinate does not
+  // change along the ray). kAlongRay: the point is triangulated and
+  // projected into the projector each iteration (a division each), later
+  // ones secant steps, and a pixel whose point is behind either device keeps
+  // its decoded coordinate; the reference kEpipolar is tested against (same
+  // fixed point, more work per pixel: test_triangulator.cpp bounds the
+  // difference, bench_codecs times both).
+  enum class ProjectorCorrection { kEpipolar, kAlongRay };
+  ProjectorCorrection projector_correction = ProjectorCorrection::kEpipolar;
 };
 
 // Thread-compatible (triangulate() is const and keeps no state, so concurrent
