@@ -590,8 +590,20 @@ cv::Mat MotionCompensator::resample(const cv::Mat& frame, double shift, const Le
   return out;
 }
 
+std::vector<double> expectedShiftsPx(double velocity_mm_s, double focal_px, double depth_mm,
+                                     const std::vector<std::int64_t>& stamps_ns) {
+  if (!(depth_mm > 0) || !(focal_px > 0))
+    throw std::invalid_argument("motion compensation: expected shifts need a depth and focal length > 0");
+  std::vector<double> shifts;
+  for (const std::int64_t t : stamps_ns)
+    shifts.push_back(-velocity_mm_s * double(t - stamps_ns.front()) * 1e-9 * focal_px / depth_mm);
+  return shifts;
+}
+
 std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& set, MotionEstimate* estimate,
-                                                              RowWorkers* workers) const {
+                                                              RowWorkers* workers, const MotionPrior* prior) const {
+  if (prior && !(prior->tolerance_px > 0))
+    throw std::invalid_argument("motion compensation: the prior's tolerance must be > 0");
   if (set.cameras.empty() || set.cameras.front().frames.empty())
     throw std::invalid_argument("motion compensation: empty image set");
   auto out = std::make_shared<ImageSet>(set);  // frames are shared until replaced
@@ -616,6 +628,17 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
       if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)
         throw std::invalid_argument("motion compensation: frames must be CV_8UC1 or CV_16UC1");
     }
+    const std::vector<double>* expected = nullptr;
+    if (prior) {
+      const auto listed = prior->expected_shifts_px.find(camera.camera_id);
+      if (listed != prior->expected_shifts_px.end()) {
+        expected = &listed->second;
+        if (static_cast<int>(expected->size()) != n)
+          throw std::invalid_argument("motion compensation: the prior for camera '" + camera.camera_id +
+                                      "' has " + std::to_string(expected->size()) + " shifts for " +
+                                      std::to_string(n) + " frames");
+      }
+    }
     std::vector<double> shifts(n, 0.0);
     std::vector<bool> within(n, true), corrected(n, false), resampled(n, false);
     // Each frame's spectrum and its correlation with the reference's; one
@@ -627,7 +650,15 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
       correlations[i] = correlate(spectra[std::size_t(ref)], spectra[std::size_t(i)]);
-      shifts[i] = peakShift(correlations[i]);
+      if (expected) {
+        // Relative to the reference, whatever the prior says of the reference.
+        const double e = (*expected)[std::size_t(i)] - (*expected)[std::size_t(ref)];
+        const double near = peakShiftWithin(correlations[i], e - prior->tolerance_px, e + prior->tolerance_px);
+        shifts[i] = std::isnan(near) ? e : near;
+        if (std::isnan(near)) ++result.frames_at_prior;
+      } else {
+        shifts[i] = peakShift(correlations[i]);
+      }
       within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
     }
     // Consistency along the sequence (see the options): the speed is the
