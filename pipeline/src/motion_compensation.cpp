@@ -66,45 +66,51 @@ std::vector<float> periodicHann(int n) {
 // c fx .. c fx + fx - 1 (CV_32FC1, cols / fx x rows / fy; a remainder is left
 // out). cv::resize's INTER_AREA does this too, but for unequal factors took
 // longer than the whole registration of a frame does here.
-template <typename T, int kFx>
-void boxAverageOf(const cv::Mat& image, int fy, cv::Mat& out) {
-  const int cols = image.cols / kFx, rows = image.rows / fy, width = cols * kFx;
-  out.create(rows, cols, CV_32FC1);
-  std::vector<float> sum(static_cast<std::size_t>(width));
-  float* __restrict s = sum.data();
+//
+// Integer pixels are summed in integers (Sum: exact, fx fy <= 64 pixels of
+// at most 16 bits), then scaled once: the same result as summing them in
+// floats (exact below 2^24).
+template <typename T, typename Sum, int kFx>
+SL_MULTIVERSION void boxAverageRows(const cv::Mat& image, int fy, int rows, int cols, Sum* __restrict s,
+                                    cv::Mat& out) {
+  const int width = cols * kFx;
   const float scale = 1.0f / float(kFx * fy);
   for (int r = 0; r < rows; ++r) {
-    const T* first = image.ptr<T>(r * fy);
-    for (int c = 0; c < width; ++c) s[c] = float(first[c]);
+    const T* __restrict first = image.ptr<T>(r * fy);
+    for (int c = 0; c < width; ++c) s[c] = Sum(first[c]);
     for (int k = 1; k < fy; ++k) {
-      const T* in = image.ptr<T>(r * fy + k);
-      for (int c = 0; c < width; ++c) s[c] += float(in[c]);
+      const T* __restrict in = image.ptr<T>(r * fy + k);
+      for (int c = 0; c < width; ++c) s[c] += Sum(in[c]);
     }
     float* __restrict o = out.ptr<float>(r);
     for (int c = 0; c < cols; ++c) {
-      float v = 0;
+      Sum v = 0;
       for (int k = 0; k < kFx; ++k) v += s[c * kFx + k];
-      o[c] = v * scale;
+      o[c] = float(v) * scale;
     }
   }
 }
 
-template <typename T>
+template <typename T, typename Sum>
 void boxAverageOf(const cv::Mat& image, int fx, int fy, cv::Mat& out) {
+  const int cols = image.cols / fx, rows = image.rows / fy;
+  out.create(rows, cols, CV_32FC1);
+  std::vector<Sum> sum(static_cast<std::size_t>(cols) * static_cast<std::size_t>(fx));
   switch (fx) {
-    case 1: boxAverageOf<T, 1>(image, fy, out); break;
-    case 2: boxAverageOf<T, 2>(image, fy, out); break;
-    case 4: boxAverageOf<T, 4>(image, fy, out); break;
-    case 8: boxAverageOf<T, 8>(image, fy, out); break;
+    case 1: boxAverageRows<T, Sum, 1>(image, fy, rows, cols, sum.data(), out); break;
+    case 2: boxAverageRows<T, Sum, 2>(image, fy, rows, cols, sum.data(), out); break;
+    case 4: boxAverageRows<T, Sum, 4>(image, fy, rows, cols, sum.data(), out); break;
+    case 8: boxAverageRows<T, Sum, 8>(image, fy, rows, cols, sum.data(), out); break;
     default: throw std::logic_error("motion compensation: averaging over " + std::to_string(fx) + " px");
   }
 }
 
 void boxAverage(const cv::Mat& image, int fx, int fy, cv::Mat& out) {
+  if (fx * fy > 64) throw std::logic_error("motion compensation: averaging over more than 64 px");
   switch (image.type()) {
-    case CV_8UC1: boxAverageOf<std::uint8_t>(image, fx, fy, out); break;
-    case CV_16UC1: boxAverageOf<std::uint16_t>(image, fx, fy, out); break;
-    case CV_32FC1: boxAverageOf<float>(image, fx, fy, out); break;
+    case CV_8UC1: boxAverageOf<std::uint8_t, std::uint16_t>(image, fx, fy, out); break;
+    case CV_16UC1: boxAverageOf<std::uint16_t, std::uint32_t>(image, fx, fy, out); break;
+    case CV_32FC1: boxAverageOf<float, float>(image, fx, fy, out); break;
     default: throw std::invalid_argument("motion compensation: frames must be CV_8UC1, CV_16UC1 or CV_32FC1");
   }
 }
@@ -584,8 +590,20 @@ cv::Mat MotionCompensator::resample(const cv::Mat& frame, double shift, const Le
   return out;
 }
 
+std::vector<double> expectedShiftsPx(double velocity_mm_s, double focal_px, double depth_mm,
+                                     const std::vector<std::int64_t>& stamps_ns) {
+  if (!(depth_mm > 0) || !(focal_px > 0))
+    throw std::invalid_argument("motion compensation: expected shifts need a depth and focal length > 0");
+  std::vector<double> shifts;
+  for (const std::int64_t t : stamps_ns)
+    shifts.push_back(-velocity_mm_s * double(t - stamps_ns.front()) * 1e-9 * focal_px / depth_mm);
+  return shifts;
+}
+
 std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& set, MotionEstimate* estimate,
-                                                              RowWorkers* workers) const {
+                                                              RowWorkers* workers, const MotionPrior* prior) const {
+  if (prior && !(prior->tolerance_px > 0))
+    throw std::invalid_argument("motion compensation: the prior's tolerance must be > 0");
   if (set.cameras.empty() || set.cameras.front().frames.empty())
     throw std::invalid_argument("motion compensation: empty image set");
   auto out = std::make_shared<ImageSet>(set);  // frames are shared until replaced
@@ -610,6 +628,17 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
       if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)
         throw std::invalid_argument("motion compensation: frames must be CV_8UC1 or CV_16UC1");
     }
+    const std::vector<double>* expected = nullptr;
+    if (prior) {
+      const auto listed = prior->expected_shifts_px.find(camera.camera_id);
+      if (listed != prior->expected_shifts_px.end()) {
+        expected = &listed->second;
+        if (static_cast<int>(expected->size()) != n)
+          throw std::invalid_argument("motion compensation: the prior for camera '" + camera.camera_id +
+                                      "' has " + std::to_string(expected->size()) + " shifts for " +
+                                      std::to_string(n) + " frames");
+      }
+    }
     std::vector<double> shifts(n, 0.0);
     std::vector<bool> within(n, true), corrected(n, false), resampled(n, false);
     // Each frame's spectrum and its correlation with the reference's; one
@@ -621,7 +650,15 @@ std::shared_ptr<const ImageSet> MotionCompensator::compensate(const ImageSet& se
     for (int i = 0; i < n; ++i) {
       if (i == ref) continue;
       correlations[i] = correlate(spectra[std::size_t(ref)], spectra[std::size_t(i)]);
-      shifts[i] = peakShift(correlations[i]);
+      if (expected) {
+        // Relative to the reference, whatever the prior says of the reference.
+        const double e = (*expected)[std::size_t(i)] - (*expected)[std::size_t(ref)];
+        const double near = peakShiftWithin(correlations[i], e - prior->tolerance_px, e + prior->tolerance_px);
+        shifts[i] = std::isnan(near) ? e : near;
+        if (std::isnan(near)) ++result.frames_at_prior;
+      } else {
+        shifts[i] = peakShift(correlations[i]);
+      }
       within[i] = std::abs(shifts[i]) <= options_.max_shift_px;
     }
     // Consistency along the sequence (see the options): the speed is the

@@ -1,11 +1,11 @@
-// The adaptive-scanning policy (engine/adaptive_policy.h) without threads,
+// The adaptive-scanning policy (sl/daemon/adaptive_policy.h) without threads,
 // clocks or DDS: velocities and times in, modes and reasons out.
 #include <catch2/catch.hpp>
 #include <cstdint>
 #include <optional>
 #include <string>
 
-#include "engine/adaptive_policy.h"
+#include "sl/daemon/adaptive_policy.h"
 #include "sl/daemon/adaptive.h"
 
 using sl::daemon::AdaptiveConfig;

@@ -187,3 +187,18 @@ TEST_CASE("gamma: an uncompensated projector gamma adds the error the model pred
     CHECK(m.at("systematic_inlier_rms_mm") < 0.08);
   }
 }
+
+TEST_CASE("adaptive: the policy's pass beats every fixed choice over a stop and a go", "[eval][adaptive]") {
+  // 6 scans: 4 stopped, then 2 moving at 60 mm/s.
+  const sl::eval::EvalResult r = sl::eval::runAdaptive(options(6));
+  const auto& m = r.metrics;
+  CHECK(m.at("switches") == 1);
+  CHECK(m.at("paused_scans") == 0);
+  for (const char* fixed : {"fixed_accurate_", "fixed_accurate_compensated_", "fixed_fast_",
+                            "fixed_fast_compensated_"}) {
+    INFO(fixed);
+    CHECK(m.at("adaptive_inlier_rms_mm") < m.at(std::string(fixed) + "inlier_rms_mm"));
+    CHECK(m.at("adaptive_coverage") >= m.at(std::string(fixed) + "coverage"));
+  }
+  CHECK(m.at("adaptive_better_than_every_fixed") == 1);
+}

@@ -121,6 +121,23 @@ EvalResult runGamma(const EvalOptions& options);
 // total_s. Plots: wall_<method>_distances.png (named in the markdown).
 EvalResult runWall(const EvalOptions& options);
 
+// adaptive (issue 33 item 4): motion's relief and rig, the sensor on a
+// stop-go pass along x (1.6 s stopped, 2.4 s at 60 mm/s, repeated; a scan
+// started every 0.4 s; `scans` scans, default 20). Each scan is taken with
+// each fixed choice (6+6_vertical, the accurate 6-step pattern, and
+// 3+3_vertical, each without and with MotionCompensator) and with the
+// daemon's AdaptivePolicy choosing from the velocity (static -> 6+6, linear
+// along x -> 3+3 compensated, its compensation seeded by the velocity
+// through MotionPrior, and unseeded). Metrics per condition (prefix
+// "fixed_accurate_", "fixed_accurate_compensated_", "fixed_fast_",
+// "fixed_fast_compensated_", "adaptive_", "adaptive_unseeded_"): rms_mm,
+// inlier_rms_mm, gross_fraction, coverage; and
+// adaptive_better_than_every_fixed (1 when its inlier RMS is lower, its
+// gross errors no more and its coverage at least those of each fixed
+// choice, else 0), switches, paused_scans,
+// prior_frames_at_expected.
+EvalResult runAdaptive(const EvalOptions& options);
+
 // Names accepted by runExperiment, in the order `all` runs them.
 std::vector<std::string> experimentNames();
 // The number of scans an experiment uses when EvalOptions::scans <= 0.

@@ -1,4 +1,4 @@
-#include "engine/adaptive_policy.h"
+#include "sl/daemon/adaptive_policy.h"
 
 #include <algorithm>
 #include <cmath>

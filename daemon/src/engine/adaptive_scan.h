@@ -1,5 +1,5 @@
 // Adaptive scanning in the engine (issue 33 item 4): keeps the robot's
-// latest velocity, runs the policy (engine/adaptive_policy.h) for the
+// latest velocity, runs the policy (sl/daemon/adaptive_policy.h) for the
 // continuous scan in progress and carries out its switches through request
 // control's public API (selectPattern: at the next sequence boundary, as a
 // client's SET_PATTERN), and tells the processing thread which compensation
@@ -12,7 +12,7 @@
 #include <optional>
 #include <string>
 
-#include "engine/adaptive_policy.h"
+#include "sl/daemon/adaptive_policy.h"
 #include "engine/request_control.h"
 #include "sl/daemon/adaptive.h"
 #include "sl/daemon/scan_engine.h"

@@ -1,7 +1,7 @@
 // Adaptive scanning (issue 33 item 4): the robot's velocity picks the
 // pattern and motion compensation of a continuous scan. The value types and
 // the configuration (`adaptive:`, docs/formats.md); the policy itself is
-// daemon/src/engine/adaptive_policy.h.
+// sl/daemon/adaptive_policy.h (public: sl_eval runs it offline).
 #pragma once
 
 #include <array>

@@ -164,7 +164,7 @@ class ScanEngine {
   // The robot's latest velocity (adaptive scanning; ignored unless
   // DaemonConfig::adaptive is enabled). While a continuous scan runs, the
   // engine switches pattern and motion compensation as the policy decides
-  // (engine/adaptive_policy.h), through selectPattern's path.
+  // (sl/daemon/adaptive_policy.h), through selectPattern's path.
   void setVelocity(const VelocitySample& velocity);
 
   EngineStatus status() const;

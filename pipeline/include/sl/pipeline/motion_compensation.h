@@ -31,6 +31,7 @@
 // puts its undistorted position moved by the shift.
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <memory>
 #include <string>
@@ -65,6 +66,33 @@ struct MotionCompensationOptions {
   double max_deviation_fraction = 0.5;
 };
 
+// What the sensor's own motion (e.g. the robot's velocity times each frame's
+// time from the reference, through the camera's focal length at the working
+// distance) says each frame's shift should be: a prior on the registration.
+// For a camera listed here each frame's shift is searched only within
+// +-tolerance_px of its expected shift (px along the axis, full resolution,
+// as MotionEstimate::shifts_px: relative to the reference frame, whose own
+// entry is subtracted; for a camera compensated in undistorted coordinates,
+// pinhole px), so a stronger false
+// peak elsewhere (a repetitive scene, a second copy of the texture) cannot
+// win; a frame whose correlation has no peak within that band (as
+// estimateShiftWithin: no maximum inside, or one below 0.3 of the global
+// maximum) is moved by its expected shift. Cameras not listed are registered
+// without a prior. The consistency check along the sequence (options) still
+// applies afterwards.
+struct MotionPrior {
+  std::map<std::string, std::vector<double>> expected_shifts_px;  // by camera id, per frame
+  double tolerance_px = 8.0;
+};
+
+// The expected shifts of the frames stamped `stamps_ns` (ns) of a camera
+// moving at `velocity_mm_s` along its image axis (the optical frame's x for
+// Axis::kX, y for kY) past a scene at `depth_mm`, seen with focal length
+// `focal_px` along that axis: -velocity (t_i - t_0) focal / depth px (the
+// content moves against the camera), for MotionPrior.
+std::vector<double> expectedShiftsPx(double velocity_mm_s, double focal_px, double depth_mm,
+                                     const std::vector<std::int64_t>& stamps_ns);
+
 struct MotionEstimate {
   // Per camera, per frame: position of the frame's content relative to the
   // reference frame along the axis (px, full resolution; for a camera
@@ -76,6 +104,9 @@ struct MotionEstimate {
   // replaced (options' max_deviation_px): all cameras, per camera per frame.
   int frames_corrected = 0;
   std::vector<std::vector<bool>> corrected;
+  // Frames that a MotionPrior moved by their expected shift because their
+  // correlation had no peak near it (all cameras).
+  int frames_at_prior = 0;
 };
 
 // Thread-compatible (its const methods may run concurrently); holds its
@@ -112,8 +143,12 @@ class MotionCompensator {
   // The frames are registered one per thread and resampled in blocks of
   // rows on `workers` when given (the caller's pool, e.g. the daemon's
   // processing threads), else on OpenCV's threads.
+  // `prior` (optional): the expected shifts (MotionPrior); throws
+  // std::invalid_argument when a listed camera's list does not have one
+  // entry per frame or the tolerance is not > 0.
   std::shared_ptr<const ImageSet> compensate(const ImageSet& set, MotionEstimate* estimate = nullptr,
-                                             RowWorkers* workers = nullptr) const;
+                                             RowWorkers* workers = nullptr,
+                                             const MotionPrior* prior = nullptr) const;
 
   const MotionCompensationOptions& options() const { return options_; }
 
